@@ -1,0 +1,11 @@
+//! synosis: physically based synthetic inspection images of machined metal parts.
+//!
+//! Data flows one way: configuration -> textures, defected meshes and the scene, built on
+//! the CPU -> uploaded once -> the render graph runs its passes on Vulkan -> images and
+//! labels are read back -> the dataset writer. `vk` knows nothing about scenes; `texture`,
+//! `defect` and `metrics` know nothing about Vulkan.
+
+pub mod defect;
+pub mod metrics;
+pub mod scene;
+pub mod texture;
