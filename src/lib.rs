@@ -9,3 +9,4 @@ pub mod defect;
 pub mod metrics;
 pub mod scene;
 pub mod texture;
+pub mod util;

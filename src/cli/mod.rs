@@ -2,6 +2,7 @@
 
 mod defects;
 mod metrics;
+mod testbody;
 mod texture;
 
 use clap::{Parser, Subcommand};
@@ -19,6 +20,8 @@ pub enum Command {
     Texture(texture::TextureArgs),
     /// Imprint dents and scratches into a mesh, with per-triangle labels.
     Defects(defects::DefectsArgs),
+    /// Write the built-in test body (variant B or its mirror M) as glTF.
+    Testbody(testbody::TestbodyArgs),
     /// Similarity metrics (histogram Wasserstein, MAE, SSIM) between two images.
     Metrics(metrics::MetricsArgs),
     /// Compare a real and a synthetic image set (domain similarity, as the paper).
@@ -29,6 +32,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Texture(a) => texture::run(a),
         Command::Defects(a) => defects::run(a),
+        Command::Testbody(a) => testbody::run(a),
         Command::Metrics(a) => metrics::run_metrics(a),
         Command::Compare(a) => metrics::run_compare(a),
     }

@@ -1,1 +1,7 @@
-//! scene
+//! Scene description: meshes and their labels, glTF import/export.
+
+pub mod gltf_io;
+pub mod mesh;
+
+pub use gltf_io::{export_mesh, import_mesh, Degenerates, Imported, MeshError};
+pub use mesh::{Mesh, TriLabel};
