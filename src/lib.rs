@@ -6,7 +6,13 @@
 //! `defect` and `metrics` know nothing about Vulkan.
 
 pub mod defect;
+pub mod image_io;
+pub mod graph;
 pub mod metrics;
+pub mod render;
 pub mod scene;
+pub mod shaders;
 pub mod texture;
+pub mod trace;
 pub mod util;
+pub mod vk;

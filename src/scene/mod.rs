@@ -2,6 +2,7 @@
 
 pub mod gltf_io;
 pub mod mesh;
+pub mod procedural;
 
 pub use gltf_io::{export_mesh, import_mesh, Degenerates, Imported, MeshError};
 pub use mesh::{Mesh, TriLabel};

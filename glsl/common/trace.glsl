@@ -1,0 +1,152 @@
+// One intersection interface, two bodies chosen by a define at build time:
+//   TRACE_RAY_QUERY  - VK_KHR_ray_query against a TLAS (binding 0)
+//   TRACE_SOFTWARE   - stack traversal of a flattened obvhs BVH2 (bindings 0, 1)
+// Passes put their own bindings from TRACE_BINDING_COUNT on.
+#ifndef TRACE_GLSL
+#define TRACE_GLSL
+
+#define NO_HIT 0xffffffffu
+
+struct Hit {
+    float t;      // distance along the (unnormalised) direction; tmax when missed
+    uint prim;    // original triangle index, NO_HIT when missed
+    vec2 bary;    // weights of the triangle's 2nd and 3rd corner
+    uint inst;    // instance index (one instance today: 0)
+};
+
+#if defined(TRACE_RAY_QUERY)
+#extension GL_EXT_ray_query : require
+#define TRACE_BINDING_COUNT 1
+layout(set = 0, binding = 0) uniform accelerationStructureEXT trace_tlas;
+
+Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
+    Hit h;
+    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    rayQueryEXT rq;
+    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, 0xff, o, tmin, d, tmax);
+    while (rayQueryProceedEXT(rq)) {}
+    if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
+        h.t = rayQueryGetIntersectionTEXT(rq, true);
+        h.prim = uint(rayQueryGetIntersectionPrimitiveIndexEXT(rq, true));
+        h.bary = rayQueryGetIntersectionBarycentricsEXT(rq, true);
+        h.inst = uint(rayQueryGetIntersectionInstanceIdEXT(rq, true));
+    }
+    return h;
+}
+
+#elif defined(TRACE_SOFTWARE)
+#define TRACE_BINDING_COUNT 2
+// Child-pair node: both children's boxes live in the parent, so one 64-byte load
+// tests two boxes. w of *_min: child node index (inner) or first triangle (leaf);
+// w of *_max: triangle count, 0 for an inner child.
+struct BvhNode { vec4 l_min; vec4 l_max; vec4 r_min; vec4 r_max; };
+// Triangles in BVH leaf order; v0.w holds the original triangle index.
+struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
+layout(std430, set = 0, binding = 0) readonly buffer TraceNodes { BvhNode trace_nodes[]; };
+layout(std430, set = 0, binding = 1) readonly buffer TraceTris { BvhTri trace_tris[]; };
+
+#define TRACE_STACK 64
+
+// Slab test; the far distance is widened by 3 ulps-worth (Ize 2013) so rounding never
+// drops a box that the ray grazes.
+bool trace_box(vec3 bmin, vec3 bmax, vec3 o, vec3 inv_d, float tmin, float tmax, out float tnear) {
+    vec3 t0 = (bmin - o) * inv_d;
+    vec3 t1 = (bmax - o) * inv_d;
+    vec3 lo = min(t0, t1);
+    vec3 hi = max(t0, t1);
+    tnear = max(max(lo.x, lo.y), max(lo.z, tmin));
+    float tfar = min(min(hi.x, hi.y), min(hi.z, tmax)) * 1.0000004;
+    return tnear <= tfar;
+}
+
+// Watertight ray/triangle test (Woop, Benthin, Wald 2013): the ray is sheared to +z
+// and the edge functions are evaluated in 2D, so a ray through a shared edge or vertex
+// hits at least one of the triangles (no leaks). `precise` keeps the compiler from
+// fusing multiply-adds, so the results match the CPU reference (src/trace/watertight.rs).
+struct TraceRay { vec3 o; uint kx; uint ky; uint kz; vec3 s; };
+
+TraceRay trace_setup(vec3 o, vec3 d) {
+    TraceRay r;
+    r.o = o;
+    vec3 a = abs(d);
+    r.kz = a.x > a.y ? (a.x > a.z ? 0u : 2u) : (a.y > a.z ? 1u : 2u);
+    r.kx = (r.kz + 1u) % 3u;
+    r.ky = (r.kx + 1u) % 3u;
+    if (d[r.kz] < 0.0) { uint t = r.kx; r.kx = r.ky; r.ky = t; }
+    precise float sz = 1.0 / d[r.kz];
+    precise float sx = d[r.kx] * sz;
+    precise float sy = d[r.ky] * sz;
+    r.s = vec3(sx, sy, sz);
+    return r;
+}
+
+void trace_leaf(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
+    for (uint i = first; i < first + count; ++i) {
+        BvhTri tri = trace_tris[i];
+        precise vec3 a = tri.v0.xyz - r.o;
+        precise vec3 b = tri.v1.xyz - r.o;
+        precise vec3 c = tri.v2.xyz - r.o;
+        precise float ax = a[r.kx] - r.s.x * a[r.kz];
+        precise float ay = a[r.ky] - r.s.y * a[r.kz];
+        precise float bx = b[r.kx] - r.s.x * b[r.kz];
+        precise float by = b[r.ky] - r.s.y * b[r.kz];
+        precise float cx = c[r.kx] - r.s.x * c[r.kz];
+        precise float cy = c[r.ky] - r.s.y * c[r.kz];
+        precise float u = cx * by - cy * bx;
+        precise float v = ax * cy - ay * cx;
+        precise float w = bx * ay - by * ax;
+        if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) continue;
+        precise float det = u + v + w;
+        if (det == 0.0) continue;
+        precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
+        precise float t = tt / det;
+        if (t >= tmin && t < h.t) {
+            h.t = t;
+            h.prim = floatBitsToUint(tri.v0.w);
+            h.bary = vec2(v / det, w / det);
+        }
+    }
+}
+
+Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
+    Hit h;
+    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    // Zero direction components would give 0 * inf = NaN in the slab test.
+    vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
+    vec3 inv_d = 1.0 / dd;
+    TraceRay tr = trace_setup(o, d);
+    uint stack[TRACE_STACK];
+    int sp = 0;
+    uint node = 0u;
+    while (true) {
+        BvhNode n = trace_nodes[node];
+        float nl, nr;
+        bool hl = trace_box(n.l_min.xyz, n.l_max.xyz, o, inv_d, tmin, h.t, nl);
+        bool hr = trace_box(n.r_min.xyz, n.r_max.xyz, o, inv_d, tmin, h.t, nr);
+        uint lc = floatBitsToUint(n.l_max.w);
+        uint rc = floatBitsToUint(n.r_max.w);
+        if (hl && lc > 0u) { trace_leaf(floatBitsToUint(n.l_min.w), lc, tr, tmin, h); hl = false; }
+        if (hr && rc > 0u) { trace_leaf(floatBitsToUint(n.r_min.w), rc, tr, tmin, h); hr = false; }
+        uint li = floatBitsToUint(n.l_min.w);
+        uint ri = floatBitsToUint(n.r_min.w);
+        if (hl && hr) {
+            uint near = nl <= nr ? li : ri;
+            uint far = nl <= nr ? ri : li;
+            if (sp < TRACE_STACK) { stack[sp++] = far; }
+            node = near;
+        } else if (hl) {
+            node = li;
+        } else if (hr) {
+            node = ri;
+        } else {
+            if (sp == 0) break;
+            node = stack[--sp];
+        }
+    }
+    return h;
+}
+#else
+#error "define TRACE_RAY_QUERY or TRACE_SOFTWARE"
+#endif
+
+#endif

@@ -1,0 +1,3 @@
+//! GPU passes that make images: first-hit raycasts (and, later, the path tracer).
+
+pub mod raycast;

@@ -1,0 +1,392 @@
+//! Vulkan instance, device choice, logical device, queues and the validation log.
+
+use std::ffi::{c_void, CStr, CString};
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex};
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+
+use super::VkError;
+
+/// What the caller needs from the device.
+#[derive(Clone, Debug, Default)]
+pub struct ContextOptions {
+    /// Enable the Khronos validation layer and collect its messages. Also turned on by
+    /// the environment variable `SYNOSIS_VALIDATION=1`.
+    pub validation: bool,
+    /// Enable acceleration structures and ray query when the device has them.
+    pub ray_query: bool,
+}
+
+/// One memory heap of the device.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MemoryHeap {
+    pub size_bytes: u64,
+    pub device_local: bool,
+}
+
+/// What `synosis info` prints and what backends consult.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DeviceInfo {
+    pub name: String,
+    pub device_type: String,
+    pub driver_name: String,
+    pub driver_info: String,
+    pub vulkan_version: String,
+    pub ray_query_supported: bool,
+    pub ray_query_enabled: bool,
+    pub is_cpu: bool,
+    pub timestamp_period_ns: f32,
+    pub timestamps_supported: bool,
+    pub max_storage_buffer_range: u32,
+    pub max_workgroup_count: [u32; 3],
+    pub memory_heaps: Vec<MemoryHeap>,
+    pub validation: bool,
+}
+
+/// A validation or driver message caught by the debug messenger.
+#[derive(Clone, Debug)]
+pub struct ValidationMessage {
+    pub error: bool,
+    pub text: String,
+}
+
+/// Every message the validation layer sent, so a test can fail on any error.
+#[derive(Default, Debug)]
+pub struct ValidationLog {
+    messages: Mutex<Vec<ValidationMessage>>,
+}
+
+impl ValidationLog {
+    pub fn errors(&self) -> Vec<String> {
+        self.lock().iter().filter(|m| m.error).map(|m| m.text.clone()).collect()
+    }
+    pub fn all(&self) -> Vec<ValidationMessage> {
+        self.lock().clone()
+    }
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<ValidationMessage>> {
+        self.messages.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    kind: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    // SAFETY: `user` is the ValidationLog the Context keeps alive for the messenger's
+    // lifetime; `data` is valid for this call per the Vulkan spec.
+    unsafe {
+        let log = &*(user as *const ValidationLog);
+        let text = if data.is_null() || (*data).p_message.is_null() {
+            String::from("(no message)")
+        } else {
+            CStr::from_ptr((*data).p_message).to_string_lossy().into_owned()
+        };
+        let error = severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR);
+        let warning = severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING);
+        if error || (warning && kind.contains(vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION)) {
+            log.lock().push(ValidationMessage { error, text: text.clone() });
+        }
+        if error {
+            eprintln!("vulkan validation error: {text}");
+        }
+    }
+    vk::FALSE
+}
+
+/// The Vulkan device and everything that lives as long as it. Shared as `Arc<Context>`;
+/// every resource keeps an `Arc` so the device outlives them.
+pub struct Context {
+    pub entry: ash::Entry,
+    pub instance: ash::Instance,
+    pub physical: vk::PhysicalDevice,
+    pub device: ash::Device,
+    pub queue: vk::Queue,
+    pub queue_family: u32,
+    pub info: DeviceInfo,
+    pub accel: Option<ash::khr::acceleration_structure::Device>,
+    pub debug_utils: Option<ash::ext::debug_utils::Device>,
+    pub validation: Arc<ValidationLog>,
+    pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
+    pub(crate) command_pool: Mutex<vk::CommandPool>,
+    debug_instance: Option<ash::ext::debug_utils::Instance>,
+    messenger: vk::DebugUtilsMessengerEXT,
+}
+
+fn validation_from_env() -> bool {
+    matches!(std::env::var("SYNOSIS_VALIDATION").as_deref(), Ok("1") | Ok("true") | Ok("yes"))
+}
+
+fn version_string(v: u32) -> String {
+    format!("{}.{}.{}", vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v))
+}
+
+fn cstr_field(chars: &[std::ffi::c_char]) -> String {
+    // SAFETY: Vulkan fills these fixed-size fields with NUL-terminated strings.
+    unsafe { CStr::from_ptr(chars.as_ptr()) }.to_string_lossy().into_owned()
+}
+
+impl Context {
+    pub fn new(opts: &ContextOptions) -> Result<Arc<Context>, VkError> {
+        // SAFETY: loading the system Vulkan loader; failure is reported as an error.
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| VkError::Loader(e.to_string()))?;
+        let validation = opts.validation || validation_from_env();
+
+        let layer_props = unsafe { entry.enumerate_instance_layer_properties() }?;
+        let validation_layer = c"VK_LAYER_KHRONOS_validation";
+        let have_layer = layer_props
+            .iter()
+            .any(|l| l.layer_name_as_c_str().ok() == Some(validation_layer));
+        if validation && !have_layer {
+            return Err(VkError::MissingValidationLayer);
+        }
+        let ext_props = unsafe { entry.enumerate_instance_extension_properties(None) }?;
+        let have_debug_utils = ext_props
+            .iter()
+            .any(|e| e.extension_name_as_c_str().ok() == Some(ash::ext::debug_utils::NAME));
+
+        let app_name = CString::new("synosis").expect("static name has no NUL");
+        let app = vk::ApplicationInfo::default()
+            .application_name(&app_name)
+            .application_version(1)
+            .engine_name(&app_name)
+            .api_version(vk::API_VERSION_1_2);
+        let layers: Vec<*const std::ffi::c_char> =
+            if validation { vec![validation_layer.as_ptr()] } else { vec![] };
+        let extensions: Vec<*const std::ffi::c_char> =
+            if have_debug_utils { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let log = Arc::new(ValidationLog::default());
+        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::ERROR | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(debug_callback))
+            .user_data(Arc::as_ptr(&log) as *mut c_void);
+        let mut create = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layers)
+            .enabled_extension_names(&extensions);
+        if have_debug_utils && validation {
+            // Also catches messages from instance creation itself.
+            create = create.push_next(&mut messenger_info);
+        }
+        let instance = unsafe { entry.create_instance(&create, None) }?;
+
+        let (debug_instance, messenger) = if have_debug_utils {
+            let di = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let m = if validation {
+                unsafe { di.create_debug_utils_messenger(&messenger_info, None) }?
+            } else {
+                vk::DebugUtilsMessengerEXT::null()
+            };
+            (Some(di), m)
+        } else {
+            (None, vk::DebugUtilsMessengerEXT::null())
+        };
+
+        let result = Self::create_device(&entry, &instance, opts, validation, have_debug_utils);
+        let (physical, device, queue_family, info, accel_enabled) = match result {
+            Ok(v) => v,
+            Err(e) => {
+                unsafe {
+                    if let Some(di) = &debug_instance {
+                        if messenger != vk::DebugUtilsMessengerEXT::null() {
+                            di.destroy_debug_utils_messenger(messenger, None);
+                        }
+                    }
+                    instance.destroy_instance(None);
+                }
+                return Err(e);
+            }
+        };
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device: physical,
+            debug_settings: Default::default(),
+            buffer_device_address: accel_enabled,
+            allocation_sizes: Default::default(),
+        })?;
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        let command_pool = unsafe { device.create_command_pool(&pool_info, None) }?;
+        let accel =
+            accel_enabled.then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
+        let debug_utils =
+            have_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
+        Ok(Arc::new(Context {
+            entry,
+            instance,
+            physical,
+            device,
+            queue,
+            queue_family,
+            info,
+            accel,
+            debug_utils,
+            validation: log,
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            command_pool: Mutex::new(command_pool),
+            debug_instance,
+            messenger,
+        }))
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn create_device(
+        entry: &ash::Entry,
+        instance: &ash::Instance,
+        opts: &ContextOptions,
+        validation: bool,
+        _debug_utils: bool,
+    ) -> Result<(vk::PhysicalDevice, ash::Device, u32, DeviceInfo, bool), VkError> {
+        let _ = entry;
+        let physicals = unsafe { instance.enumerate_physical_devices() }?;
+        // Prefer a discrete GPU, then integrated, virtual, and the CPU (lavapipe) last.
+        let score = |t: vk::PhysicalDeviceType| match t {
+            vk::PhysicalDeviceType::DISCRETE_GPU => 4,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => 3,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+            vk::PhysicalDeviceType::CPU => 1,
+            _ => 0,
+        };
+        let mut candidates: Vec<(vk::PhysicalDevice, u32, i32)> = Vec::new();
+        for &p in &physicals {
+            let props = unsafe { instance.get_physical_device_properties(p) };
+            if props.api_version < vk::API_VERSION_1_2 {
+                continue;
+            }
+            let families = unsafe { instance.get_physical_device_queue_family_properties(p) };
+            if let Some(q) = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)) {
+                candidates.push((p, q as u32, score(props.device_type)));
+            }
+        }
+        if let Ok(want) = std::env::var("SYNOSIS_DEVICE") {
+            candidates.retain(|(p, _, _)| {
+                let props = unsafe { instance.get_physical_device_properties(*p) };
+                cstr_field(&props.device_name).to_lowercase().contains(&want.to_lowercase())
+            });
+        }
+        candidates.sort_by_key(|c| -c.2);
+        let Some(&(physical, queue_family, _)) = candidates.first() else {
+            return Err(VkError::NoDevice);
+        };
+
+        let exts = unsafe { instance.enumerate_device_extension_properties(physical) }?;
+        let has_ext = |name: &CStr| exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(name));
+        let rq_exts = [
+            ash::khr::acceleration_structure::NAME,
+            ash::khr::ray_query::NAME,
+            ash::khr::deferred_host_operations::NAME,
+        ];
+        let mut rq_feat = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+        let mut as_feat = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
+        let ray_query_supported = rq_exts.iter().all(|e| has_ext(e)) && {
+            let mut f2 = vk::PhysicalDeviceFeatures2::default()
+                .push_next(&mut rq_feat)
+                .push_next(&mut as_feat)
+                .push_next(&mut v12);
+            unsafe { instance.get_physical_device_features2(physical, &mut f2) };
+            rq_feat.ray_query == vk::TRUE
+                && as_feat.acceleration_structure == vk::TRUE
+                && v12.buffer_device_address == vk::TRUE
+        };
+        let ray_query_enabled = opts.ray_query && ray_query_supported;
+
+        let mut ext_names: Vec<*const std::ffi::c_char> = Vec::new();
+        if ray_query_enabled {
+            ext_names.extend(rq_exts.iter().map(|e| e.as_ptr()));
+        }
+        let priorities = [1.0f32];
+        let queue_info = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&priorities)];
+        let mut v12_on = vk::PhysicalDeviceVulkan12Features::default()
+            .host_query_reset(true)
+            .buffer_device_address(ray_query_enabled);
+        let mut rq_on = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
+        let mut as_on = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
+        let mut create = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_info)
+            .enabled_extension_names(&ext_names)
+            .push_next(&mut v12_on);
+        if ray_query_enabled {
+            create = create.push_next(&mut rq_on).push_next(&mut as_on);
+        }
+        let device = unsafe { instance.create_device(physical, &create, None) }?;
+
+        let mut driver = vk::PhysicalDeviceDriverProperties::default();
+        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+        unsafe { instance.get_physical_device_properties2(physical, &mut props2) };
+        let props = props2.properties;
+        let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
+        let mem = unsafe { instance.get_physical_device_memory_properties(physical) };
+        let info = DeviceInfo {
+            name: cstr_field(&props.device_name),
+            device_type: format!("{:?}", props.device_type),
+            driver_name: cstr_field(&driver.driver_name),
+            driver_info: cstr_field(&driver.driver_info),
+            vulkan_version: version_string(props.api_version),
+            ray_query_supported,
+            ray_query_enabled,
+            is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
+            timestamp_period_ns: props.limits.timestamp_period,
+            timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,
+            max_storage_buffer_range: props.limits.max_storage_buffer_range,
+            max_workgroup_count: props.limits.max_compute_work_group_count,
+            memory_heaps: mem.memory_heaps[..mem.memory_heap_count as usize]
+                .iter()
+                .map(|h| MemoryHeap {
+                    size_bytes: h.size,
+                    device_local: h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL),
+                })
+                .collect(),
+            validation,
+        };
+        Ok((physical, device, queue_family, info, ray_query_enabled))
+    }
+
+    /// Gives a Vulkan object a name that shows in validation messages and captures.
+    pub fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
+        if let (Some(du), Ok(n)) = (&self.debug_utils, CString::new(name)) {
+            let info = vk::DebugUtilsObjectNameInfoEXT::default().object_handle(handle).object_name(&n);
+            // Naming is a debugging aid; a failure must not stop rendering.
+            let _ = unsafe { du.set_debug_utils_object_name(&info) };
+        }
+    }
+
+    /// Validation errors collected so far (empty when validation is off).
+    pub fn validation_errors(&self) -> Vec<String> {
+        self.validation.errors()
+    }
+}
+
+impl Drop for Context {
+    fn drop(&mut self) {
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            let pool = *self.command_pool.get_mut().unwrap_or_else(|p| p.into_inner());
+            self.device.destroy_command_pool(pool, None);
+            // The allocator frees its memory blocks, so it must go before the device.
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            if let Some(di) = &self.debug_instance {
+                if self.messenger != vk::DebugUtilsMessengerEXT::null() {
+                    di.destroy_debug_utils_messenger(self.messenger, None);
+                }
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}

@@ -1,0 +1,108 @@
+//! Both trace backends against the CPU reference (obvhs), on lavapipe, validation on.
+
+mod common;
+
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+use synosis::render::raycast::{trace_rays, RayIn};
+use synosis::scene::procedural::bumpy_sphere;
+use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
+use synosis::trace::TraceScene;
+
+/// 100k rays: a third random through the volume, a third aimed exactly at vertices, a
+/// third at points on edges (where two triangles meet and intersectors disagree most).
+fn rays(mesh: &synosis::scene::Mesh, n: usize, seed: u64) -> Vec<RayIn> {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let (lo, hi) = mesh.bounds();
+    let c = (lo + hi) * 0.5;
+    let r = (hi - lo).length();
+    (0..n)
+        .map(|i| {
+            let u: f32 = rng.random_range(-1.0..1.0);
+            let phi: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+            let s = (1.0 - u * u).sqrt();
+            let origin = c + r * Vec3::new(s * phi.cos(), s * phi.sin(), u);
+            let target = match i % 3 {
+                0 => lo + (hi - lo) * Vec3::new(rng.random(), rng.random(), rng.random()),
+                1 => mesh.positions[rng.random_range(0..mesh.positions.len())],
+                _ => {
+                    let t = mesh.triangles[rng.random_range(0..mesh.triangles.len())];
+                    let k = rng.random_range(0..3);
+                    let (a, b) = (mesh.positions[t[k] as usize], mesh.positions[t[(k + 1) % 3] as usize]);
+                    a.lerp(b, rng.random())
+                }
+            };
+            RayIn { origin: origin.into(), tmin: 0.0, dir: (target - origin).normalize().into(), tmax: 1e30 }
+        })
+        .collect()
+}
+
+#[test]
+fn both_backends_agree_with_cpu_reference_on_100k_rays() {
+    let ctx = common::gpu();
+    let mesh = bumpy_sphere(256, 101, 10.0, 0.05); // 51,200 triangles
+    assert!(mesh.triangles.len() >= 50_000);
+    let rays = rays(&mesh, 100_000, 7);
+    let tris = obvhs_triangles(&mesh.positions, &mesh.triangles);
+    let bvh = build_bvh(&tris);
+    let reference: Vec<Option<(f32, u32)>> = rays
+        .iter()
+        .map(|r| cpu_closest_hit(&bvh, &tris, r.origin.into(), r.dir.into(), r.tmin, r.tmax))
+        .collect();
+    let ref_hits = reference.iter().filter(|h| h.is_some()).count();
+    assert!(ref_hits > 60_000, "most rays should hit the sphere, got {ref_hits}");
+    for backend in common::BACKENDS {
+        let scene = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
+        let (hits, _) = trace_rays(&ctx, &scene, &rays, None).unwrap();
+        let mut hit_miss = 0;
+        let mut far_t = 0;
+        let mut other_prim = 0;
+        let mut volume_mismatch = 0; // among the rays not aimed at a vertex or edge
+        for (i, (h, r)) in hits.iter().zip(&reference).enumerate() {
+            let bad = match (h.is_hit(), r) {
+                (true, Some((t, p))) => {
+                    if (h.t - t).abs() > 1e-4 * t.max(1.0) {
+                        far_t += 1;
+                        true
+                    } else {
+                        // Same distance, neighbouring triangle: a tie on an edge.
+                        other_prim += usize::from(h.prim != *p);
+                        false
+                    }
+                }
+                (false, None) => false,
+                _ => {
+                    hit_miss += 1;
+                    true
+                }
+            };
+            volume_mismatch += usize::from(bad && i % 3 == 0);
+        }
+        eprintln!(
+            "{}: {} rays, hit/miss disagreements {hit_miss}, distance disagreements {far_t}, \
+             same-distance other triangle {other_prim}",
+            backend.name(),
+            rays.len()
+        );
+        // Measured on lavapipe (Mesa 25.0.7), 100k rays: software 0 hit/miss and 0
+        // distance mismatches (same watertight test and traversal bounds as the CPU);
+        // ray query 0 hit/miss and 77 distance mismatches, all on vertex- or edge-aimed
+        // rays where lavapipe's intersector slips through a shared vertex to a farther
+        // surface. Bounds: software 5, ray query 300 (0.3 %); rays through the volume
+        // (not aimed at edges) must agree in both (a traversal bug costs thousands).
+        let bound = match backend {
+            synosis::trace::Backend::Software => 5,
+            synosis::trace::Backend::RayQuery => 300,
+        };
+        assert!(hit_miss + far_t <= bound, "{}: {hit_miss} hit/miss and {far_t} distance mismatches", backend.name());
+        assert!(volume_mismatch <= 2, "{}: {volume_mismatch} mismatches on rays through the volume", backend.name());
+        // Where both hit, barycentrics must reconstruct the hit point.
+        for (h, r) in hits.iter().zip(&rays).filter(|(h, _)| h.is_hit()).take(2000) {
+            let [a, b, c] = mesh.corners(h.prim as usize);
+            let p = a * (1.0 - h.bary[0] - h.bary[1]) + b * h.bary[0] + c * h.bary[1];
+            let q = Vec3::from(r.origin) + h.t * Vec3::from(r.dir);
+            assert!((p - q).length() < 1e-3, "{}: barycentrics do not give the hit point", backend.name());
+        }
+    }
+    common::assert_clean(&ctx);
+}
