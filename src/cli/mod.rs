@@ -1,6 +1,7 @@
 //! Subcommands. Each lives in its own file with a clap `Args` struct and a `run`.
 
 mod defects;
+mod gpu;
 mod metrics;
 mod testbody;
 mod texture;
@@ -16,6 +17,10 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Command {
+    /// Show the Vulkan device, driver, ray-query support and the backend auto picks.
+    Info(gpu::InfoArgs),
+    /// Raycast a mesh from above (depth.exr, normals.png): proves import, both backends, the graph.
+    Raycast(gpu::RaycastArgs),
     /// Synthesise a milled or sandblasted surface texture (height map + slope/normal map).
     Texture(texture::TextureArgs),
     /// Imprint dents and scratches into a mesh, with per-triangle labels.
@@ -30,6 +35,8 @@ pub enum Command {
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Info(a) => gpu::info(a),
+        Command::Raycast(a) => gpu::raycast_cmd(a),
         Command::Texture(a) => texture::run(a),
         Command::Defects(a) => defects::run(a),
         Command::Testbody(a) => testbody::run(a),

@@ -11,7 +11,7 @@ use super::mesh::{Mesh, TriLabel};
 pub fn bumpy_sphere(segments: u32, rings: u32, radius: f32, bump: f32) -> Mesh {
     let segments = segments.max(3);
     let rings = rings.max(2);
-    let mut positions = vec![Vec3::new(0.0, 0.0, radius * (1.0 + bump))];
+    let mut positions = vec![Vec3::new(0.0, 0.0, radius)];
     for r in 1..rings {
         let theta = std::f32::consts::PI * r as f32 / rings as f32;
         for s in 0..segments {
@@ -20,7 +20,7 @@ pub fn bumpy_sphere(segments: u32, rings: u32, radius: f32, bump: f32) -> Mesh {
             positions.push(radius * k * Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
         }
     }
-    positions.push(Vec3::new(0.0, 0.0, -radius * (1.0 + bump)));
+    positions.push(Vec3::new(0.0, 0.0, -radius));
     let south = positions.len() as u32 - 1;
     let idx = |r: u32, s: u32| 1 + (r - 1) * segments + (s % segments);
     let mut triangles = Vec::new();

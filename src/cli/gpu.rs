@@ -1,0 +1,110 @@
+//! `synosis info` and `synosis raycast`.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Args;
+use synosis::render::raycast::{raycast, PinholeCamera};
+use synosis::scene::{import_mesh, Degenerates};
+use synosis::trace::{auto_backend, resolve, AccelChoice, TraceScene};
+use synosis::vk::{Context, ContextOptions, Profiler};
+
+#[derive(Args)]
+pub struct InfoArgs {
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn info(a: InfoArgs) -> anyhow::Result<()> {
+    let ctx = Context::new(&ContextOptions { validation: false, ray_query: true })?;
+    let (auto, why) = auto_backend(&ctx.info);
+    if a.json {
+        let mut v = serde_json::to_value(&ctx.info)?;
+        v["auto_backend"] = serde_json::Value::from(auto.name());
+        v["auto_reason"] = serde_json::Value::from(why);
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    let i = &ctx.info;
+    println!("device:          {} ({})", i.name, i.device_type);
+    println!("driver:          {} {}", i.driver_name, i.driver_info);
+    println!("vulkan:          {}", i.vulkan_version);
+    println!("ray query:       {}", if i.ray_query_supported { "yes" } else { "no" });
+    println!("auto backend:    {} ({why})", auto.name());
+    println!("timestamps:      {} (period {} ns)", i.timestamps_supported, i.timestamp_period_ns);
+    println!("max storage buffer range: {} MiB", i.max_storage_buffer_range / (1 << 20));
+    for (k, h) in i.memory_heaps.iter().enumerate() {
+        println!(
+            "memory heap {k}:   {:.1} GiB{}",
+            h.size_bytes as f64 / (1u64 << 30) as f64,
+            if h.device_local { " (device local)" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct RaycastArgs {
+    /// Mesh to raycast (.gltf or .glb).
+    mesh: PathBuf,
+    /// Output directory (created if missing): depth.exr and normals.png.
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, value_enum, default_value_t = AccelChoice::Auto)]
+    accel: AccelChoice,
+    #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    width: u32,
+    #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    height: u32,
+    /// Remove zero-area triangles instead of refusing the mesh.
+    #[arg(long)]
+    drop_degenerate: bool,
+    /// Write a Chrome trace (Perfetto, chrome://tracing) of CPU phases and GPU passes.
+    #[arg(long)]
+    profile: Option<PathBuf>,
+}
+
+pub fn raycast_cmd(a: RaycastArgs) -> anyhow::Result<()> {
+    let profiler = Profiler::new();
+    let degenerates = if a.drop_degenerate { Degenerates::Drop } else { Degenerates::Reject };
+    let imported = profiler.cpu("import glTF", || import_mesh(&a.mesh, degenerates))?;
+    if imported.dropped_degenerate > 0 {
+        eprintln!("warning: dropped {} degenerate triangle(s)", imported.dropped_degenerate);
+    }
+    let mesh = imported.mesh;
+    let ctx = profiler.cpu("Vulkan init", || Context::new(&ContextOptions { validation: false, ray_query: true }))?;
+    let backend = resolve(a.accel, &ctx.info)?;
+    let scene = TraceScene::build(&ctx, &mesh, backend, Some(&profiler))?;
+    let cam = PinholeCamera::framing(&mesh, a.width as f32 / a.height as f32);
+    let img = raycast(&ctx, &scene, &cam, a.width, a.height, Some(&profiler))?;
+    let errors = ctx.validation_errors();
+    anyhow::ensure!(errors.is_empty(), "Vulkan validation reported {} error(s); first: {}", errors.len(), errors[0]);
+
+    std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
+    profiler.cpu("write images", || -> anyhow::Result<()> {
+        let depth = a.out.join("depth.exr");
+        synosis::image_io::write_exr_f32(&depth, a.width as usize, a.height as usize, "Z", &img.depth)
+            .with_context(|| format!("writing {}", depth.display()))?;
+        let normals = a.out.join("normals.png");
+        synosis::image_io::write_png_rgba8(&normals, a.width, a.height, &img.normals)
+            .with_context(|| format!("writing {}", normals.display()))?;
+        Ok(())
+    })?;
+    let hits = img.depth.iter().filter(|&&d| d > 0.0).count();
+    println!(
+        "{}: {} triangles, {}x{}, {hits} pixels hit; build {:.1} ms, raycast pass {:.2} ms on {} ({})",
+        a.mesh.display(),
+        mesh.triangles.len(),
+        a.width,
+        a.height,
+        scene.build_ms,
+        img.timing.gpu_ms,
+        ctx.info.name,
+        backend.name()
+    );
+    if let Some(p) = &a.profile {
+        profiler.write_chrome_trace(p).with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}
