@@ -9,14 +9,15 @@
 //!   are not recompiled.
 
 use std::cell::RefCell;
-use std::collections::hash_map::DefaultHasher;
 use std::collections::BTreeSet;
+use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
 fn main() {
-    let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let root =
+        PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     let glsl = root.join("glsl");
     let out = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     println!("cargo:rerun-if-changed=glsl");
@@ -25,13 +26,19 @@ fn main() {
     collect(&glsl, &mut shaders);
     shaders.sort();
     let compiler = shaderc::Compiler::new().expect("shaderc compiler");
-    let mut table = String::from("/// (name, SPIR-V) of every compiled shader variant.\npub static SHADERS: &[(&str, &[u8])] = &[\n");
+    let mut table = String::from(
+        "/// (name, SPIR-V) of every compiled shader variant.\npub static SHADERS: &[(&str, &[u8])] = &[\n",
+    );
     let mut failed = false;
     for path in &shaders {
         println!("cargo:rerun-if-changed={}", path.display());
-        let source = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let stem = path.file_stem().and_then(|s| s.to_str()).expect("shader names are UTF-8").to_string();
-        let rel = path.strip_prefix(&root).unwrap_or(path).display().to_string();
+        let source =
+            std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .expect("shader names are UTF-8")
+            .to_string();
         for (variant, define) in variants(&source) {
             let name = match &variant {
                 Some(v) => format!("{stem}.{v}"),
@@ -39,27 +46,34 @@ fn main() {
             };
             let spv_path = out.join(format!("{name}.spv"));
             let hash_path = out.join(format!("{name}.hash"));
-            if let Ok(old) = std::fs::read_to_string(&hash_path) {
-                if let Some((h, deps)) = old.split_once('\n') {
-                    if spv_path.exists() && h == input_hash(&source, deps.lines(), define.as_deref()).to_string() {
-                        table.push_str(&format!("    ({name:?}, include_bytes!({:?})),\n", spv_path.display().to_string()));
-                        for d in deps.lines() {
-                            println!("cargo:rerun-if-changed={d}");
-                        }
-                        continue;
-                    }
+            let old = std::fs::read_to_string(&hash_path).unwrap_or_default();
+            if let Some((h, deps)) = old.split_once('\n')
+                && spv_path.exists()
+                && h == input_hash(&source, deps.lines(), define.as_deref()).to_string()
+            {
+                table.push_str(&format!(
+                    "    ({name:?}, include_bytes!({:?})),\n",
+                    spv_path.display().to_string()
+                ));
+                for d in deps.lines() {
+                    println!("cargo:rerun-if-changed={d}");
                 }
+                continue;
             }
-            match compile(&compiler, &glsl, path, &rel, &source, define.as_deref()) {
+            match compile(&compiler, &glsl, path, &source, define.as_deref()) {
                 Ok((words, deps)) => {
                     std::fs::write(&spv_path, &words).expect("write SPIR-V");
                     let deps: Vec<String> = deps.into_iter().collect();
                     let h = input_hash(&source, deps.iter().map(|s| s.as_str()), define.as_deref());
-                    std::fs::write(&hash_path, format!("{h}\n{}", deps.join("\n"))).expect("write hash");
+                    std::fs::write(&hash_path, format!("{h}\n{}", deps.join("\n")))
+                        .expect("write hash");
                     for d in &deps {
                         println!("cargo:rerun-if-changed={d}");
                     }
-                    table.push_str(&format!("    ({name:?}, include_bytes!({:?})),\n", spv_path.display().to_string()));
+                    table.push_str(&format!(
+                        "    ({name:?}, include_bytes!({:?})),\n",
+                        spv_path.display().to_string()
+                    ));
                 }
                 Err(msg) => {
                     failed = true;
@@ -80,7 +94,9 @@ fn main() {
 }
 
 fn collect(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(rd) = std::fs::read_dir(dir) else { return };
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return;
+    };
     for e in rd.flatten() {
         let p = e.path();
         if p.is_dir() {
@@ -119,13 +135,15 @@ fn compile(
     compiler: &shaderc::Compiler,
     glsl: &Path,
     path: &Path,
-    rel: &str,
     source: &str,
     define: Option<&str>,
 ) -> Result<(Vec<u8>, BTreeSet<String>), String> {
     let deps: Rc<RefCell<BTreeSet<String>>> = Rc::default();
     let mut opts = shaderc::CompileOptions::new().map_err(|e| e.to_string())?;
-    opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+    opts.set_target_env(
+        shaderc::TargetEnv::Vulkan,
+        shaderc::EnvVersion::Vulkan1_2 as u32,
+    );
     opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
     opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
     opts.set_generate_debug_info();
@@ -136,19 +154,30 @@ fn compile(
     let here = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let deps_cb = deps.clone();
     opts.set_include_callback(move |name, _ty, includer, _depth| {
-        let base = Path::new(includer).parent().map(Path::to_path_buf).unwrap_or_else(|| here.clone());
+        let base = Path::new(includer)
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| here.clone());
         for candidate in [base.join(name), here.join(name), glsl_dir.join(name)] {
             if let Ok(content) = std::fs::read_to_string(&candidate) {
                 let resolved = candidate.display().to_string();
                 deps_cb.borrow_mut().insert(resolved.clone());
-                return Ok(shaderc::ResolvedInclude { resolved_name: resolved, content });
+                return Ok(shaderc::ResolvedInclude {
+                    resolved_name: resolved,
+                    content,
+                });
             }
         }
         Err(format!("cannot find include {name:?} (from {includer})"))
     });
-    let _ = rel;
     let artifact = compiler
-        .compile_into_spirv(source, shaderc::ShaderKind::Compute, &path.display().to_string(), "main", Some(&opts))
+        .compile_into_spirv(
+            source,
+            shaderc::ShaderKind::Compute,
+            &path.display().to_string(),
+            "main",
+            Some(&opts),
+        )
         .map_err(|e| match define {
             Some(d) => format!("{e}\n(in variant with {d})"),
             None => e.to_string(),

@@ -5,7 +5,13 @@ use std::path::Path;
 use exr::prelude::*;
 
 /// Writes a one-channel f32 EXR (channel `name`, e.g. "Y" or "Z"), row 0 at the top.
-pub fn write_exr_f32(path: &Path, width: usize, height: usize, channel: &str, data: &[f32]) -> std::io::Result<()> {
+pub fn write_exr_f32(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channel: &str,
+    data: &[f32],
+) -> std::io::Result<()> {
     assert_eq!(data.len(), width * height, "image size mismatch");
     let tmp = crate::util::temp_sibling(path).with_extension("tmp.exr");
     let ch = AnyChannel::new(channel, FlatSamples::F32(data.to_vec()));
@@ -42,27 +48,33 @@ pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
 
 fn encode_png(img: image::DynamicImage, path: &Path) -> std::io::Result<()> {
     let mut bytes = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .map_err(std::io::Error::other)?;
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .map_err(std::io::Error::other)?;
     crate::util::write_atomic(path, &bytes)
 }
 
 /// 8-bit RGBA PNG from packed u32 pixels (R in the low byte).
 pub fn write_png_rgba8(path: &Path, width: u32, height: u32, rgba: &[u32]) -> std::io::Result<()> {
     let bytes: Vec<u8> = rgba.iter().flat_map(|p| p.to_le_bytes()).collect();
-    let img = image::RgbaImage::from_raw(width, height, bytes).ok_or_else(|| std::io::Error::other("size mismatch"))?;
+    let img = image::RgbaImage::from_raw(width, height, bytes)
+        .ok_or_else(|| std::io::Error::other("size mismatch"))?;
     encode_png(image::DynamicImage::ImageRgba8(img), path)
 }
 
 /// 8-bit grayscale PNG.
 pub fn write_png_gray8(path: &Path, width: u32, height: u32, data: &[u8]) -> std::io::Result<()> {
-    let img = image::GrayImage::from_raw(width, height, data.to_vec()).ok_or_else(|| std::io::Error::other("size mismatch"))?;
+    let img = image::GrayImage::from_raw(width, height, data.to_vec())
+        .ok_or_else(|| std::io::Error::other("size mismatch"))?;
     encode_png(image::DynamicImage::ImageLuma8(img), path)
 }
 
 /// 16-bit grayscale PNG.
 pub fn write_png_gray16(path: &Path, width: u32, height: u32, data: &[u16]) -> std::io::Result<()> {
-    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, data.to_vec())
-        .ok_or_else(|| std::io::Error::other("size mismatch"))?;
+    let img =
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, data.to_vec())
+            .ok_or_else(|| std::io::Error::other("size mismatch"))?;
     encode_png(image::DynamicImage::ImageLuma16(img), path)
 }

@@ -6,8 +6,8 @@
 //! `defect` and `metrics` know nothing about Vulkan.
 
 pub mod defect;
-pub mod image_io;
 pub mod graph;
+pub mod image_io;
 pub mod metrics;
 pub mod render;
 pub mod scene;

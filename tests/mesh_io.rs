@@ -1,7 +1,7 @@
 //! glTF import/export: round trip with labels, and every bad input gets a clear error.
 
 use glam::Vec3;
-use synosis::scene::{export_mesh, import_mesh, Degenerates, Mesh, MeshError, TriLabel};
+use synosis::scene::{Degenerates, Mesh, MeshError, TriLabel, export_mesh, import_mesh};
 
 fn quad(label_b: TriLabel) -> Mesh {
     Mesh {
@@ -12,14 +12,25 @@ fn quad(label_b: TriLabel) -> Mesh {
             Vec3::new(0.0, 1.0, 0.0),
         ],
         triangles: vec![[0, 1, 2], [0, 2, 3]],
-        labels: vec![TriLabel { face: 1, class: 0, instance: 0 }, label_b],
+        labels: vec![
+            TriLabel {
+                face: 1,
+                class: 0,
+                instance: 0,
+            },
+            label_b,
+        ],
     }
 }
 
 #[test]
 fn round_trip_glb_and_gltf_keep_geometry_and_labels() {
     let dir = tempfile::tempdir().unwrap();
-    let m = quad(TriLabel { face: 3, class: 2, instance: 7 });
+    let m = quad(TriLabel {
+        face: 3,
+        class: 2,
+        instance: 7,
+    });
     for name in ["q.glb", "q.gltf"] {
         let p = dir.path().join(name);
         export_mesh(&m, &p).unwrap();
@@ -32,7 +43,9 @@ fn round_trip_glb_and_gltf_keep_geometry_and_labels() {
 
 #[test]
 fn missing_file_is_a_clear_error() {
-    let e = import_mesh("/nonexistent/x.glb".as_ref(), Degenerates::Reject).err().unwrap();
+    let e = import_mesh("/nonexistent/x.glb".as_ref(), Degenerates::Reject)
+        .err()
+        .unwrap();
     assert!(matches!(e, MeshError::NotFound { .. }));
     assert!(e.to_string().contains("/nonexistent/x.glb"));
 }
@@ -54,7 +67,11 @@ fn malformed_file_is_a_clear_error() {
 fn empty_mesh_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("empty.gltf");
-    std::fs::write(&p, br#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#).unwrap();
+    std::fs::write(
+        &p,
+        br#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#,
+    )
+    .unwrap();
     let e = import_mesh(&p, Degenerates::Reject).err().unwrap();
     assert!(matches!(e, MeshError::Empty { .. }), "{e}");
 }

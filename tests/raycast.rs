@@ -5,9 +5,9 @@ mod common;
 use std::process::Command;
 
 use glam::Vec3;
-use synosis::render::raycast::{raycast, PinholeCamera};
+use synosis::render::raycast::{PinholeCamera, raycast};
 use synosis::scene::procedural::bumpy_sphere;
-use synosis::scene::{export_mesh, Mesh, TriLabel};
+use synosis::scene::{Mesh, TriLabel, export_mesh};
 use synosis::trace::{Backend, TraceScene};
 
 /// A bumpy sphere standing on a thin slab: depth edges, grazing silhouettes, a plane.
@@ -25,7 +25,14 @@ fn test_mesh() -> Mesh {
             if i & 4 == 0 { lo.z } else { hi.z },
         ));
     }
-    for f in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+    for f in [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ] {
         m.triangles.push([base + f[0], base + f[1], base + f[2]]);
         m.triangles.push([base + f[0], base + f[2], base + f[3]]);
         m.labels.extend([TriLabel::default(); 2]);
@@ -48,22 +55,43 @@ fn backends_give_the_same_raycast_image() {
     let (a, b) = (&imgs[0], &imgs[1]);
     let hits = a.depth.iter().filter(|&&d| d > 0.0).count();
     // The framing camera fits the box's top; the slab 20 mm lower fills about 40 %.
-    assert!(hits > 320 * 240 * 3 / 10, "the mesh should fill much of the frame ({hits} hits)");
-    let mask_diff = a.depth.iter().zip(&b.depth).filter(|(x, y)| (**x > 0.0) != (**y > 0.0)).count();
+    assert!(
+        hits > 320 * 240 * 3 / 10,
+        "the mesh should fill much of the frame ({hits} hits)"
+    );
+    let mask_diff = a
+        .depth
+        .iter()
+        .zip(&b.depth)
+        .filter(|(x, y)| (**x > 0.0) != (**y > 0.0))
+        .count();
     let depth_diff = a
         .depth
         .iter()
         .zip(&b.depth)
         .filter(|(x, y)| **x > 0.0 && **y > 0.0 && (**x - **y).abs() > 1e-4 * x.max(1.0))
         .count();
-    let normal_diff = a.normals.iter().zip(&b.normals).filter(|(x, y)| x != y).count();
-    eprintln!("raycast 320x240: hit-mask differences {mask_diff}, depth differences {depth_diff}, normal differences {normal_diff}");
+    let normal_diff = a
+        .normals
+        .iter()
+        .zip(&b.normals)
+        .filter(|(x, y)| x != y)
+        .count();
+    eprintln!(
+        "raycast 320x240: hit-mask differences {mask_diff}, depth differences {depth_diff}, normal differences {normal_diff}"
+    );
     // Measured on lavapipe: 0 mask, 0 depth and 9 normal differences of 76,800 pixels;
     // the normals differ where a ray passes exactly through an edge and each backend
     // reports one of the two triangles at the same distance. Bounds: 3 mask or depth
     // pixels, 0.05 % (38) normal pixels.
-    assert!(mask_diff <= 3 && depth_diff <= 3, "backends disagree: {mask_diff} mask, {depth_diff} depth pixels");
-    assert!(normal_diff <= 38, "backends disagree on {normal_diff} normals");
+    assert!(
+        mask_diff <= 3 && depth_diff <= 3,
+        "backends disagree: {mask_diff} mask, {depth_diff} depth pixels"
+    );
+    assert!(
+        normal_diff <= 38,
+        "backends disagree on {normal_diff} normals"
+    );
     common::assert_clean(&ctx);
 }
 
@@ -83,34 +111,70 @@ fn cli_raycast_writes_depth_normals_and_profile_for_gltf_and_glb() {
         let out = dir.path().join(format!("out-{ext}"));
         let prof = dir.path().join(format!("prof-{ext}.json"));
         let st = synosis()
-            .args(["raycast", m.to_str().unwrap(), "--out", out.to_str().unwrap(), "--accel", accel])
-            .args(["--width", "64", "--height", "48", "--profile", prof.to_str().unwrap()])
+            .args([
+                "raycast",
+                m.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--accel",
+                accel,
+            ])
+            .args([
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--profile",
+                prof.to_str().unwrap(),
+            ])
             .output()
             .unwrap();
-        assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
         let (w, h, depth) = synosis::image_io::read_exr_f32(&out.join("depth.exr")).unwrap();
         assert_eq!((w, h), (64, 48));
         // The camera sits above the slab's top (z = 1) and the sphere's top (z = 21).
         let max = depth.iter().cloned().fold(0.0f32, f32::max);
-        let min_hit = depth.iter().cloned().filter(|&d| d > 0.0).fold(f32::INFINITY, f32::min);
-        assert!(min_hit > 0.0 && max > min_hit + 15.0, "depth range {min_hit}..{max}");
+        let min_hit = depth
+            .iter()
+            .cloned()
+            .filter(|&d| d > 0.0)
+            .fold(f32::INFINITY, f32::min);
+        assert!(
+            min_hit > 0.0 && max > min_hit + 15.0,
+            "depth range {min_hit}..{max}"
+        );
         let normals = image::open(out.join("normals.png")).unwrap().to_rgba8();
         assert_eq!(normals.dimensions(), (64, 48));
         // Pixel (14, 24) sees the slab's top face between the sphere and the slab's edge:
         // normal exactly +Z, encoded (128, 128, 255); the corner sees nothing.
         assert_eq!(normals.get_pixel(14, 24).0, [128, 128, 255, 255]);
         assert_eq!(normals.get_pixel(0, 0).0, [0, 0, 0, 0]);
-        let trace: serde_json::Value = serde_json::from_slice(&std::fs::read(&prof).unwrap()).unwrap();
+        let trace: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&prof).unwrap()).unwrap();
         let names: Vec<String> = trace["traceEvents"]
             .as_array()
             .unwrap()
             .iter()
             .filter(|e| e["ph"] == "X")
-            .map(|e| format!("{}:{}", e["cat"].as_str().unwrap(), e["name"].as_str().unwrap()))
+            .map(|e| {
+                format!(
+                    "{}:{}",
+                    e["cat"].as_str().unwrap(),
+                    e["name"].as_str().unwrap()
+                )
+            })
             .collect();
         assert!(names.contains(&"gpu:raycast".to_string()), "{names:?}");
         assert!(names.iter().any(|n| n == "cpu:readback"), "{names:?}");
-        let build = if accel == "software" { "cpu:BVH build (obvhs)" } else { "cpu:AS build (BLAS+TLAS)" };
+        let build = if accel == "software" {
+            "cpu:BVH build (obvhs)"
+        } else {
+            "cpu:AS build (BLAS+TLAS)"
+        };
         assert!(names.iter().any(|n| n == build), "{names:?}");
     }
 }
@@ -121,7 +185,11 @@ fn cli_bad_inputs_fail_clearly_and_leave_nothing_behind() {
     let malformed = dir.path().join("malformed.gltf");
     std::fs::write(&malformed, b"{\"asset\": 7").unwrap();
     let empty = dir.path().join("empty.gltf");
-    std::fs::write(&empty, br#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#).unwrap();
+    std::fs::write(
+        &empty,
+        br#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"scene":0}"#,
+    )
+    .unwrap();
     let degenerate = dir.path().join("degenerate.glb");
     let mut m = test_mesh();
     m.triangles.push([0, 0, 1]);
@@ -135,18 +203,43 @@ fn cli_bad_inputs_fail_clearly_and_leave_nothing_behind() {
         (&degenerate, "degenerate"),
     ] {
         let out = dir.path().join("out");
-        let r = synosis().args(["raycast", path.to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+        let r = synosis()
+            .args([
+                "raycast",
+                path.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&r.stderr);
         assert!(!r.status.success(), "{}: should fail", path.display());
-        assert!(err.contains(expect), "{}: error should say {expect:?}, got {err}", path.display());
-        assert!(err.contains(path.file_name().unwrap().to_str().unwrap()), "error names the file: {err}");
+        assert!(
+            err.contains(expect),
+            "{}: error should say {expect:?}, got {err}",
+            path.display()
+        );
+        assert!(
+            err.contains(path.file_name().unwrap().to_str().unwrap()),
+            "error names the file: {err}"
+        );
         assert!(!err.contains("panicked"), "{err}");
-        assert!(!out.exists(), "no output may be left behind for {}", path.display());
+        assert!(
+            !out.exists(),
+            "no output may be left behind for {}",
+            path.display()
+        );
     }
     // With --drop-degenerate the same mesh renders.
     let out = dir.path().join("out");
     let r = synosis()
-        .args(["raycast", degenerate.to_str().unwrap(), "--out", out.to_str().unwrap(), "--drop-degenerate"])
+        .args([
+            "raycast",
+            degenerate.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--drop-degenerate",
+        ])
         .args(["--width", "32", "--height", "24"])
         .output()
         .unwrap();

@@ -4,10 +4,10 @@ mod common;
 
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
-use synosis::render::raycast::{trace_rays, RayIn};
+use synosis::render::raycast::{RayIn, trace_rays};
 use synosis::scene::procedural::bumpy_sphere;
-use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
 use synosis::trace::TraceScene;
+use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
 
 /// 100k rays: a third random through the volume, a third aimed exactly at vertices, a
 /// third at points on edges (where two triangles meet and intersectors disagree most).
@@ -28,11 +28,19 @@ fn rays(mesh: &synosis::scene::Mesh, n: usize, seed: u64) -> Vec<RayIn> {
                 _ => {
                     let t = mesh.triangles[rng.random_range(0..mesh.triangles.len())];
                     let k = rng.random_range(0..3);
-                    let (a, b) = (mesh.positions[t[k] as usize], mesh.positions[t[(k + 1) % 3] as usize]);
+                    let (a, b) = (
+                        mesh.positions[t[k] as usize],
+                        mesh.positions[t[(k + 1) % 3] as usize],
+                    );
                     a.lerp(b, rng.random())
                 }
             };
-            RayIn { origin: origin.into(), tmin: 0.0, dir: (target - origin).normalize().into(), tmax: 1e30 }
+            RayIn {
+                origin: origin.into(),
+                tmin: 0.0,
+                dir: (target - origin).normalize().into(),
+                tmax: 1e30,
+            }
         })
         .collect()
 }
@@ -50,7 +58,10 @@ fn both_backends_agree_with_cpu_reference_on_100k_rays() {
         .map(|r| cpu_closest_hit(&bvh, &tris, r.origin.into(), r.dir.into(), r.tmin, r.tmax))
         .collect();
     let ref_hits = reference.iter().filter(|h| h.is_some()).count();
-    assert!(ref_hits > 60_000, "most rays should hit the sphere, got {ref_hits}");
+    assert!(
+        ref_hits > 60_000,
+        "most rays should hit the sphere, got {ref_hits}"
+    );
     for backend in common::BACKENDS {
         let scene = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
         let (hits, _) = trace_rays(&ctx, &scene, &rays, None).unwrap();
@@ -94,14 +105,31 @@ fn both_backends_agree_with_cpu_reference_on_100k_rays() {
             synosis::trace::Backend::Software => 5,
             synosis::trace::Backend::RayQuery => 300,
         };
-        assert!(hit_miss + far_t <= bound, "{}: {hit_miss} hit/miss and {far_t} distance mismatches", backend.name());
-        assert!(volume_mismatch <= 2, "{}: {volume_mismatch} mismatches on rays through the volume", backend.name());
+        assert!(
+            hit_miss + far_t <= bound,
+            "{}: {hit_miss} hit/miss and {far_t} distance mismatches",
+            backend.name()
+        );
+        assert!(
+            volume_mismatch <= 2,
+            "{}: {volume_mismatch} mismatches on rays through the volume",
+            backend.name()
+        );
         // Where both hit, barycentrics must reconstruct the hit point.
-        for (h, r) in hits.iter().zip(&rays).filter(|(h, _)| h.is_hit()).take(2000) {
+        for (h, r) in hits
+            .iter()
+            .zip(&rays)
+            .filter(|(h, _)| h.is_hit())
+            .take(2000)
+        {
             let [a, b, c] = mesh.corners(h.prim as usize);
             let p = a * (1.0 - h.bary[0] - h.bary[1]) + b * h.bary[0] + c * h.bary[1];
             let q = Vec3::from(r.origin) + h.t * Vec3::from(r.dir);
-            assert!((p - q).length() < 1e-3, "{}: barycentrics do not give the hit point", backend.name());
+            assert!(
+                (p - q).length() < 1e-3,
+                "{}: barycentrics do not give the hit point",
+                backend.name()
+            );
         }
     }
     common::assert_clean(&ctx);

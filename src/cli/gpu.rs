@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use synosis::render::raycast::{raycast, PinholeCamera};
-use synosis::scene::{import_mesh, Degenerates};
-use synosis::trace::{auto_backend, resolve, AccelChoice, TraceScene};
+use synosis::render::raycast::{PinholeCamera, raycast};
+use synosis::scene::{Degenerates, import_mesh};
+use synosis::trace::{AccelChoice, TraceScene, auto_backend, resolve};
 use synosis::vk::{Context, ContextOptions, Profiler};
 
 #[derive(Args)]
@@ -17,7 +17,10 @@ pub struct InfoArgs {
 }
 
 pub fn info(a: InfoArgs) -> anyhow::Result<()> {
-    let ctx = Context::new(&ContextOptions { validation: false, ray_query: true })?;
+    let ctx = Context::new(&ContextOptions {
+        validation: false,
+        ray_query: true,
+    })?;
     let (auto, why) = auto_backend(&ctx.info);
     if a.json {
         let mut v = serde_json::to_value(&ctx.info)?;
@@ -30,15 +33,28 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
     println!("device:          {} ({})", i.name, i.device_type);
     println!("driver:          {} {}", i.driver_name, i.driver_info);
     println!("vulkan:          {}", i.vulkan_version);
-    println!("ray query:       {}", if i.ray_query_supported { "yes" } else { "no" });
+    println!(
+        "ray query:       {}",
+        if i.ray_query_supported { "yes" } else { "no" }
+    );
     println!("auto backend:    {} ({why})", auto.name());
-    println!("timestamps:      {} (period {} ns)", i.timestamps_supported, i.timestamp_period_ns);
-    println!("max storage buffer range: {} MiB", i.max_storage_buffer_range / (1 << 20));
+    println!(
+        "timestamps:      {} (period {} ns)",
+        i.timestamps_supported, i.timestamp_period_ns
+    );
+    println!(
+        "max storage buffer range: {} MiB",
+        i.max_storage_buffer_range / (1 << 20)
+    );
     for (k, h) in i.memory_heaps.iter().enumerate() {
         println!(
             "memory heap {k}:   {:.1} GiB{}",
             h.size_bytes as f64 / (1u64 << 30) as f64,
-            if h.device_local { " (device local)" } else { "" }
+            if h.device_local {
+                " (device local)"
+            } else {
+                ""
+            }
         );
     }
     Ok(())
@@ -67,25 +83,49 @@ pub struct RaycastArgs {
 
 pub fn raycast_cmd(a: RaycastArgs) -> anyhow::Result<()> {
     let profiler = Profiler::new();
-    let degenerates = if a.drop_degenerate { Degenerates::Drop } else { Degenerates::Reject };
+    let degenerates = if a.drop_degenerate {
+        Degenerates::Drop
+    } else {
+        Degenerates::Reject
+    };
     let imported = profiler.cpu("import glTF", || import_mesh(&a.mesh, degenerates))?;
     if imported.dropped_degenerate > 0 {
-        eprintln!("warning: dropped {} degenerate triangle(s)", imported.dropped_degenerate);
+        eprintln!(
+            "warning: dropped {} degenerate triangle(s)",
+            imported.dropped_degenerate
+        );
     }
     let mesh = imported.mesh;
-    let ctx = profiler.cpu("Vulkan init", || Context::new(&ContextOptions { validation: false, ray_query: true }))?;
+    let ctx = profiler.cpu("Vulkan init", || {
+        Context::new(&ContextOptions {
+            validation: false,
+            ray_query: true,
+        })
+    })?;
     let backend = resolve(a.accel, &ctx.info)?;
     let scene = TraceScene::build(&ctx, &mesh, backend, Some(&profiler))?;
     let cam = PinholeCamera::framing(&mesh, a.width as f32 / a.height as f32);
     let img = raycast(&ctx, &scene, &cam, a.width, a.height, Some(&profiler))?;
     let errors = ctx.validation_errors();
-    anyhow::ensure!(errors.is_empty(), "Vulkan validation reported {} error(s); first: {}", errors.len(), errors[0]);
+    anyhow::ensure!(
+        errors.is_empty(),
+        "Vulkan validation reported {} error(s); first: {}",
+        errors.len(),
+        errors[0]
+    );
 
-    std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
     profiler.cpu("write images", || -> anyhow::Result<()> {
         let depth = a.out.join("depth.exr");
-        synosis::image_io::write_exr_f32(&depth, a.width as usize, a.height as usize, "Z", &img.depth)
-            .with_context(|| format!("writing {}", depth.display()))?;
+        synosis::image_io::write_exr_f32(
+            &depth,
+            a.width as usize,
+            a.height as usize,
+            "Z",
+            &img.depth,
+        )
+        .with_context(|| format!("writing {}", depth.display()))?;
         let normals = a.out.join("normals.png");
         synosis::image_io::write_png_rgba8(&normals, a.width, a.height, &img.normals)
             .with_context(|| format!("writing {}", normals.display()))?;
@@ -104,7 +144,9 @@ pub fn raycast_cmd(a: RaycastArgs) -> anyhow::Result<()> {
         backend.name()
     );
     if let Some(p) = &a.profile {
-        profiler.write_chrome_trace(p).with_context(|| format!("writing {}", p.display()))?;
+        profiler
+            .write_chrome_trace(p)
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(())
 }

@@ -11,7 +11,10 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use crate::vk::{AccelStructure, BindingKind, Buffer, ComputePipeline, Context, MemoryKind, Profiler, Span, VkError};
+use crate::vk::{
+    AccelStructure, BindingKind, Buffer, ComputePipeline, Context, MemoryKind, Profiler, Span,
+    VkError,
+};
 
 /// A buffer known to the graph.
 #[derive(Debug, PartialEq, Eq, Hash)]
@@ -51,7 +54,9 @@ impl Stage {
         match (self, a) {
             (Stage::Compute, Access::Read) => vk::AccessFlags::SHADER_READ,
             (Stage::Compute, Access::Write) => vk::AccessFlags::SHADER_WRITE,
-            (Stage::Compute, Access::ReadWrite) => vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+            (Stage::Compute, Access::ReadWrite) => {
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE
+            }
             (Stage::Transfer, Access::Read) => vk::AccessFlags::TRANSFER_READ,
             (Stage::Transfer, _) => vk::AccessFlags::TRANSFER_WRITE,
         }
@@ -169,7 +174,13 @@ impl<'a> DispatchBuilder<'_, 'a> {
 
 impl<'a> Graph<'a> {
     pub fn new(ctx: &Arc<Context>, label: &str) -> Self {
-        Graph { ctx: ctx.clone(), buffers: Vec::new(), accels: Vec::new(), passes: Vec::new(), label: label.into() }
+        Graph {
+            ctx: ctx.clone(),
+            buffers: Vec::new(),
+            accels: Vec::new(),
+            passes: Vec::new(),
+            label: label.into(),
+        }
     }
 
     /// Makes a caller-owned buffer available to passes; its contents after `execute` are
@@ -195,10 +206,21 @@ impl<'a> Graph<'a> {
     }
 
     /// Starts a compute pass dispatching `groups` workgroups.
-    pub fn dispatch<'g>(&'g mut self, name: &str, pipeline: &'a ComputePipeline, groups: [u32; 3]) -> DispatchBuilder<'g, 'a> {
+    pub fn dispatch<'g>(
+        &'g mut self,
+        name: &str,
+        pipeline: &'a ComputePipeline,
+        groups: [u32; 3],
+    ) -> DispatchBuilder<'g, 'a> {
         let pass = Pass {
             name: name.to_string(),
-            kind: PassKind::Dispatch { pipeline, buffers: Vec::new(), accels: Vec::new(), push: Vec::new(), groups },
+            kind: PassKind::Dispatch {
+                pipeline,
+                buffers: Vec::new(),
+                accels: Vec::new(),
+                push: Vec::new(),
+                groups,
+            },
             accesses: Vec::new(),
         };
         DispatchBuilder { graph: self, pass }
@@ -206,10 +228,17 @@ impl<'a> Graph<'a> {
 
     /// Copies `src` into `dst` (the smaller of both sizes).
     pub fn copy(&mut self, name: &str, src: &BufferRef, dst: &mut BufferRef) {
-        let size = self.buffers[src.0].buffer().size.min(self.buffers[dst.0].buffer().size);
+        let size = self.buffers[src.0]
+            .buffer()
+            .size
+            .min(self.buffers[dst.0].buffer().size);
         self.passes.push(Pass {
             name: name.into(),
-            kind: PassKind::Copy { src: src.0, dst: dst.0, size },
+            kind: PassKind::Copy {
+                src: src.0,
+                dst: dst.0,
+                size,
+            },
             accesses: vec![(src.0, Access::Read), (dst.0, Access::Write)],
         });
     }
@@ -237,7 +266,13 @@ impl<'a> Graph<'a> {
                     deps[i].push(w);
                 }
                 if a.writes() {
-                    deps[i].extend(readers.remove(&r).unwrap_or_default().into_iter().filter(|&x| x != i));
+                    deps[i].extend(
+                        readers
+                            .remove(&r)
+                            .unwrap_or_default()
+                            .into_iter()
+                            .filter(|&x| x != i),
+                    );
                 }
             }
             for &(r, a) in &p.accesses {
@@ -265,7 +300,9 @@ impl<'a> Graph<'a> {
             }
         }
         // Kahn's algorithm, always taking the earliest-declared ready pass.
-        let mut indeg: Vec<usize> = (0..n).map(|i| deps[i].iter().filter(|&&d| keep[d]).count()).collect();
+        let mut indeg: Vec<usize> = (0..n)
+            .map(|i| deps[i].iter().filter(|&&d| keep[d]).count())
+            .collect();
         let mut order = Vec::new();
         let mut done = vec![false; n];
         while let Some(i) = (0..n).find(|&i| keep[i] && !done[i] && indeg[i] == 0) {
@@ -293,7 +330,9 @@ impl<'a> Graph<'a> {
         let nq = 2 * order.len() as u32;
         let query_pool = unsafe {
             dev.create_query_pool(
-                &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(nq),
+                &vk::QueryPoolCreateInfo::default()
+                    .query_type(vk::QueryType::TIMESTAMP)
+                    .query_count(nq),
                 None,
             )
         }?;
@@ -307,12 +346,19 @@ impl<'a> Graph<'a> {
                 }
             }
         }
-        let sizes: Vec<vk::DescriptorPoolSize> =
-            pool_sizes.iter().map(|(&ty, &n)| vk::DescriptorPoolSize { ty, descriptor_count: n }).collect();
+        let sizes: Vec<vk::DescriptorPoolSize> = pool_sizes
+            .iter()
+            .map(|(&ty, &n)| vk::DescriptorPoolSize {
+                ty,
+                descriptor_count: n,
+            })
+            .collect();
         let desc_pool = if sets_needed > 0 {
             match unsafe {
                 dev.create_descriptor_pool(
-                    &vk::DescriptorPoolCreateInfo::default().max_sets(sets_needed).pool_sizes(&sizes),
+                    &vk::DescriptorPoolCreateInfo::default()
+                        .max_sets(sets_needed)
+                        .pool_sizes(&sizes),
                     None,
                 )
             } {
@@ -348,11 +394,21 @@ impl<'a> Graph<'a> {
         // Descriptor sets first (they must be written before recording uses them).
         let mut sets: HashMap<usize, vk::DescriptorSet> = HashMap::new();
         for &i in order {
-            let PassKind::Dispatch { pipeline, buffers, accels, .. } = &self.passes[i].kind else { continue };
+            let PassKind::Dispatch {
+                pipeline,
+                buffers,
+                accels,
+                ..
+            } = &self.passes[i].kind
+            else {
+                continue;
+            };
             let layouts = [pipeline.set_layout];
             let set = unsafe {
                 dev.allocate_descriptor_sets(
-                    &vk::DescriptorSetAllocateInfo::default().descriptor_pool(desc_pool).set_layouts(&layouts),
+                    &vk::DescriptorSetAllocateInfo::default()
+                        .descriptor_pool(desc_pool)
+                        .set_layouts(&layouts),
                 )
             }?[0];
             for (binding, kind) in pipeline.bindings.iter().enumerate() {
@@ -382,7 +438,8 @@ impl<'a> Graph<'a> {
             }
             for &(binding, a) in accels {
                 let handles = [self.accels[a].raw];
-                let mut as_info = vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(&handles);
+                let mut as_info = vk::WriteDescriptorSetAccelerationStructureKHR::default()
+                    .acceleration_structures(&handles);
                 let w = vk::WriteDescriptorSet::default()
                     .dst_set(set)
                     .dst_binding(binding)
@@ -427,7 +484,15 @@ impl<'a> Graph<'a> {
                 }
                 if !barriers.is_empty() {
                     unsafe {
-                        dev.cmd_pipeline_barrier(cb, src_stage, stage.flags(), vk::DependencyFlags::empty(), &[], &barriers, &[])
+                        dev.cmd_pipeline_barrier(
+                            cb,
+                            src_stage,
+                            stage.flags(),
+                            vk::DependencyFlags::empty(),
+                            &[],
+                            &barriers,
+                            &[],
+                        )
                     };
                 }
                 for &(r, a) in &pass.accesses {
@@ -441,27 +506,74 @@ impl<'a> Graph<'a> {
                 }
                 ctx.begin_label(cb, &pass.name);
                 if timestamps {
-                    unsafe { dev.cmd_write_timestamp(cb, vk::PipelineStageFlags::ALL_COMMANDS, query_pool, 2 * k as u32) };
+                    unsafe {
+                        dev.cmd_write_timestamp(
+                            cb,
+                            vk::PipelineStageFlags::ALL_COMMANDS,
+                            query_pool,
+                            2 * k as u32,
+                        )
+                    };
                 }
                 match &pass.kind {
-                    PassKind::Dispatch { pipeline, push, groups, .. } => unsafe {
-                        dev.cmd_bind_pipeline(cb, vk::PipelineBindPoint::COMPUTE, pipeline.pipeline);
-                        dev.cmd_bind_descriptor_sets(cb, vk::PipelineBindPoint::COMPUTE, pipeline.layout, 0, &[sets[&i]], &[]);
+                    PassKind::Dispatch {
+                        pipeline,
+                        push,
+                        groups,
+                        ..
+                    } => unsafe {
+                        dev.cmd_bind_pipeline(
+                            cb,
+                            vk::PipelineBindPoint::COMPUTE,
+                            pipeline.pipeline,
+                        );
+                        dev.cmd_bind_descriptor_sets(
+                            cb,
+                            vk::PipelineBindPoint::COMPUTE,
+                            pipeline.layout,
+                            0,
+                            &[sets[&i]],
+                            &[],
+                        );
                         if !push.is_empty() {
-                            dev.cmd_push_constants(cb, pipeline.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
+                            dev.cmd_push_constants(
+                                cb,
+                                pipeline.layout,
+                                vk::ShaderStageFlags::COMPUTE,
+                                0,
+                                push,
+                            );
                         }
                         dev.cmd_dispatch(cb, groups[0], groups[1], groups[2]);
                     },
                     PassKind::Copy { src, dst, size } => unsafe {
                         let region = [vk::BufferCopy::default().size(*size)];
-                        dev.cmd_copy_buffer(cb, self.buffers[*src].buffer().raw, self.buffers[*dst].buffer().raw, &region);
+                        dev.cmd_copy_buffer(
+                            cb,
+                            self.buffers[*src].buffer().raw,
+                            self.buffers[*dst].buffer().raw,
+                            &region,
+                        );
                     },
                     PassKind::Fill { dst, value } => unsafe {
-                        dev.cmd_fill_buffer(cb, self.buffers[*dst].buffer().raw, 0, vk::WHOLE_SIZE, *value);
+                        dev.cmd_fill_buffer(
+                            cb,
+                            self.buffers[*dst].buffer().raw,
+                            0,
+                            vk::WHOLE_SIZE,
+                            *value,
+                        );
                     },
                 }
                 if timestamps {
-                    unsafe { dev.cmd_write_timestamp(cb, vk::PipelineStageFlags::ALL_COMMANDS, query_pool, 2 * k as u32 + 1) };
+                    unsafe {
+                        dev.cmd_write_timestamp(
+                            cb,
+                            vk::PipelineStageFlags::ALL_COMMANDS,
+                            query_pool,
+                            2 * k as u32 + 1,
+                        )
+                    };
                 }
                 ctx.end_label(cb);
             }
@@ -487,7 +599,14 @@ impl<'a> Graph<'a> {
         let mut timings = Vec::new();
         if timestamps {
             let mut ts = vec![0u64; 2 * order.len()];
-            unsafe { dev.get_query_pool_results(query_pool, 0, &mut ts, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }?;
+            unsafe {
+                dev.get_query_pool_results(
+                    query_pool,
+                    0,
+                    &mut ts,
+                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                )
+            }?;
             let period_ms = ctx.info.timestamp_period_ns as f64 * 1e-6;
             let t0 = ts[0];
             for (k, &i) in order.iter().enumerate() {
@@ -495,7 +614,12 @@ impl<'a> Graph<'a> {
                 let gpu_ms = ts[2 * k + 1].saturating_sub(ts[2 * k]) as f64 * period_ms;
                 let name = self.passes[i].name.clone();
                 if let Some(p) = profiler {
-                    p.push(Span { name: name.clone(), track: "gpu", start_us: submit_us + start_ms * 1e3, dur_us: gpu_ms * 1e3 });
+                    p.push(Span {
+                        name: name.clone(),
+                        track: "gpu",
+                        start_us: submit_us + start_ms * 1e3,
+                        dur_us: gpu_ms * 1e3,
+                    });
                 }
                 timings.push(PassTiming { name, gpu_ms });
             }

@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use crate::graph::{Graph, PassTiming};
 use crate::scene::Mesh;
-use crate::trace::{scramble_multiplier, trace_pipeline, TraceScene};
+use crate::trace::{TraceScene, scramble_multiplier, trace_pipeline};
 use crate::vk::{Buffer, Context, MemoryKind, Profiler, VkError};
 
 /// A ray for [`trace_rays`]: origin, tmin, direction, tmax.
@@ -55,18 +55,37 @@ pub fn trace_rays(
     let pipeline = trace_pipeline(ctx, "hits", scene.backend, 2, 16, [64, 1, 1])?;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let ray_buf = Buffer::from_slice(ctx, "rays", rays, storage)?;
-    let hit_buf = Buffer::new(ctx, "hits", rays.len() as u64 * 16, storage, MemoryKind::Readback)?;
+    let hit_buf = Buffer::new(
+        ctx,
+        "hits",
+        rays.len() as u64 * 16,
+        storage,
+        MemoryKind::Readback,
+    )?;
     let groups = (rays.len() as u32).div_ceil(64);
     let max_groups = ctx.info.max_workgroup_count[0];
     if groups > max_groups {
-        return Err(VkError::Other(format!("{} rays exceed one dispatch ({} groups max)", rays.len(), max_groups)));
+        return Err(VkError::Other(format!(
+            "{} rays exceed one dispatch ({} groups max)",
+            rays.len(),
+            max_groups
+        )));
     }
-    let push = HitsPush { count: rays.len() as u32, groups, mult: scramble_multiplier(groups), pad: 0 };
+    let push = HitsPush {
+        count: rays.len() as u32,
+        groups,
+        mult: scramble_multiplier(groups),
+        pad: 0,
+    };
     let mut g = Graph::new(ctx, "trace rays");
     let refs = scene.import(&mut g);
     let r = g.import(&ray_buf);
     let mut h = g.import(&hit_buf);
-    refs.bind(g.dispatch("trace", &pipeline, [groups, 1, 1])).read(off, &r).write(off + 1, &mut h).push(&push).submit();
+    refs.bind(g.dispatch("trace", &pipeline, [groups, 1, 1]))
+        .read(off, &r)
+        .write(off + 1, &mut h)
+        .push(&push)
+        .submit();
     let timings = g.execute(profiler)?;
     let raw: Vec<[f32; 4]> = match profiler {
         Some(p) => p.cpu("readback", || hit_buf.read()),
@@ -74,9 +93,16 @@ pub fn trace_rays(
     }?;
     let hits = raw
         .iter()
-        .map(|v| HitOut { t: v[0], prim: v[1].to_bits(), bary: [v[2], v[3]] })
+        .map(|v| HitOut {
+            t: v[0],
+            prim: v[1].to_bits(),
+            bary: [v[2], v[3]],
+        })
         .collect();
-    let timing = timings.into_iter().next().unwrap_or(PassTiming { name: "trace".into(), gpu_ms: f64::NAN });
+    let timing = timings.into_iter().next().unwrap_or(PassTiming {
+        name: "trace".into(),
+        gpu_ms: f64::NAN,
+    });
     Ok((hits, timing))
 }
 
@@ -104,7 +130,12 @@ impl PinholeCamera {
         let tan = (FRAMING_VFOV_DEG.to_radians() * 0.5).tan();
         let half_h = (half.y.max(half.x / aspect) * FRAMING_MARGIN).max(1e-6);
         let dist = half_h / tan;
-        PinholeCamera { eye: Vec3::new(c.x, c.y, hi.z + dist), forward: -Vec3::Z, up: Vec3::Y, vfov_deg: FRAMING_VFOV_DEG }
+        PinholeCamera {
+            eye: Vec3::new(c.x, c.y, hi.z + dist),
+            forward: -Vec3::Z,
+            up: Vec3::Y,
+            vfov_deg: FRAMING_VFOV_DEG,
+        }
     }
 
     /// Primary ray direction (unnormalised) through pixel centre (px, py), row 0 at top.
@@ -155,7 +186,14 @@ pub fn raycast(
     profiler: Option<&Profiler>,
 ) -> Result<RaycastImage, VkError> {
     let off = TraceScene::binding_kinds(scene.backend).len() as u32;
-    let pipeline = trace_pipeline(ctx, "raycast", scene.backend, 3, std::mem::size_of::<RaycastPush>() as u32, [8, 8, 1])?;
+    let pipeline = trace_pipeline(
+        ctx,
+        "raycast",
+        scene.backend,
+        3,
+        std::mem::size_of::<RaycastPush>() as u32,
+        [8, 8, 1],
+    )?;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let n = width as u64 * height as u64;
     let depth_buf = Buffer::new(ctx, "depth", n * 4, storage, MemoryKind::Readback)?;
@@ -185,11 +223,21 @@ pub fn raycast(
         .push(&push)
         .submit();
     let timings = g.execute(profiler)?;
-    let read = || -> Result<_, VkError> { Ok((depth_buf.read::<f32>()?, normal_buf.read::<u32>()?)) };
+    let read =
+        || -> Result<_, VkError> { Ok((depth_buf.read::<f32>()?, normal_buf.read::<u32>()?)) };
     let (depth, normals) = match profiler {
         Some(p) => p.cpu("readback", read),
         None => read(),
     }?;
-    let timing = timings.into_iter().next().unwrap_or(PassTiming { name: "raycast".into(), gpu_ms: f64::NAN });
-    Ok(RaycastImage { width, height, depth, normals, timing })
+    let timing = timings.into_iter().next().unwrap_or(PassTiming {
+        name: "raycast".into(),
+        gpu_ms: f64::NAN,
+    });
+    Ok(RaycastImage {
+        width,
+        height,
+        depth,
+        normals,
+        timing,
+    })
 }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Vec3};
 
-use super::mesh::{face_from_name, face_name, Mesh, TriLabel};
+use super::mesh::{Mesh, TriLabel, face_from_name, face_name};
 
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
@@ -25,13 +25,25 @@ pub enum MeshError {
         "{path}: {count} degenerate (zero-area) triangle(s), first at triangle {first}; \
          fix the mesh or pass --drop-degenerate to remove them"
     )]
-    Degenerate { path: PathBuf, count: usize, first: usize },
+    Degenerate {
+        path: PathBuf,
+        count: usize,
+        first: usize,
+    },
     #[error("{path}: vertex {index} has a non-finite position")]
     NonFinite { path: PathBuf, index: usize },
     #[error("{path}: primitive {primitive} of mesh {mesh}: {reason}")]
-    BadLabel { path: PathBuf, mesh: usize, primitive: usize, reason: String },
+    BadLabel {
+        path: PathBuf,
+        mesh: usize,
+        primitive: usize,
+        reason: String,
+    },
     #[error("{path}: cannot write: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: unsupported extension (use .gltf or .glb)")]
     Extension { path: PathBuf },
 }
@@ -65,9 +77,14 @@ struct LabelExtras {
 
 /// Reads every triangle primitive of the default scene (node transforms applied).
 pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, MeshError> {
-    let malformed = |reason: String| MeshError::Malformed { path: path.to_path_buf(), reason };
+    let malformed = |reason: String| MeshError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
     if !path.exists() {
-        return Err(MeshError::NotFound { path: path.to_path_buf() });
+        return Err(MeshError::NotFound {
+            path: path.to_path_buf(),
+        });
     }
     let gltf = gltf::Gltf::open(path).map_err(|e| malformed(e.to_string()))?;
     let buffers = gltf::import_buffers(&gltf.document, path.parent(), gltf.blob.clone())
@@ -81,7 +98,8 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
         Some(s) => s.nodes().collect(),
         None => gltf.document.nodes().collect(),
     };
-    let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut stack: Vec<(gltf::Node, Mat4)> =
+        roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
     let mut shared = std::collections::HashMap::new();
     while let Some((node, parent)) = stack.pop() {
         let local = Mat4::from_cols_array_2d(&node.transform().matrix());
@@ -124,26 +142,40 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
                 Some(ix) => ix.into_u32().collect(),
                 None => (0..nverts).collect(),
             };
-            if indices.len() % 3 != 0 {
-                return Err(malformed(format!("index count {} is not a multiple of 3", indices.len())));
+            if !indices.len().is_multiple_of(3) {
+                return Err(malformed(format!(
+                    "index count {} is not a multiple of 3",
+                    indices.len()
+                )));
             }
             if let Some(&bad) = indices.iter().find(|&&i| i >= nverts) {
-                return Err(malformed(format!("index {bad} out of range ({nverts} vertices)")));
+                return Err(malformed(format!(
+                    "index {bad} out of range ({nverts} vertices)"
+                )));
             }
             // A mirroring transform flips winding; keep outward normals outward.
             let flip = world.determinant() < 0.0;
             for t in indices.chunks_exact(3) {
-                let tri = if flip { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] };
+                let tri = if flip {
+                    [t[0], t[2], t[1]]
+                } else {
+                    [t[0], t[1], t[2]]
+                };
                 mesh.triangles.push(tri.map(|i| i + base));
                 mesh.labels.push(label);
             }
         }
     }
     if mesh.triangles.is_empty() {
-        return Err(MeshError::Empty { path: path.to_path_buf() });
+        return Err(MeshError::Empty {
+            path: path.to_path_buf(),
+        });
     }
     if let Some(index) = mesh.positions.iter().position(|p| !p.is_finite()) {
-        return Err(MeshError::NonFinite { path: path.to_path_buf(), index });
+        return Err(MeshError::NonFinite {
+            path: path.to_path_buf(),
+            index,
+        });
     }
     let degenerate = mesh.degenerate_triangles();
     let dropped_degenerate = degenerate.len();
@@ -159,10 +191,15 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
             Degenerates::Drop => mesh.remove_triangles(&degenerate),
         }
         if mesh.triangles.is_empty() {
-            return Err(MeshError::Empty { path: path.to_path_buf() });
+            return Err(MeshError::Empty {
+                path: path.to_path_buf(),
+            });
         }
     }
-    Ok(Imported { mesh, dropped_degenerate })
+    Ok(Imported {
+        mesh,
+        dropped_degenerate,
+    })
 }
 
 fn primitive_label(
@@ -186,7 +223,9 @@ fn primitive_label(
             let face = match ex.face.as_deref() {
                 None => 0,
                 Some(n) => face_from_name(n).ok_or_else(|| {
-                    bad(format!("extras.synosis.face = {n:?}; allowed: \"A\", \"B\", \"C\", \"other\""))
+                    bad(format!(
+                        "extras.synosis.face = {n:?}; allowed: \"A\", \"B\", \"C\", \"other\""
+                    ))
                 })?,
             };
             if ex.class > 2 {
@@ -195,22 +234,38 @@ fn primitive_label(
                     ex.class
                 )));
             }
-            return Ok(TriLabel { face, class: ex.class, instance: ex.instance });
+            return Ok(TriLabel {
+                face,
+                class: ex.class,
+                instance: ex.instance,
+            });
         }
     }
     let by_name = |n: Option<&str>| {
         n.and_then(|n| face_from_name(n.strip_prefix("face_").unwrap_or(n)))
             .filter(|&f| f != 0)
     };
-    let face = by_name(gmesh.name()).or_else(|| by_name(node.name())).unwrap_or(0);
-    Ok(TriLabel { face, ..TriLabel::default() })
+    let face = by_name(gmesh.name())
+        .or_else(|| by_name(node.name()))
+        .unwrap_or(0);
+    Ok(TriLabel {
+        face,
+        ..TriLabel::default()
+    })
 }
 
 /// Writes `mesh` as .glb or .gltf (+ .bin), chosen by the extension, atomically: to a
 /// temporary name first, renamed when complete.
 pub fn export_mesh(mesh: &Mesh, path: &Path) -> Result<(), MeshError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let write_err = |p: &Path, source| MeshError::Write { path: p.to_path_buf(), source };
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let write_err = |p: &Path, source| MeshError::Write {
+        path: p.to_path_buf(),
+        source,
+    };
 
     // Group triangles by label, keeping first-appearance order (deterministic output).
     let mut groups: Vec<(TriLabel, Vec<u32>)> = Vec::new();
@@ -229,7 +284,9 @@ pub fn export_mesh(mesh: &Mesh, path: &Path) -> Result<(), MeshError> {
         bin.extend_from_slice(bytemuck::cast_slice(&p.to_array()));
     }
     let pos_len = bin.len();
-    let mut views = vec![serde_json::json!({"buffer": 0, "byteOffset": 0, "byteLength": pos_len, "target": 34962})];
+    let mut views = vec![
+        serde_json::json!({"buffer": 0, "byteOffset": 0, "byteLength": pos_len, "target": 34962}),
+    ];
     let mut accessors = vec![serde_json::json!({
         "bufferView": 0, "componentType": 5126, "count": mesh.positions.len(), "type": "VEC3",
         "min": lo.to_array(), "max": hi.to_array()
@@ -247,13 +304,16 @@ pub fn export_mesh(mesh: &Mesh, path: &Path) -> Result<(), MeshError> {
             "extras": {"synosis": {"face": face_name(label.face), "class": label.class, "instance": label.instance}}
         }));
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let bin_name = path.with_extension("bin");
     let mut buffer = serde_json::json!({"byteLength": bin.len()});
     if ext == "gltf" {
-        let name = bin_name.file_name().and_then(|n| n.to_str()).unwrap_or("mesh.bin");
+        let name = bin_name
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("mesh.bin");
         buffer["uri"] = serde_json::Value::from(name);
     }
     let doc = serde_json::json!({
@@ -269,7 +329,7 @@ pub fn export_mesh(mesh: &Mesh, path: &Path) -> Result<(), MeshError> {
     let mut json = serde_json::to_vec(&doc).expect("serialising a json! value cannot fail");
     match ext.as_str() {
         "glb" => {
-            while json.len() % 4 != 0 {
+            while !json.len().is_multiple_of(4) {
                 json.push(b' ');
             }
             let total = 12 + 8 + json.len() + 8 + bin.len();
@@ -289,6 +349,8 @@ pub fn export_mesh(mesh: &Mesh, path: &Path) -> Result<(), MeshError> {
             crate::util::write_atomic(&bin_name, &bin).map_err(|e| write_err(&bin_name, e))?;
             crate::util::write_atomic(path, &json).map_err(|e| write_err(path, e))
         }
-        _ => Err(MeshError::Extension { path: path.to_path_buf() }),
+        _ => Err(MeshError::Extension {
+            path: path.to_path_buf(),
+        }),
     }
 }

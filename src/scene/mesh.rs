@@ -86,7 +86,8 @@ impl Mesh {
                 let [a, b, c] = self.corners(t);
                 let scale = (b - a).length_squared().max((c - a).length_squared());
                 let n2 = self.area_normal(t).length_squared();
-                !(n2 > scale * scale * 1e-14)
+                // NaN areas (non-finite corners) count as degenerate too.
+                n2.partial_cmp(&(scale * scale * 1e-14)) != Some(std::cmp::Ordering::Greater)
             })
             .collect()
     }

@@ -4,5 +4,5 @@ pub mod gltf_io;
 pub mod mesh;
 pub mod procedural;
 
-pub use gltf_io::{export_mesh, import_mesh, Degenerates, Imported, MeshError};
+pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};

@@ -17,7 +17,15 @@ pub fn bumpy_sphere(segments: u32, rings: u32, radius: f32, bump: f32) -> Mesh {
         for s in 0..segments {
             let phi = std::f32::consts::TAU * s as f32 / segments as f32;
             let k = 1.0 + bump * (5.0 * theta).sin() * (7.0 * phi).cos();
-            positions.push(radius * k * Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
+            positions.push(
+                radius
+                    * k
+                    * Vec3::new(
+                        theta.sin() * phi.cos(),
+                        theta.sin() * phi.sin(),
+                        theta.cos(),
+                    ),
+            );
         }
     }
     positions.push(Vec3::new(0.0, 0.0, -radius));
@@ -38,5 +46,9 @@ pub fn bumpy_sphere(segments: u32, rings: u32, radius: f32, bump: f32) -> Mesh {
         triangles.push([south, idx(rings - 1, s + 1), idx(rings - 1, s)]);
     }
     let labels = vec![TriLabel::default(); triangles.len()];
-    Mesh { positions, triangles, labels }
+    Mesh {
+        positions,
+        triangles,
+        labels,
+    }
 }

@@ -15,7 +15,17 @@ use crate::scene::Mesh;
 use crate::vk::{BindingKind, Buffer, ComputePipeline, Context, Profiler, TriangleAccel, VkError};
 
 /// What `--accel` asks for.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum AccelChoice {
     #[default]
@@ -55,7 +65,10 @@ pub fn auto_backend(ctx_info: &crate::vk::DeviceInfo) -> (Backend, &'static str)
     if !ctx_info.ray_query_supported {
         (Backend::Software, "the device has no ray query")
     } else if ctx_info.is_cpu {
-        (Backend::Software, "CPU device (lavapipe): the software BVH is measured faster than its ray query")
+        (
+            Backend::Software,
+            "CPU device (lavapipe): the software BVH is measured faster than its ray query",
+        )
     } else {
         (Backend::RayQuery, "the device has hardware ray query")
     }
@@ -113,7 +126,12 @@ impl TraceRefs {
 }
 
 impl TraceScene {
-    pub fn build(ctx: &Arc<Context>, mesh: &Mesh, backend: Backend, profiler: Option<&Profiler>) -> Result<Self, VkError> {
+    pub fn build(
+        ctx: &Arc<Context>,
+        mesh: &Mesh,
+        backend: Backend,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
         let timed = |name: &str, f: &mut dyn FnMut()| match profiler {
             Some(p) => p.cpu(name, f),
             None => f(),
@@ -126,7 +144,11 @@ impl TraceScene {
                 .iter()
                 .map(|t| {
                     let p = t.map(|i| mesh.positions[i as usize]);
-                    ShadeTri { a: p[0].extend(0.0).into(), b: p[1].extend(0.0).into(), c: p[2].extend(0.0).into() }
+                    ShadeTri {
+                        a: p[0].extend(0.0).into(),
+                        b: p[1].extend(0.0).into(),
+                        c: p[2].extend(0.0).into(),
+                    }
                 })
                 .collect();
         });
@@ -136,7 +158,9 @@ impl TraceScene {
             Backend::RayQuery => {
                 let pos: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
                 let mut r = None;
-                timed("AS build (BLAS+TLAS)", &mut || r = Some(TriangleAccel::build(ctx, &pos, &mesh.triangles)));
+                timed("AS build (BLAS+TLAS)", &mut || {
+                    r = Some(TriangleAccel::build(ctx, &pos, &mesh.triangles))
+                });
                 Data::RayQuery(r.expect("closure ran")?)
             }
             Backend::Software => {
@@ -155,7 +179,10 @@ impl TraceScene {
                     ))
                 });
                 let (n, t) = up.expect("closure ran");
-                Data::Software { nodes: n?, tris: t? }
+                Data::Software {
+                    nodes: n?,
+                    tris: t?,
+                }
             }
         };
         Ok(TraceScene {
@@ -195,7 +222,8 @@ pub fn trace_pipeline(
     local_size: [u32; 3],
 ) -> Result<ComputePipeline, VkError> {
     let variant = format!("{name}.{}", backend.shader_suffix());
-    let spirv = crate::shaders::spirv(&variant).ok_or_else(|| VkError::Other(format!("no shader variant {variant}")))?;
+    let spirv = crate::shaders::spirv(&variant)
+        .ok_or_else(|| VkError::Other(format!("no shader variant {variant}")))?;
     let mut kinds = TraceScene::binding_kinds(backend);
     kinds.extend(std::iter::repeat_n(BindingKind::StorageBuffer, extra));
     ComputePipeline::new(ctx, &variant, &spirv, &kinds, push_size, local_size)

@@ -40,7 +40,11 @@ pub fn obvhs_triangles(positions: &[glam::Vec3], triangles: &[[u32; 3]]) -> Vec<
 /// traversal, per obvhs).
 pub fn build_bvh(tris: &[Triangle]) -> Bvh2 {
     let mut core = std::time::Duration::ZERO;
-    obvhs::bvh2::builder::build_bvh2_from_tris(tris, obvhs::BvhBuildParams::medium_build(), &mut core)
+    obvhs::bvh2::builder::build_bvh2_from_tris(
+        tris,
+        obvhs::BvhBuildParams::medium_build(),
+        &mut core,
+    )
 }
 
 /// Flattens `bvh` into GPU nodes (root at 0) and leaf-ordered triangles.
@@ -60,7 +64,11 @@ pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
     let nodes = &bvh.nodes;
     let child = |idx: usize, gpu_index: u32| -> ([f32; 4], [f32; 4]) {
         let n = &nodes[idx];
-        let (r, c) = if n.prim_count > 0 { (n.first_index, n.prim_count) } else { (gpu_index, 0) };
+        let (r, c) = if n.prim_count > 0 {
+            (n.first_index, n.prim_count)
+        } else {
+            (gpu_index, 0)
+        };
         (
             [n.aabb.min.x, n.aabb.min.y, n.aabb.min.z, f32::from_bits(r)],
             [n.aabb.max.x, n.aabb.max.y, n.aabb.max.z, f32::from_bits(c)],
@@ -73,7 +81,15 @@ pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
         // A root leaf: the right child repeats it (testing a triangle twice is harmless,
         // and avoids an "empty box" whose slab test would be NaN-prone).
         let (mn, mx) = child(0, 0);
-        return (vec![GpuNode { l_min: mn, l_max: mx, r_min: mn, r_max: mx }], gpu_tris);
+        return (
+            vec![GpuNode {
+                l_min: mn,
+                l_max: mx,
+                r_min: mn,
+                r_max: mx,
+            }],
+            gpu_tris,
+        );
     }
     // Breadth-first over inner nodes: GPU index assigned when a node is queued.
     let mut gpu_of = vec![u32::MAX; nodes.len()];
@@ -92,7 +108,12 @@ pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
             }
             pair[k] = child(c, gpu_of[c]);
         }
-        out.push(GpuNode { l_min: pair[0].0, l_max: pair[0].1, r_min: pair[1].0, r_max: pair[1].1 });
+        out.push(GpuNode {
+            l_min: pair[0].0,
+            l_max: pair[0].1,
+            r_min: pair[1].0,
+            r_max: pair[1].1,
+        });
     }
     (out, gpu_tris)
 }
@@ -101,7 +122,14 @@ pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
 /// a vertex on a box face is never dropped by rounding. obvhs's own `ray_traverse` uses an
 /// exact slab test and misses such rays (measured: about 3 % of vertex-aimed rays on a
 /// 51k-triangle sphere), which is why the reference traversal lives here.
-fn robust_box_t(min: glam::Vec3A, max: glam::Vec3A, o: glam::Vec3A, inv_d: glam::Vec3A, tmin: f32, tmax: f32) -> Option<f32> {
+fn robust_box_t(
+    min: glam::Vec3A,
+    max: glam::Vec3A,
+    o: glam::Vec3A,
+    inv_d: glam::Vec3A,
+    tmin: f32,
+    tmax: f32,
+) -> Option<f32> {
     let t0 = (min - o) * inv_d;
     let t1 = (max - o) * inv_d;
     let near = t0.min(t1).max_element().max(tmin);
@@ -113,7 +141,14 @@ fn robust_box_t(min: glam::Vec3A, max: glam::Vec3A, o: glam::Vec3A, inv_d: glam:
 /// test (the reference the GPU backends are tested against). obvhs's Moeller-Trumbore test
 /// leaks through shared vertices (measured: 3 % of vertex-aimed rays), so it is not used.
 /// Returns (t, original triangle).
-pub fn cpu_closest_hit(bvh: &Bvh2, tris: &[Triangle], origin: glam::Vec3, dir: glam::Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32)> {
+pub fn cpu_closest_hit(
+    bvh: &Bvh2,
+    tris: &[Triangle],
+    origin: glam::Vec3,
+    dir: glam::Vec3,
+    tmin: f32,
+    tmax: f32,
+) -> Option<(f32, u32)> {
     let ray = obvhs::ray::Ray::new(origin.into(), dir.into(), tmin, tmax);
     let inv_d = glam::Vec3A::from(dir).recip();
     let mut best: Option<(f32, u32)> = None;
@@ -129,7 +164,8 @@ pub fn cpu_closest_hit(bvh: &Bvh2, tris: &[Triangle], origin: glam::Vec3, dir: g
             for k in n.first_index..n.first_index + n.prim_count {
                 let p = bvh.primitive_indices[k as usize];
                 let tri = &tris[p as usize];
-                let hit = sheared.intersect(tri.v0.into(), tri.v1.into(), tri.v2.into(), tmin, t_best);
+                let hit =
+                    sheared.intersect(tri.v0.into(), tri.v1.into(), tri.v2.into(), tmin, t_best);
                 if let Some((t, _)) = hit {
                     t_best = t;
                     best = Some((t, p));

@@ -15,18 +15,35 @@ pub struct ShearedRay {
 impl ShearedRay {
     pub fn new(o: Vec3, d: Vec3) -> Self {
         let a = d.abs();
-        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+        let kz = if a.x > a.y {
+            if a.x > a.z { 0 } else { 2 }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / d[kz];
-        ShearedRay { o, k: [kx, ky, kz], s: Vec3::new(d[kx] * sz, d[ky] * sz, sz) }
+        ShearedRay {
+            o,
+            k: [kx, ky, kz],
+            s: Vec3::new(d[kx] * sz, d[ky] * sz, sz),
+        }
     }
 
     /// Distance and barycentrics (weights of v1, v2) of a hit in [tmin, tmax).
-    pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, [f32; 2])> {
+    pub fn intersect(
+        &self,
+        v0: Vec3,
+        v1: Vec3,
+        v2: Vec3,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, [f32; 2])> {
         let [kx, ky, kz] = self.k;
         let (a, b, c) = (v0 - self.o, v1 - self.o, v2 - self.o);
         let ax = a[kx] - self.s.x * a[kz];

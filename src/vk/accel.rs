@@ -59,7 +59,8 @@ fn build_one(
         ctx,
         &format!("{name} storage"),
         sizes.acceleration_structure_size,
-        vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+        vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
         MemoryKind::Device,
         AS_ALIGNMENT,
     )?;
@@ -74,11 +75,20 @@ fn build_one(
             &vk::AccelerationStructureDeviceAddressInfoKHR::default().acceleration_structure(raw),
         )
     };
-    let out = AccelStructure { ctx: ctx.clone(), raw, address, _storage: storage };
+    let out = AccelStructure {
+        ctx: ctx.clone(),
+        raw,
+        address,
+        _storage: storage,
+    };
     let mut as_props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
     let mut props = vk::PhysicalDeviceProperties2::default().push_next(&mut as_props);
-    unsafe { ctx.instance.get_physical_device_properties2(ctx.physical, &mut props) };
-    let scratch_align = (as_props.min_acceleration_structure_scratch_offset_alignment as u64).max(AS_ALIGNMENT);
+    unsafe {
+        ctx.instance
+            .get_physical_device_properties2(ctx.physical, &mut props)
+    };
+    let scratch_align =
+        (as_props.min_acceleration_structure_scratch_offset_alignment as u64).max(AS_ALIGNMENT);
     let scratch = Buffer::with_alignment(
         ctx,
         &format!("{name} scratch"),
@@ -89,12 +99,16 @@ fn build_one(
     )?;
     build = build
         .dst_acceleration_structure(raw)
-        .scratch_data(vk::DeviceOrHostAddressKHR { device_address: scratch.device_address() });
+        .scratch_data(vk::DeviceOrHostAddressKHR {
+            device_address: scratch.device_address(),
+        });
     let range = [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(prim_count)];
     let ranges: [&[vk::AccelerationStructureBuildRangeInfoKHR]; 1] = [&range];
     ctx.submit_and_wait(|cb| {
         ctx.begin_label(cb, name);
-        unsafe { accel.cmd_build_acceleration_structures(cb, std::slice::from_ref(&build), &ranges) };
+        unsafe {
+            accel.cmd_build_acceleration_structures(cb, std::slice::from_ref(&build), &ranges)
+        };
         let barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR)
             .dst_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR);
@@ -102,7 +116,8 @@ fn build_one(
             ctx.device.cmd_pipeline_barrier(
                 cb,
                 vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
-                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR | vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR
+                    | vk::PipelineStageFlags::COMPUTE_SHADER,
                 vk::DependencyFlags::empty(),
                 &[barrier],
                 &[],
@@ -117,23 +132,37 @@ fn build_one(
 
 impl TriangleAccel {
     /// Builds the BLAS over `positions`/`triangles` and a one-instance TLAS on the device.
-    pub fn build(ctx: &Arc<Context>, positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<Self, VkError> {
+    pub fn build(
+        ctx: &Arc<Context>,
+        positions: &[[f32; 3]],
+        triangles: &[[u32; 3]],
+    ) -> Result<Self, VkError> {
         let usage = vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR
             | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
         let vb = Buffer::from_slice(ctx, "blas vertices", positions, usage)?;
         let ib = Buffer::from_slice(ctx, "blas indices", triangles, usage)?;
         let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
             .vertex_format(vk::Format::R32G32B32_SFLOAT)
-            .vertex_data(vk::DeviceOrHostAddressConstKHR { device_address: vb.device_address() })
+            .vertex_data(vk::DeviceOrHostAddressConstKHR {
+                device_address: vb.device_address(),
+            })
             .vertex_stride(12)
             .max_vertex(positions.len().saturating_sub(1) as u32)
             .index_type(vk::IndexType::UINT32)
-            .index_data(vk::DeviceOrHostAddressConstKHR { device_address: ib.device_address() });
+            .index_data(vk::DeviceOrHostAddressConstKHR {
+                device_address: ib.device_address(),
+            });
         let geom = vk::AccelerationStructureGeometryKHR::default()
             .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
             .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
             .flags(vk::GeometryFlagsKHR::OPAQUE);
-        let blas = build_one(ctx, "blas", vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, geom, triangles.len() as u32)?;
+        let blas = build_one(
+            ctx,
+            "blas",
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            geom,
+            triangles.len() as u32,
+        )?;
 
         let instance = vk::AccelerationStructureInstanceKHR {
             transform: vk::TransformMatrixKHR {
@@ -158,12 +187,26 @@ impl TriangleAccel {
         let instances = Buffer::from_slice(ctx, "tlas instances", bytes, usage)?;
         let inst_data = vk::AccelerationStructureGeometryInstancesDataKHR::default()
             .array_of_pointers(false)
-            .data(vk::DeviceOrHostAddressConstKHR { device_address: instances.device_address() });
+            .data(vk::DeviceOrHostAddressConstKHR {
+                device_address: instances.device_address(),
+            });
         let geom = vk::AccelerationStructureGeometryKHR::default()
             .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-            .geometry(vk::AccelerationStructureGeometryDataKHR { instances: inst_data })
+            .geometry(vk::AccelerationStructureGeometryDataKHR {
+                instances: inst_data,
+            })
             .flags(vk::GeometryFlagsKHR::OPAQUE);
-        let tlas = build_one(ctx, "tlas", vk::AccelerationStructureTypeKHR::TOP_LEVEL, geom, 1)?;
-        Ok(TriangleAccel { tlas, _blas: blas, _inputs: vec![vb, ib, instances] })
+        let tlas = build_one(
+            ctx,
+            "tlas",
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            geom,
+            1,
+        )?;
+        Ok(TriangleAccel {
+            tlas,
+            _blas: blas,
+            _inputs: vec![vb, ib, instances],
+        })
     }
 }

@@ -16,7 +16,10 @@ impl Context {
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(1);
         let cb = unsafe { self.device.allocate_command_buffers(&alloc) }?[0];
-        let fence = unsafe { self.device.create_fence(&vk::FenceCreateInfo::default(), None) };
+        let fence = unsafe {
+            self.device
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+        };
         let fence = match fence {
             Ok(f) => f,
             Err(e) => {
@@ -25,7 +28,8 @@ impl Context {
             }
         };
         let result = (|| {
-            let begin = vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+            let begin = vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
             unsafe { self.device.begin_command_buffer(cb, &begin) }?;
             let r = record(cb)?;
             unsafe { self.device.end_command_buffer(cb) }?;

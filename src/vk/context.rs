@@ -1,6 +1,6 @@
 //! Vulkan instance, device choice, logical device, queues and the validation log.
 
-use std::ffi::{c_void, CStr, CString};
+use std::ffi::{CStr, CString, c_void};
 use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex};
 
@@ -60,7 +60,11 @@ pub struct ValidationLog {
 
 impl ValidationLog {
     pub fn errors(&self) -> Vec<String> {
-        self.lock().iter().filter(|m| m.error).map(|m| m.text.clone()).collect()
+        self.lock()
+            .iter()
+            .filter(|m| m.error)
+            .map(|m| m.text.clone())
+            .collect()
     }
     pub fn all(&self) -> Vec<ValidationMessage> {
         self.lock().clone()
@@ -83,12 +87,17 @@ unsafe extern "system" fn debug_callback(
         let text = if data.is_null() || (*data).p_message.is_null() {
             String::from("(no message)")
         } else {
-            CStr::from_ptr((*data).p_message).to_string_lossy().into_owned()
+            CStr::from_ptr((*data).p_message)
+                .to_string_lossy()
+                .into_owned()
         };
         let error = severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR);
         let warning = severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING);
         if error || (warning && kind.contains(vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION)) {
-            log.lock().push(ValidationMessage { error, text: text.clone() });
+            log.lock().push(ValidationMessage {
+                error,
+                text: text.clone(),
+            });
         }
         if error {
             eprintln!("vulkan validation error: {text}");
@@ -117,16 +126,26 @@ pub struct Context {
 }
 
 fn validation_from_env() -> bool {
-    matches!(std::env::var("SYNOSIS_VALIDATION").as_deref(), Ok("1") | Ok("true") | Ok("yes"))
+    matches!(
+        std::env::var("SYNOSIS_VALIDATION").as_deref(),
+        Ok("1") | Ok("true") | Ok("yes")
+    )
 }
 
 fn version_string(v: u32) -> String {
-    format!("{}.{}.{}", vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v))
+    format!(
+        "{}.{}.{}",
+        vk::api_version_major(v),
+        vk::api_version_minor(v),
+        vk::api_version_patch(v)
+    )
 }
 
 fn cstr_field(chars: &[std::ffi::c_char]) -> String {
     // SAFETY: Vulkan fills these fixed-size fields with NUL-terminated strings.
-    unsafe { CStr::from_ptr(chars.as_ptr()) }.to_string_lossy().into_owned()
+    unsafe { CStr::from_ptr(chars.as_ptr()) }
+        .to_string_lossy()
+        .into_owned()
 }
 
 impl Context {
@@ -154,14 +173,21 @@ impl Context {
             .application_version(1)
             .engine_name(&app_name)
             .api_version(vk::API_VERSION_1_2);
-        let layers: Vec<*const std::ffi::c_char> =
-            if validation { vec![validation_layer.as_ptr()] } else { vec![] };
-        let extensions: Vec<*const std::ffi::c_char> =
-            if have_debug_utils { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let layers: Vec<*const std::ffi::c_char> = if validation {
+            vec![validation_layer.as_ptr()]
+        } else {
+            vec![]
+        };
+        let extensions: Vec<*const std::ffi::c_char> = if have_debug_utils {
+            vec![ash::ext::debug_utils::NAME.as_ptr()]
+        } else {
+            vec![]
+        };
         let log = Arc::new(ValidationLog::default());
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
             .message_severity(
-                vk::DebugUtilsMessageSeverityFlagsEXT::ERROR | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
+                vk::DebugUtilsMessageSeverityFlagsEXT::ERROR
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
             )
             .message_type(
                 vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
@@ -197,10 +223,10 @@ impl Context {
             Ok(v) => v,
             Err(e) => {
                 unsafe {
-                    if let Some(di) = &debug_instance {
-                        if messenger != vk::DebugUtilsMessengerEXT::null() {
-                            di.destroy_debug_utils_messenger(messenger, None);
-                        }
+                    if let Some(di) = &debug_instance
+                        && messenger != vk::DebugUtilsMessengerEXT::null()
+                    {
+                        di.destroy_debug_utils_messenger(messenger, None);
                     }
                     instance.destroy_instance(None);
                 }
@@ -220,8 +246,8 @@ impl Context {
             .queue_family_index(queue_family)
             .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
         let command_pool = unsafe { device.create_command_pool(&pool_info, None) }?;
-        let accel =
-            accel_enabled.then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
+        let accel = accel_enabled
+            .then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
         let debug_utils =
             have_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
         Ok(Arc::new(Context {
@@ -267,14 +293,19 @@ impl Context {
                 continue;
             }
             let families = unsafe { instance.get_physical_device_queue_family_properties(p) };
-            if let Some(q) = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)) {
+            if let Some(q) = families
+                .iter()
+                .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+            {
                 candidates.push((p, q as u32, score(props.device_type)));
             }
         }
         if let Ok(want) = std::env::var("SYNOSIS_DEVICE") {
             candidates.retain(|(p, _, _)| {
                 let props = unsafe { instance.get_physical_device_properties(*p) };
-                cstr_field(&props.device_name).to_lowercase().contains(&want.to_lowercase())
+                cstr_field(&props.device_name)
+                    .to_lowercase()
+                    .contains(&want.to_lowercase())
             });
         }
         candidates.sort_by_key(|c| -c.2);
@@ -283,7 +314,10 @@ impl Context {
         };
 
         let exts = unsafe { instance.enumerate_device_extension_properties(physical) }?;
-        let has_ext = |name: &CStr| exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(name));
+        let has_ext = |name: &CStr| {
+            exts.iter()
+                .any(|e| e.extension_name_as_c_str().ok() == Some(name))
+        };
         let rq_exts = [
             ash::khr::acceleration_structure::NAME,
             ash::khr::ray_query::NAME,
@@ -316,7 +350,8 @@ impl Context {
             .host_query_reset(true)
             .buffer_device_address(ray_query_enabled);
         let mut rq_on = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
-        let mut as_on = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
+        let mut as_on = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
+            .acceleration_structure(true);
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
             .enabled_extension_names(&ext_names)
@@ -360,7 +395,9 @@ impl Context {
     /// Gives a Vulkan object a name that shows in validation messages and captures.
     pub fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
         if let (Some(du), Ok(n)) = (&self.debug_utils, CString::new(name)) {
-            let info = vk::DebugUtilsObjectNameInfoEXT::default().object_handle(handle).object_name(&n);
+            let info = vk::DebugUtilsObjectNameInfoEXT::default()
+                .object_handle(handle)
+                .object_name(&n);
             // Naming is a debugging aid; a failure must not stop rendering.
             let _ = unsafe { du.set_debug_utils_object_name(&info) };
         }
@@ -376,15 +413,18 @@ impl Drop for Context {
     fn drop(&mut self) {
         unsafe {
             let _ = self.device.device_wait_idle();
-            let pool = *self.command_pool.get_mut().unwrap_or_else(|p| p.into_inner());
+            let pool = *self
+                .command_pool
+                .get_mut()
+                .unwrap_or_else(|p| p.into_inner());
             self.device.destroy_command_pool(pool, None);
             // The allocator frees its memory blocks, so it must go before the device.
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
-            if let Some(di) = &self.debug_instance {
-                if self.messenger != vk::DebugUtilsMessengerEXT::null() {
-                    di.destroy_debug_utils_messenger(self.messenger, None);
-                }
+            if let Some(di) = &self.debug_instance
+                && self.messenger != vk::DebugUtilsMessengerEXT::null()
+            {
+                di.destroy_debug_utils_messenger(self.messenger, None);
             }
             self.instance.destroy_instance(None);
         }

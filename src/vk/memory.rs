@@ -3,8 +3,8 @@
 use std::sync::Arc;
 
 use ash::vk;
-use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 
 use super::{Context, VkError};
 
@@ -88,13 +88,26 @@ impl Buffer {
                 return Err(e.into());
             }
         };
-        if let Err(e) = unsafe { ctx.device.bind_buffer_memory(raw, alloc.memory(), alloc.offset()) } {
+        if let Err(e) = unsafe {
+            ctx.device
+                .bind_buffer_memory(raw, alloc.memory(), alloc.offset())
+        } {
             unsafe { ctx.device.destroy_buffer(raw, None) };
-            let _ = ctx.allocator.lock().unwrap_or_else(|p| p.into_inner()).free(alloc);
+            let _ = ctx
+                .allocator
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .free(alloc);
             return Err(e.into());
         }
         ctx.set_name(raw, name);
-        Ok(Buffer { ctx: ctx.clone(), raw, size, name: name.to_string(), allocation: Some(alloc) })
+        Ok(Buffer {
+            ctx: ctx.clone(),
+            raw,
+            size,
+            name: name.to_string(),
+            allocation: Some(alloc),
+        })
     }
 
     /// A GPU-readable buffer holding `data`. Uses a staging copy when upload memory is not
@@ -132,7 +145,9 @@ impl Buffer {
             .ok_or_else(|| VkError::NotMappable(self.name.clone()))?;
         let n = slice.len() / std::mem::size_of::<T>();
         let n = n.min(self.size as usize / std::mem::size_of::<T>());
-        Ok(bytemuck::pod_collect_to_vec(&slice[..n * std::mem::size_of::<T>()]))
+        Ok(bytemuck::pod_collect_to_vec(
+            &slice[..n * std::mem::size_of::<T>()],
+        ))
     }
 
     pub fn device_address(&self) -> vk::DeviceAddress {
@@ -145,7 +160,12 @@ impl Drop for Buffer {
     fn drop(&mut self) {
         unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.allocation.take() {
-            let _ = self.ctx.allocator.lock().unwrap_or_else(|p| p.into_inner()).free(a);
+            let _ = self
+                .ctx
+                .allocator
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .free(a);
         }
     }
 }

@@ -18,11 +18,17 @@ pub use profiler::{Profiler, Span};
 pub enum VkError {
     #[error("cannot load the Vulkan loader (libvulkan.so.1): {0}; run tools/setup")]
     Loader(String),
-    #[error("no Vulkan 1.2 device with a compute queue was found (is mesa-vulkan-drivers installed? run tools/setup)")]
+    #[error(
+        "no Vulkan 1.2 device with a compute queue was found (is mesa-vulkan-drivers installed? run tools/setup)"
+    )]
     NoDevice,
-    #[error("validation was asked for (SYNOSIS_VALIDATION=1) but VK_LAYER_KHRONOS_validation is not installed; run tools/setup")]
+    #[error(
+        "validation was asked for (SYNOSIS_VALIDATION=1) but VK_LAYER_KHRONOS_validation is not installed; run tools/setup"
+    )]
     MissingValidationLayer,
-    #[error("the ray-query backend was asked for but this device has no VK_KHR_ray_query / acceleration structures; use --accel software")]
+    #[error(
+        "the ray-query backend was asked for but this device has no VK_KHR_ray_query / acceleration structures; use --accel software"
+    )]
     RayQueryUnavailable,
     #[error("buffer {0:?} is not host-visible")]
     NotMappable(String),

@@ -84,7 +84,9 @@ impl ComputePipeline {
             dev.destroy_pipeline_layout(layout, None);
             dev.destroy_descriptor_set_layout(set_layout, None);
         };
-        let module = match unsafe { dev.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(spirv), None) } {
+        let module = match unsafe {
+            dev.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(spirv), None)
+        } {
             Ok(m) => m,
             Err(e) => {
                 cleanup(None);
@@ -95,8 +97,11 @@ impl ComputePipeline {
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(module)
             .name(c"main");
-        let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
-        let pipeline = unsafe { dev.create_compute_pipelines(vk::PipelineCache::null(), &info, None) };
+        let info = [vk::ComputePipelineCreateInfo::default()
+            .stage(stage)
+            .layout(layout)];
+        let pipeline =
+            unsafe { dev.create_compute_pipelines(vk::PipelineCache::null(), &info, None) };
         unsafe { dev.destroy_shader_module(module, None) };
         let pipeline = match pipeline {
             Ok(p) => p[0],
@@ -124,7 +129,9 @@ impl Drop for ComputePipeline {
         unsafe {
             self.ctx.device.destroy_pipeline(self.pipeline, None);
             self.ctx.device.destroy_pipeline_layout(self.layout, None);
-            self.ctx.device.destroy_descriptor_set_layout(self.set_layout, None);
+            self.ctx
+                .device
+                .destroy_descriptor_set_layout(self.set_layout, None);
         }
     }
 }

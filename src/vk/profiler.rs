@@ -23,7 +23,10 @@ pub struct Profiler {
 
 impl Default for Profiler {
     fn default() -> Self {
-        Profiler { origin: Instant::now(), spans: Mutex::new(Vec::new()) }
+        Profiler {
+            origin: Instant::now(),
+            spans: Mutex::new(Vec::new()),
+        }
     }
 }
 
@@ -42,12 +45,20 @@ impl Profiler {
         let start = self.now_us();
         let r = f();
         let dur = self.now_us() - start;
-        self.push(Span { name: name.to_string(), track: "cpu", start_us: start, dur_us: dur });
+        self.push(Span {
+            name: name.to_string(),
+            track: "cpu",
+            start_us: start,
+            dur_us: dur,
+        });
         r
     }
 
     pub fn push(&self, span: Span) {
-        self.spans.lock().unwrap_or_else(|p| p.into_inner()).push(span);
+        self.spans
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(span);
     }
 
     pub fn spans(&self) -> Vec<Span> {
@@ -56,7 +67,12 @@ impl Profiler {
 
     /// Total duration of the spans with this name (all tracks), in milliseconds.
     pub fn total_ms(&self, name: &str) -> f64 {
-        self.spans().iter().filter(|s| s.name == name).map(|s| s.dur_us).sum::<f64>() / 1e3
+        self.spans()
+            .iter()
+            .filter(|s| s.name == name)
+            .map(|s| s.dur_us)
+            .sum::<f64>()
+            / 1e3
     }
 
     /// The Chrome trace-event JSON (complete events, "X").
@@ -76,7 +92,8 @@ impl Profiler {
     }
 
     pub fn write_chrome_trace(&self, path: &Path) -> std::io::Result<()> {
-        let bytes = serde_json::to_vec_pretty(&self.chrome_trace()).map_err(std::io::Error::other)?;
+        let bytes =
+            serde_json::to_vec_pretty(&self.chrome_trace()).map_err(std::io::Error::other)?;
         crate::util::write_atomic(path, &bytes)
     }
 }
