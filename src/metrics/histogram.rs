@@ -122,3 +122,32 @@ impl Histogram {
         area
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hist(v: &[f32]) -> Histogram {
+        Histogram::of(&GrayImage::new(v.len(), 1, v.to_vec()).unwrap(), None)
+    }
+
+    #[test]
+    fn unequal_sizes_match_the_cdf_integral() {
+        // scipy.stats.wasserstein_distance([0, 1], [0, 0, 3]) = 1/6 + 2 * 1/3 = 5/6
+        let d = hist(&[0.0, 1.0]).wasserstein(&hist(&[0.0, 0.0, 3.0]));
+        assert!((d - 5.0 / 6.0).abs() < 1e-12, "{d}");
+        // Off the 16-bit grid (sort path) gives the same as on it.
+        let d = hist(&[0.25, 1.25]).wasserstein(&hist(&[0.25, 0.25, 3.25]));
+        assert!((d - 5.0 / 6.0).abs() < 1e-12, "{d}");
+    }
+
+    #[test]
+    fn aligned_histogram_merges_clamped_bins() {
+        let h = hist(&[10.0, 100.0, 200.0, 200.0]).aligned(Alignment {
+            factor: 2.0,
+            bias: 0.0,
+        });
+        assert_eq!(h.bins(), &[(20.0, 1), (200.0, 1), (255.0, 2)]);
+        assert_eq!(h.total(), 4);
+    }
+}

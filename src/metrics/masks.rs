@@ -179,3 +179,34 @@ pub fn face_mask(faces: &DynamicImage, path: &Path, id: u8) -> Result<Mask, Metr
         data: b.as_raw().iter().map(|&v| v == id).collect(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn polygon_fill_uses_integer_pixel_centres() {
+        let mut m = Mask::filled(8, 6, false);
+        m.fill_polygon(&[[2.0, 1.0], [5.0, 1.0], [5.0, 4.0], [2.0, 4.0]]);
+        // x in 2..=5; y half-open [1, 4), so a shared vertex row is counted once.
+        let want: Vec<bool> = (0..48)
+            .map(|i| (2..=5).contains(&(i % 8)) && (1..4).contains(&(i / 8)))
+            .collect();
+        assert_eq!(m.data, want);
+        assert_eq!(
+            m.bbox(),
+            Some(Rect {
+                x0: 2,
+                y0: 1,
+                x1: 6,
+                y1: 4
+            })
+        );
+        // A triangle covers about half its bounding box.
+        let mut t = Mask::filled(100, 100, false);
+        t.fill_polygon(&[[0.0, 0.0], [99.0, 0.0], [0.0, 99.0]]);
+        let n = t.count() as f64;
+        assert!((n - 5050.0).abs() < 150.0, "{n}");
+        assert!(Mask::filled(3, 3, false).bbox().is_none());
+    }
+}
