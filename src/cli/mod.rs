@@ -7,11 +7,7 @@ mod texture;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(
-    name = "synosis",
-    version,
-    about = "Synthetic, labelled inspection images of machined metal parts"
-)]
+#[command(name = "synosis", version, about = "Synthetic, labelled inspection images of machined metal parts")]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
