@@ -579,3 +579,65 @@ fn cli_metrics_prints_json() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent.png"));
 }
+
+#[test]
+fn cli_compare_writes_the_table() {
+    let set = make_set();
+    let out = set.real.parent().unwrap().join("report");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args([
+            "compare",
+            "--align",
+            "sandblasted=2,10",
+            "--align",
+            "parallel=1,0",
+        ])
+        .arg("--real")
+        .arg(&set.real)
+        .arg("--synthetic")
+        .arg(&set.synth)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.starts_with("| Method | sandblasted | parallel | All |")
+            && stdout.contains("| images | 2 | 1 | 3 |"),
+        "{stdout}"
+    );
+    let csv = std::fs::read_to_string(out.join("similarities.csv")).unwrap();
+    assert!(
+        csv.starts_with("method,sandblasted,parallel,All\n"),
+        "{csv}"
+    );
+    let matches = std::fs::read_to_string(out.join("matches.csv")).unwrap();
+    assert!(
+        matches
+            .lines()
+            .any(|l| l.starts_with("r_sand,A0,") && l.contains(",s_sand2,"))
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(json["alignments"]["sandblasted"]["factor"], 2.0);
+
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args([
+            "compare",
+            "--align",
+            "spiral=fast",
+            "--real",
+            "a",
+            "--synthetic",
+            "b",
+        ])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("TYPE=FACTOR,BIAS"));
+}
