@@ -1,0 +1,111 @@
+//! Grayscale images as f32 in 8-bit units, so 8- and 16-bit inputs are comparable.
+
+use std::path::Path;
+
+use image::DynamicImage;
+
+use super::MetricsError;
+
+/// Full-scale value of every image after loading: intensities live in 8-bit units
+/// (0..=255) whatever the file's bit depth, 16-bit codes being divided by 257
+/// (65535 / 257 = 255 exactly).
+pub const DATA_RANGE: f64 = 255.0;
+
+/// A grayscale image, row-major, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GrayImage {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<f32>,
+}
+
+impl GrayImage {
+    pub fn new(width: usize, height: usize, data: Vec<f32>) -> Result<Self, MetricsError> {
+        if data.len() != width * height {
+            return Err(MetricsError::param(
+                "data",
+                format!(
+                    "{} values for a {width} x {height} image (expected {})",
+                    data.len(),
+                    width * height
+                ),
+            ));
+        }
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Decodes an 8- or 16-bit grayscale PNG (an alpha channel is ignored).
+    pub fn load(path: &Path) -> Result<Self, MetricsError> {
+        let img = open(path)?;
+        let (width, height) = (img.width() as usize, img.height() as usize);
+        let data = match img {
+            DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(f32::from).collect(),
+            DynamicImage::ImageLumaA8(b) => b.pixels().map(|p| f32::from(p.0[0])).collect(),
+            DynamicImage::ImageLuma16(b) => b.into_raw().into_iter().map(from16).collect(),
+            DynamicImage::ImageLumaA16(b) => b.pixels().map(|p| from16(p.0[0])).collect(),
+            other => {
+                return Err(MetricsError::NotGrayscale {
+                    path: path.to_path_buf(),
+                    color: format!("{:?}", other.color()),
+                });
+            }
+        };
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Applies `factor * v + bias`, clamped to the 8-bit range as a saved image would be.
+    pub fn aligned(&self, align: super::Alignment) -> Self {
+        Self {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&v| align.apply(v)).collect(),
+        }
+    }
+}
+
+fn from16(v: u16) -> f32 {
+    (f64::from(v) / 257.0) as f32
+}
+
+pub(crate) fn open(path: &Path) -> Result<DynamicImage, MetricsError> {
+    // image::open reports a missing file as an ImageError too; keep the io kind visible.
+    if let Err(source) = std::fs::metadata(path) {
+        return Err(MetricsError::Io {
+            path: path.to_path_buf(),
+            source,
+        });
+    }
+    image::open(path).map_err(|source| MetricsError::Decode {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+pub(crate) fn check_same_size(
+    a: &GrayImage,
+    a_name: &str,
+    b: &GrayImage,
+    b_name: &str,
+) -> Result<(), MetricsError> {
+    if a.size() != b.size() {
+        return Err(MetricsError::SizeMismatch {
+            a: a_name.to_string(),
+            a_size: a.size(),
+            b: b_name.to_string(),
+            b_size: b.size(),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,643 @@
+//! Tests of `synosis::metrics` against independent implementations.
+//!
+//! The fixtures under tests/fixtures/metrics/ were made by tools/make-metrics-fixtures.py:
+//! expected.json holds, per image pair (and optional mask), the values of
+//! - skimage `structural_similarity(gaussian_weights=True, sigma=1.5,
+//!   use_sample_covariance=False, data_range=255)`; unmasked it is skimage's own mean,
+//!   which crops a (11 - 1) / 2 = 5 px border; masked it is the `full=True` SSIM map
+//!   averaged over the mask pixels (our masked definition);
+//! - scipy `wasserstein_distance` of the (masked) pixel values;
+//! - numpy `mean(abs(a - b))` over the (masked) pixels;
+//!
+//! all on float64 intensities in 8-bit units (16-bit codes / 257).
+
+use std::path::{Path, PathBuf};
+
+use synosis::metrics::{
+    self, GrayImage, Mask, MetricsError, Ssim,
+    compare::{AlignMode, CompareConfig, MatchBy, compare},
+};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/metrics")
+        .join(name)
+}
+
+#[derive(serde::Deserialize)]
+struct Expected {
+    a: String,
+    b: String,
+    mask: Option<String>,
+    pixels: usize,
+    hist_wd: f64,
+    mae: f64,
+    ssim: f64,
+}
+
+#[test]
+fn metrics_match_skimage_and_scipy() {
+    let text = std::fs::read_to_string(fixture("expected.json")).unwrap();
+    let cases: Vec<Expected> = serde_json::from_str(&text).unwrap();
+    assert!(cases.len() >= 8);
+    for c in &cases {
+        let a = GrayImage::load(&fixture(&c.a)).unwrap();
+        let b = GrayImage::load(&fixture(&c.b)).unwrap();
+        let mask = c.mask.as_ref().map(|m| Mask::load(&fixture(m)).unwrap());
+        let got = metrics::pair_metrics(&a, &b, mask.as_ref()).unwrap();
+        let what = format!("{} vs {} mask {:?}", c.a, c.b, c.mask);
+        assert_eq!(got.pixels, c.pixels, "{what}");
+        assert!(
+            (got.hist_wd - c.hist_wd).abs() < 1e-6,
+            "{what}: wd {} vs {}",
+            got.hist_wd,
+            c.hist_wd
+        );
+        assert!(
+            (got.mae - c.mae).abs() < 1e-6,
+            "{what}: mae {} vs {}",
+            got.mae,
+            c.mae
+        );
+        assert!(
+            (got.ssim - c.ssim).abs() < 1e-6,
+            "{what}: ssim {} vs {}",
+            got.ssim,
+            c.ssim
+        );
+    }
+}
+
+#[test]
+fn masked_ssim_with_cropped_border_equals_unmasked() {
+    let a = GrayImage::load(&fixture("stripes_a.png")).unwrap();
+    let b = GrayImage::load(&fixture("stripes_b.png")).unwrap();
+    let mut m = Mask::filled(a.width, a.height, false);
+    for y in 5..a.height - 5 {
+        for x in 5..a.width - 5 {
+            m.data[y * a.width + x] = true;
+        }
+    }
+    let s = Ssim::default();
+    let full = s.mean(&a, &b).unwrap();
+    let masked = s.mean_masked(&a, &b, &m).unwrap();
+    assert!((full - masked).abs() < 1e-6, "{full} vs {masked}");
+    // The map agrees with both on that region.
+    let map = s.map(&a, &b).unwrap();
+    let mean_map: f64 = m
+        .indices()
+        .iter()
+        .map(|&i| f64::from(map[i as usize]))
+        .sum::<f64>()
+        / m.count() as f64;
+    assert!((mean_map - full).abs() < 1e-6);
+}
+
+fn textured(w: usize, h: usize, seed: u32, lo: f32, span: f32) -> GrayImage {
+    // A small integer hash, so the tests need no RNG state.
+    let data = (0..w * h)
+        .map(|i| {
+            let mut x = (i as u32).wrapping_mul(2654435761) ^ seed.wrapping_mul(40503);
+            x ^= x >> 13;
+            x = x.wrapping_mul(1274126177);
+            x ^= x >> 16;
+            (lo + (x % 1000) as f32 / 1000.0 * span).round()
+        })
+        .collect();
+    GrayImage::new(w, h, data).unwrap()
+}
+
+#[test]
+fn identical_images_are_fully_similar() {
+    for name in ["tex_a.png", "deep_b.png", "flat_a.png"] {
+        let a = GrayImage::load(&fixture(name)).unwrap();
+        let m = Mask::load(&fixture("mask_corner.png")).unwrap();
+        for mask in [None, Some(&m)] {
+            let r = metrics::pair_metrics(&a, &a, mask).unwrap();
+            assert_eq!(r.hist_wd, 0.0, "{name}");
+            assert_eq!(r.mae, 0.0, "{name}");
+            assert!((r.ssim - 1.0).abs() < 1e-6, "{name}: {}", r.ssim);
+            assert_eq!(r.hist_wd_similarity, 1.0);
+            assert_eq!(r.mae_similarity, 1.0);
+            assert!((r.ssim_similarity - 1.0).abs() < 1e-6);
+        }
+    }
+}
+
+#[test]
+fn known_shift_gives_known_distances() {
+    let a = textured(40, 30, 7, 0.0, 200.0);
+    let b = GrayImage::new(40, 30, a.data.iter().map(|v| v + 10.0).collect()).unwrap();
+    let r = metrics::pair_metrics(&a, &b, None).unwrap();
+    assert!((r.hist_wd - 10.0).abs() < 1e-9, "{}", r.hist_wd);
+    assert!((r.mae - 10.0).abs() < 1e-9, "{}", r.mae);
+    assert!((r.hist_wd_similarity - (1.0 - 10.0 / 255.0)).abs() < 1e-12);
+    // A pure shift keeps structure and contrast: only the luminance term drops.
+    assert!(r.ssim < 1.0 && r.ssim > 0.9, "{}", r.ssim);
+    // A permutation of the same values: histogram distance 0, MAE > 0.
+    let mut p = a.data.clone();
+    p.reverse();
+    let p = GrayImage::new(40, 30, p).unwrap();
+    let r = metrics::pair_metrics(&a, &p, None).unwrap();
+    assert!(r.hist_wd.abs() < 1e-12 && r.mae > 10.0);
+    // Inverted contrast: negative SSIM, reported as similarity 0.
+    let inv = GrayImage::new(40, 30, a.data.iter().map(|v| 255.0 - v).collect()).unwrap();
+    let r = metrics::pair_metrics(&a, &inv, None).unwrap();
+    assert!(r.ssim < 0.0 && r.ssim_similarity == 0.0, "{}", r.ssim);
+}
+
+#[test]
+fn bad_inputs_error_cleanly() {
+    let a = GrayImage::load(&fixture("tex_a.png")).unwrap();
+    let small = textured(20, 20, 1, 0.0, 100.0);
+    let e = metrics::pair_metrics(&a, &small, None).unwrap_err();
+    assert!(matches!(e, MetricsError::SizeMismatch { .. }), "{e}");
+    assert!(e.to_string().contains("(20, 20)"), "{e}");
+
+    let empty = Mask::filled(a.width, a.height, false);
+    let e = metrics::pair_metrics(&a, &a, Some(&empty)).unwrap_err();
+    assert!(matches!(e, MetricsError::EmptyMask { .. }), "{e}");
+
+    let wrong = Mask::filled(10, 10, true);
+    let e = metrics::pair_metrics(&a, &a, Some(&wrong)).unwrap_err();
+    assert!(matches!(e, MetricsError::SizeMismatch { .. }), "{e}");
+
+    let tiny = textured(8, 30, 1, 0.0, 100.0);
+    let e = metrics::pair_metrics(&tiny, &tiny, None).unwrap_err();
+    assert!(matches!(e, MetricsError::TooSmall { .. }), "{e}");
+
+    let e = GrayImage::load(Path::new("/nonexistent/x.png")).unwrap_err();
+    assert!(matches!(e, MetricsError::Io { .. }) && e.to_string().contains("/nonexistent/x.png"));
+
+    let dir = tempfile::tempdir().unwrap();
+    let junk = dir.path().join("junk.png");
+    std::fs::write(&junk, b"not a png").unwrap();
+    let e = GrayImage::load(&junk).unwrap_err();
+    assert!(
+        matches!(e, MetricsError::Decode { .. }) && e.to_string().contains("junk.png"),
+        "{e}"
+    );
+
+    let rgb = dir.path().join("rgb.png");
+    image::RgbImage::new(4, 4).save(&rgb).unwrap();
+    let e = GrayImage::load(&rgb).unwrap_err();
+    assert!(
+        matches!(e, MetricsError::NotGrayscale { .. }) && e.to_string().contains("rgb.png"),
+        "{e}"
+    );
+}
+
+// ---- compare, end to end on a tiny generated set --------------------------------------
+
+const W: usize = 48;
+const H: usize = 40;
+
+fn save(img: &GrayImage, path: &Path) {
+    let raw: Vec<u8> = img.data.iter().map(|&v| v as u8).collect();
+    image::GrayImage::from_raw(W as u32, H as u32, raw)
+        .unwrap()
+        .save(path)
+        .unwrap();
+}
+
+/// Face-id image with `id` on [x0, x1) x [y0, y1).
+fn save_faces(path: &Path, id: u8, x0: usize, x1: usize, y0: usize, y1: usize) {
+    let mut raw = vec![0u8; W * H];
+    for y in y0..y1 {
+        for x in x0..x1 {
+            raw[y * W + x] = id;
+        }
+    }
+    image::GrayImage::from_raw(W as u32, H as u32, raw)
+        .unwrap()
+        .save(path)
+        .unwrap();
+}
+
+fn labelme(dir: &Path, stem: &str, label: &str) {
+    let json = serde_json::json!({
+        "version": "5.2.1",
+        "flags": {},
+        "shapes": [
+            {"label": label, "points": [[2.0, 2.0], [45.0, 2.0], [45.0, 37.0], [2.0, 37.0]],
+             "group_id": null, "shape_type": "polygon", "flags": {}},
+            {"label": "dent", "points": [[20.0, 20.0], [22.0, 22.0]], "shape_type": "circle"}
+        ],
+        "imagePath": format!("{stem}.png"),
+        "imageData": null,
+        "imageHeight": H,
+        "imageWidth": W,
+    });
+    std::fs::write(dir.join(format!("{stem}.json")), json.to_string()).unwrap();
+}
+
+fn map(img: &GrayImage, f: impl Fn(f32) -> f32) -> GrayImage {
+    GrayImage::new(
+        img.width,
+        img.height,
+        img.data.iter().map(|&v| f(v)).collect(),
+    )
+    .unwrap()
+}
+
+struct Set {
+    _dir: tempfile::TempDir,
+    real: PathBuf,
+    synth: PathBuf,
+    r_par: GrayImage,
+    s_par1: GrayImage,
+    r_b: GrayImage,
+    s_b: [GrayImage; 2],
+}
+
+/// Real: r_sand (A0, sandblasted), r_par (A0, parallel), r_b (B10, sandblasted).
+/// Synthetic A0: s_sand1 (noise), s_sand2 (aligns exactly onto r_sand with 2x + 10),
+/// s_par1 (r_par plus noise), s_decoy (sandblasted, aligns exactly onto r_par: only a
+/// candidate when textures are ignored). Synthetic B10: two noise images.
+fn make_set() -> Set {
+    let dir = tempfile::tempdir().unwrap();
+    let real = dir.path().join("real");
+    let synth = dir.path().join("synth");
+    std::fs::create_dir_all(&real).unwrap();
+    std::fs::create_dir_all(&synth).unwrap();
+
+    let base = textured(W, H, 1, 20.0, 90.0);
+    let r_sand = map(&base, |v| 2.0 * v + 10.0);
+    let stripes = GrayImage::new(
+        W,
+        H,
+        (0..W * H)
+            .map(|i| (45.0 + 20.0 * ((i % W) as f32 * 0.8).sin()).round())
+            .collect(),
+    )
+    .unwrap();
+    let r_par = map(&stripes, |v| 2.0 * v + 10.0);
+    let noise = textured(W, H, 9, -6.0, 12.0);
+    let s_par1 = GrayImage::new(
+        W,
+        H,
+        r_par
+            .data
+            .iter()
+            .zip(&noise.data)
+            .map(|(a, n)| (a + n).clamp(0.0, 255.0))
+            .collect(),
+    )
+    .unwrap();
+    let r_b = textured(W, H, 3, 60.0, 120.0);
+    let s_b = [textured(W, H, 4, 50.0, 60.0), textured(W, H, 5, 0.0, 60.0)];
+
+    save(&r_sand, &real.join("r_sand.png"));
+    save(&r_par, &real.join("r_par.png"));
+    save(&r_b, &real.join("r_b.png"));
+    labelme(&real, "r_sand", "A");
+    labelme(&real, "r_par", "a");
+    labelme(&real, "r_b", "B");
+    std::fs::write(
+        real.join("index.csv"),
+        "file,viewpoint,finish\n# a comment\nr_sand,A0,sandblasted-2.5bar\nr_par.json,A0,parallel-d4-ae0.5\nr_b,B10,sandblasted-6bar\n",
+    )
+    .unwrap();
+
+    let synth_imgs = [
+        (
+            "s_sand1",
+            textured(W, H, 2, 20.0, 90.0),
+            "A0",
+            "sandblasted-2.5bar",
+        ),
+        ("s_sand2", base.clone(), "A0", "sandblasted-6bar"),
+        ("s_par1", s_par1.clone(), "A0", "parallel-d8-ae0.8"),
+        ("s_decoy", stripes.clone(), "A0", "sandblasted-2.5bar"),
+        ("s_b1", s_b[0].clone(), "B10", "sandblasted-2.5bar"),
+        ("s_b2", s_b[1].clone(), "B10", "sandblasted-2.5bar"),
+    ];
+    let mut manifest = String::new();
+    for (k, (id, img, vp, finish)) in synth_imgs.iter().enumerate() {
+        std::fs::create_dir_all(synth.join(id)).unwrap();
+        save(img, &synth.join(id).join("image.png"));
+        // Face regions differ per image; the meta-mask is their intersection.
+        let face = if vp.starts_with('A') { 1 } else { 2 };
+        save_faces(
+            &synth.join(id).join("faces.png"),
+            face,
+            6 + k % 3,
+            40 - k % 2,
+            5 + k % 2,
+            33,
+        );
+        manifest.push_str(&format!(
+            "{{\"image\": \"{id}/image.png\", \"faces\": \"{id}/faces.png\", \"viewpoint\": \"{vp}\", \"finish\": \"{finish}\", \"seed\": {k}}}\n"
+        ));
+    }
+    std::fs::write(synth.join("manifest.jsonl"), manifest).unwrap();
+    Set {
+        _dir: dir,
+        real,
+        synth,
+        r_par,
+        s_par1,
+        r_b,
+        s_b,
+    }
+}
+
+/// The meta-mask the set above must produce: intersection of the synthetic face
+/// rectangles (the real polygons are larger).
+fn expected_meta(ks: &[usize]) -> Mask {
+    let mut m = Mask::filled(W, H, false);
+    let x0 = ks.iter().map(|k| 6 + k % 3).max().unwrap();
+    let x1 = ks.iter().map(|k| 40 - k % 2).min().unwrap();
+    let y0 = ks.iter().map(|k| 5 + k % 2).max().unwrap();
+    for y in y0..33 {
+        for x in x0..x1 {
+            m.data[y * W + x] = true;
+        }
+    }
+    m
+}
+
+fn config(set: &Set) -> CompareConfig {
+    let mut cfg = CompareConfig::new(set.real.clone(), set.synth.clone());
+    let mut table = metrics::paper_defaults();
+    table.insert(
+        "sandblasted".into(),
+        metrics::Alignment {
+            factor: 2.0,
+            bias: 10.0,
+        },
+    );
+    table.insert("parallel".into(), metrics::Alignment::IDENTITY);
+    cfg.align = AlignMode::Table(table);
+    cfg
+}
+
+#[test]
+fn compare_picks_the_closest_sample_and_builds_the_table() {
+    let set = make_set();
+    let report = compare(&config(&set)).unwrap();
+    assert_eq!(
+        report.meta_mask_pixels["A0"],
+        expected_meta(&[0, 1, 2, 3]).count()
+    );
+    assert_eq!(
+        report.meta_mask_pixels["B10"],
+        expected_meta(&[4, 5]).count()
+    );
+    let by_id = |id: &str| report.results.iter().find(|r| r.id == id).unwrap();
+
+    let rs = by_id("r_sand");
+    assert_eq!(rs.candidates, 3, "two sandblasted + the sandblasted decoy");
+    assert_eq!(
+        (
+            rs.hist_wd_match.as_str(),
+            rs.mae_match.as_str(),
+            rs.ssim_match.as_str()
+        ),
+        ("s_sand2", "s_sand2", "s_sand2")
+    );
+    assert_eq!(rs.hist_wd, 0.0);
+    assert_eq!(rs.mae, 0.0);
+    assert!((rs.ssim - 1.0).abs() < 1e-6);
+
+    // The decoy (sandblasted) would match r_par exactly but is another texture type.
+    let rp = by_id("r_par");
+    assert_eq!(rp.candidates, 1);
+    assert_eq!(rp.mae_match, "s_par1");
+    let meta_a = expected_meta(&[0, 1, 2, 3]);
+    let want = metrics::pair_metrics(&set.r_par, &set.s_par1, Some(&meta_a)).unwrap();
+    assert!((rp.hist_wd - want.hist_wd).abs() < 1e-9);
+    assert!((rp.mae - want.mae).abs() < 1e-9 && rp.mae > 0.5);
+    assert!((rp.ssim - want.ssim).abs() < 1e-6 && rp.ssim < 0.999);
+
+    // B10: one-sided Chamfer, per metric, over the two synthetic images (aligned 2x + 10).
+    let rb = by_id("r_b");
+    let meta_b = expected_meta(&[4, 5]);
+    let pm: Vec<_> = set
+        .s_b
+        .iter()
+        .map(|s| {
+            let al = map(s, |v| (2.0 * v + 10.0).clamp(0.0, 255.0));
+            metrics::pair_metrics(&set.r_b, &al, Some(&meta_b)).unwrap()
+        })
+        .collect();
+    let best_wd = pm[0].hist_wd.min(pm[1].hist_wd);
+    assert!((rb.hist_wd - best_wd).abs() < 1e-9);
+    let want_match = if pm[0].mae <= pm[1].mae {
+        "s_b1"
+    } else {
+        "s_b2"
+    };
+    assert_eq!(rb.mae_match, want_match);
+    assert!((rb.ssim - pm[0].ssim.max(pm[1].ssim)).abs() < 1e-6);
+
+    // Table: sandblasted = mean of r_sand and r_b; parallel = r_par; All = all three.
+    let t = &report.table;
+    assert_eq!(t.columns, vec!["sandblasted", "parallel", "All"]);
+    assert_eq!(t.images, vec![2, 1, 3]);
+    let mae_row = &t.rows.iter().find(|r| r.0 == "1-MAE").unwrap().1;
+    let sim = |d: f64| 1.0 - d / 255.0;
+    assert!((mae_row[0] - (1.0 + sim(rb.mae)) / 2.0).abs() < 1e-12);
+    assert!((mae_row[1] - sim(rp.mae)).abs() < 1e-12);
+    assert!((mae_row[2] - (1.0 + sim(rb.mae) + sim(rp.mae)) / 3.0).abs() < 1e-12);
+    let md = t.markdown();
+    assert!(
+        md.starts_with("| Method | sandblasted | parallel | All |"),
+        "{md}"
+    );
+    assert!(t.csv().lines().count() == 5);
+
+    // Ignoring textures, the decoy becomes r_par's exact match.
+    let mut cfg = config(&set);
+    cfg.match_by = MatchBy::Any;
+    let report = compare(&cfg).unwrap();
+    let rp = report.results.iter().find(|r| r.id == "r_par").unwrap();
+    assert_eq!(rp.mae_match, "s_decoy");
+    assert_eq!(rp.mae, 0.0);
+}
+
+#[test]
+fn compare_synthetic_against_itself_skips_self() {
+    let set = make_set();
+    let mut cfg = CompareConfig::new(set.synth.clone(), set.synth.clone());
+    cfg.align = AlignMode::None;
+    cfg.match_by = MatchBy::Any;
+    let report = compare(&cfg).unwrap();
+    assert_eq!(report.results.len(), 6);
+    for r in &report.results {
+        let others = if r.viewpoint == "A0" { 3 } else { 1 };
+        assert_eq!(r.candidates, others, "{}", r.id);
+        assert_ne!(r.mae_match, r.id);
+        assert!(r.mae > 0.0);
+    }
+}
+
+#[test]
+fn compare_fit_alignment_recovers_an_affine_map() {
+    let set = make_set();
+    let mut cfg = config(&set);
+    cfg.align = AlignMode::Fit(metrics::paper_defaults());
+    let report = compare(&cfg).unwrap();
+    // Both textures have real and synthetic images, so both are fitted, not the table.
+    assert_eq!(report.alignments.len(), 2);
+    for a in report.alignments.values() {
+        assert!(a.factor > 0.5 && a.factor < 4.0, "{a:?}");
+        assert_ne!(*a, metrics::paper_defaults()["sandblasted"]);
+    }
+}
+
+#[test]
+fn compare_bad_inputs_error_cleanly() {
+    let set = make_set();
+    // Unknown texture type without alignment.
+    std::fs::write(
+        set.synth.join("manifest.jsonl"),
+        "{\"image\": \"s_sand1/image.png\", \"faces\": \"s_sand1/faces.png\", \"viewpoint\": \"A0\", \"finish\": \"knurled-1\"}\n",
+    )
+    .unwrap();
+    let e = compare(&config(&set)).unwrap_err().to_string();
+    assert!(e.contains("knurled"), "{e}");
+
+    std::fs::write(set.synth.join("manifest.jsonl"), "{\"image\": \"x.png\"}\n").unwrap();
+    let e = compare(&config(&set)).unwrap_err().to_string();
+    assert!(
+        e.contains("manifest.jsonl line 1") && e.contains("faces"),
+        "{e}"
+    );
+
+    std::fs::write(
+        set.real.join("index.csv"),
+        "file,viewpoint,finish\nmissing,A0,spiral-d4\n",
+    )
+    .unwrap();
+    let e = compare(&config(&set)).unwrap_err().to_string();
+    assert!(e.contains("missing.json"), "{e}");
+
+    std::fs::write(set.real.join("index.csv"), "name,vp\n").unwrap();
+    let e = compare(&config(&set)).unwrap_err().to_string();
+    assert!(e.contains("index.csv line 1"), "{e}");
+
+    let e = compare(&CompareConfig::new(
+        set.real.join("nope"),
+        set.synth.clone(),
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("manifest.jsonl") && e.contains("index.csv"),
+        "{e}"
+    );
+}
+
+#[test]
+fn compare_disjoint_faces_give_an_empty_meta_mask_error() {
+    let set = make_set();
+    // r_b's polygon moved off the synthetic B faces.
+    let json = serde_json::json!({
+        "shapes": [{"label": "B", "points": [[41.0, 34.0], [47.0, 34.0], [47.0, 39.0]], "shape_type": "polygon"}],
+        "imagePath": "r_b.png", "imageHeight": H, "imageWidth": W,
+    });
+    std::fs::write(set.real.join("r_b.json"), json.to_string()).unwrap();
+    let e = compare(&config(&set)).unwrap_err();
+    assert!(matches!(e, MetricsError::EmptyMask { .. }), "{e}");
+    assert!(e.to_string().contains("B10"), "{e}");
+}
+
+#[test]
+fn cli_metrics_prints_json() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args(["metrics", "--json", "--mask"])
+        .arg(fixture("mask_ellipse.png"))
+        .arg(fixture("tex_a.png"))
+        .arg(fixture("tex_b.png"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for k in [
+        "hist_wd",
+        "mae",
+        "ssim",
+        "hist_wd_similarity",
+        "mae_similarity",
+        "ssim_similarity",
+    ] {
+        assert!(v[k].is_f64(), "{k} missing in {v}");
+    }
+    assert!((v["mae"].as_f64().unwrap() - 29.657254138266797).abs() < 1e-6);
+
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .arg("metrics")
+        .arg(fixture("tex_a.png"))
+        .arg("/nonexistent.png")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent.png"));
+}
+
+#[test]
+fn cli_compare_writes_the_table() {
+    let set = make_set();
+    let out = set.real.parent().unwrap().join("report");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args([
+            "compare",
+            "--align",
+            "sandblasted=2,10",
+            "--align",
+            "parallel=1,0",
+        ])
+        .arg("--real")
+        .arg(&set.real)
+        .arg("--synthetic")
+        .arg(&set.synth)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.starts_with("| Method | sandblasted | parallel | All |")
+            && stdout.contains("| images | 2 | 1 | 3 |"),
+        "{stdout}"
+    );
+    let csv = std::fs::read_to_string(out.join("similarities.csv")).unwrap();
+    assert!(
+        csv.starts_with("method,sandblasted,parallel,All\n"),
+        "{csv}"
+    );
+    let matches = std::fs::read_to_string(out.join("matches.csv")).unwrap();
+    assert!(
+        matches
+            .lines()
+            .any(|l| l.starts_with("r_sand,A0,") && l.contains(",s_sand2,"))
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(json["alignments"]["sandblasted"]["factor"], 2.0);
+
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args([
+            "compare",
+            "--align",
+            "spiral=fast",
+            "--real",
+            "a",
+            "--synthetic",
+            "b",
+        ])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("TYPE=FACTOR,BIAS"));
+}
