@@ -154,7 +154,9 @@ pub fn imprint_with_stats(
         };
         let uv: DVec2 = region.to_uv(*p);
         let (h, who) = combined_height(&tools, idx, uv);
-        if who.is_some() {
+        // Below 0.1 nm a displacement is lost in f32 positions anyway; leaving such
+        // vertices flat keeps labels to where the surface really moved.
+        if who.is_some() && h.abs() > 1e-7 {
             *p += region.normal * h;
             height[i] = h;
             winner[i] = who;
