@@ -306,7 +306,7 @@ fn a_straight_scratch_is_as_long_and_deep_as_specified() {
         "measured length {measured}"
     );
     assert!(
-        max_depth <= 0.03 + 1e-5 && max_depth >= 0.03 * 0.95,
+        (0.03 * 0.95..=0.03 + 1e-5).contains(&max_depth),
         "measured depth {max_depth}"
     );
 }

@@ -156,7 +156,7 @@ pub fn sample_defects(mesh: &Mesh, spec: &DefectSpec, seed: u64) -> Result<Defec
         .collect();
     let regions = Region::of_mesh(mesh, &faces);
     let picker = Picker::new(&regions);
-    if regions.is_empty() || !(picker.total() > 0.0) {
+    if regions.is_empty() || picker.total().partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Err(DefectError::NoFace {
             faces: spec.faces.join(", "),
         });

@@ -80,7 +80,7 @@ pub fn face_frames(mesh: &Mesh) -> Vec<FaceFrame> {
             weighted += (a + b + c) / 3.0 * da;
             area += da;
         }
-        if !(area > 0.0) || area_normal.length_squared() == 0.0 {
+        if area.is_nan() || area <= 0.0 || area_normal.length_squared() == 0.0 {
             continue;
         }
         let centre = weighted / area;
