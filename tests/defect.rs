@@ -251,14 +251,15 @@ fn dents_have_the_specified_depth_diameter_and_volume() {
             "{name}: measured diameter {width}"
         );
     }
-    // Removed volume against the analytic half-ellipsoids: the piecewise-linear
-    // interpolant of the (convex) pit lies above it, so it removes a little less; f32
-    // positions add about 1e-3 mm^3 of noise to a 86000 mm^3 body's volume.
+    // Removed volume against the analytic half-ellipsoids. Inside a footprint the
+    // piecewise-linear surface lies above the (convex) pit and removes less; triangles
+    // straddling the rim remove a sliver beyond it; f32 positions add about 1e-3 mm^3 of
+    // noise to a whole-body volume. Net: within 2 % here (docs/defects.md).
     let removed = volume(&b) - volume(&out);
     let ratio = removed / analytic;
     eprintln!("removed volume {removed:.5} mm^3, analytic {analytic:.5} mm^3, ratio {ratio:.4}");
     assert!(
-        ratio > 0.9 && removed <= analytic + 2e-3,
+        (ratio - 1.0).abs() < 0.02,
         "removed {removed} vs analytic {analytic}: ratio {ratio}"
     );
 }
