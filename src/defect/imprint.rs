@@ -107,7 +107,7 @@ pub fn imprint_with_stats(
         let Some((region, idx)) = tools_of(r.labels[t as usize].face) else {
             return false;
         };
-        let (_, _, l2) = r.longest(t);
+        let (_, l2) = r.longest(t);
         let tri = r.tris[t as usize].map(|i| r.positions[i as usize]);
         let c3 = (tri[0] + tri[1] + tri[2]) / 3.0;
         let reach = tri.iter().map(|p| p.distance(c3)).fold(0.0, f64::max);

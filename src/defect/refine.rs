@@ -7,7 +7,6 @@
 //! the shared edge). Shapes stay well graded: angles are bounded away from 0.
 
 use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
 use glam::DVec3;
 
@@ -15,25 +14,6 @@ use super::DefectError;
 use crate::scene::TriLabel;
 
 const NONE: u32 = u32::MAX;
-
-/// Multiplicative hashing for packed edge keys (SipHash dominated the run time).
-#[derive(Default)]
-struct EdgeHasher(u64);
-
-impl Hasher for EdgeHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ b as u64).wrapping_mul(0x100_0000_01B3);
-        }
-    }
-    fn write_u64(&mut self, x: u64) {
-        let h = x.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        self.0 = h ^ (h >> 29);
-    }
-}
 
 fn key(a: u32, b: u32) -> u64 {
     let (lo, hi) = if a < b { (a, b) } else { (b, a) };
@@ -44,7 +24,10 @@ pub(crate) struct Refiner {
     pub positions: Vec<DVec3>,
     pub tris: Vec<[u32; 3]>,
     pub labels: Vec<TriLabel>,
-    edges: HashMap<u64, [u32; 2], BuildHasherDefault<EdgeHasher>>,
+    /// `adj[t][k]`: the triangle across edge k = (tri[k], tri[k+1]) of t, or NONE.
+    /// Kept per triangle rather than in an edge hash map: bisection only ever touches
+    /// the two triangles of an edge and their four neighbours.
+    adj: Vec<[u32; 3]>,
     /// Triangles created or changed since the caller last drained it.
     pub touched: Vec<u32>,
     limit: usize,
@@ -57,26 +40,32 @@ impl Refiner {
         labels: Vec<TriLabel>,
         limit: usize,
     ) -> Result<Self, DefectError> {
-        let mut edges: HashMap<u64, [u32; 2], BuildHasherDefault<EdgeHasher>> = HashMap::default();
-        edges.reserve(tris.len() * 2);
+        let mut edges: HashMap<u64, (u32, u8, u32, u8)> = HashMap::with_capacity(tris.len() * 2);
         for (t, tri) in tris.iter().enumerate() {
             for k in 0..3 {
                 let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let slot = edges.entry(key(a, b)).or_insert([NONE, NONE]);
-                if slot[0] == NONE {
-                    slot[0] = t as u32;
-                } else if slot[1] == NONE {
-                    slot[1] = t as u32;
+                let slot = edges.entry(key(a, b)).or_insert((NONE, 0, NONE, 0));
+                if slot.0 == NONE {
+                    (slot.0, slot.1) = (t as u32, k as u8);
+                } else if slot.2 == NONE {
+                    (slot.2, slot.3) = (t as u32, k as u8);
                 } else {
                     return Err(DefectError::NonManifold { a, b });
                 }
+            }
+        }
+        let mut adj = vec![[NONE; 3]; tris.len()];
+        for &(t0, k0, t1, k1) in edges.values() {
+            if t1 != NONE {
+                adj[t0 as usize][k0 as usize] = t1;
+                adj[t1 as usize][k1 as usize] = t0;
             }
         }
         Ok(Refiner {
             positions,
             tris,
             labels,
-            edges,
+            adj,
             touched: Vec::new(),
             limit,
         })
@@ -86,103 +75,129 @@ impl Refiner {
         self.positions[a as usize].distance_squared(self.positions[b as usize])
     }
 
-    /// Longest edge of `t` as (from, to) in winding order. Ties are broken by the edge
-    /// key, so both triangles sharing an edge agree on which of their edges is longest.
-    pub fn longest(&self, t: u32) -> (u32, u32, f64) {
+    /// Local index of the longest edge of `t`, and its squared length. Ties are broken
+    /// by the edge's vertex ids, so both triangles sharing an edge agree on it.
+    pub fn longest(&self, t: u32) -> (usize, f64) {
         let tri = self.tris[t as usize];
-        let mut best = (tri[0], tri[1], self.len2(tri[0], tri[1]));
+        let mut best = (0, self.len2(tri[0], tri[1]));
         for k in 1..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            let l = self.len2(a, b);
-            if l > best.2 || (l == best.2 && key(a, b) > key(best.0, best.1)) {
-                best = (a, b, l);
+            let l = self.len2(tri[k], tri[(k + 1) % 3]);
+            let (bk, bl) = best;
+            if l > bl
+                || (l == bl && key(tri[k], tri[(k + 1) % 3]) > key(tri[bk], tri[(bk + 1) % 3]))
+            {
+                best = (k, l);
             }
         }
         best
     }
 
-    fn other(&self, a: u32, b: u32, t: u32) -> Option<u32> {
-        let s = self.edges.get(&key(a, b))?;
-        let o = if s[0] == t { s[1] } else { s[0] };
-        (o != NONE).then_some(o)
-    }
-
-    fn slot_replace(&mut self, k: u64, old: u32, new: u32) {
-        if let Some(s) = self.edges.get_mut(&k) {
-            if s[0] == old {
-                s[0] = new;
-            } else if s[1] == old {
-                s[1] = new;
-            }
-        }
-    }
-
-    fn slot_add(&mut self, k: u64, t: u32) {
-        let s = self.edges.entry(k).or_insert([NONE, NONE]);
-        if s[0] == NONE {
-            s[0] = t;
-        } else {
-            s[1] = t;
-        }
-    }
-
-    /// Splits edge (a, b) at its midpoint, with both triangles sharing it.
-    fn bisect(&mut self, a: u32, b: u32) {
+    /// Local index in `n` of the edge (a, b).
+    fn local_edge(&self, n: u32, a: u32, b: u32) -> usize {
+        let tri = self.tris[n as usize];
         let k = key(a, b);
-        let Some(slots) = self.edges.remove(&k) else {
+        (0..3)
+            .find(|&j| key(tri[j], tri[(j + 1) % 3]) == k)
+            .expect("adjacent triangles share the edge")
+    }
+
+    /// In `x`, points the link that went to `old` across edge (a, b) to `new`.
+    fn relink(&mut self, x: u32, a: u32, b: u32, old: u32, new: u32) {
+        if x == NONE {
             return;
-        };
+        }
+        let j = self.local_edge(x, a, b);
+        debug_assert_eq!(self.adj[x as usize][j], old);
+        self.adj[x as usize][j] = new;
+    }
+
+    /// Splits edge `k` of `t` at its midpoint, with the triangle on its other side.
+    fn bisect(&mut self, t: u32, k: usize) {
+        let tri = self.tris[t as usize];
+        let (a, b, c) = (tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]);
+        let n = self.adj[t as usize][k];
+        let (x, y) = (
+            self.adj[t as usize][(k + 1) % 3],
+            self.adj[t as usize][(k + 2) % 3],
+        );
         let m = self.positions.len() as u32;
         self.positions
             .push(0.5 * (self.positions[a as usize] + self.positions[b as usize]));
-        for t in slots {
-            if t == NONE {
-                continue;
+        let t2 = self.tris.len() as u32;
+        let n2 = if n == NONE { NONE } else { t2 + 1 };
+        // The other side runs p -> q along the edge: (b, a) when windings agree.
+        let (p, q, d, xn, yn) = if n == NONE {
+            (b, a, NONE, NONE, NONE)
+        } else {
+            let j = self.local_edge(n, a, b);
+            let nt = self.tris[n as usize];
+            let na = self.adj[n as usize];
+            (
+                nt[j],
+                nt[(j + 1) % 3],
+                nt[(j + 2) % 3],
+                na[(j + 1) % 3],
+                na[(j + 2) % 3],
+            )
+        };
+        let n_child_with = |v: u32| {
+            if n == NONE {
+                NONE
+            } else if p == v {
+                n
+            } else {
+                n2
             }
-            let tri = self.tris[t as usize];
-            let i = (0..3)
-                .find(|&i| key(tri[i], tri[(i + 1) % 3]) == k)
-                .expect("edge map and triangles agree");
-            let (p, q, c) = (tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]);
-            let t2 = self.tris.len() as u32;
-            self.tris[t as usize] = [p, m, c];
-            self.tris.push([m, q, c]);
-            self.labels.push(self.labels[t as usize]);
-            self.slot_replace(key(q, c), t, t2);
-            self.slot_add(key(p, m), t);
-            self.slot_add(key(m, q), t2);
-            self.slot_add(key(m, c), t);
-            self.slot_add(key(m, c), t2);
-            self.touched.push(t);
-            self.touched.push(t2);
+        };
+        // t -> [a, m, c] (keeps its index), t2 -> [m, b, c].
+        self.tris[t as usize] = [a, m, c];
+        self.adj[t as usize] = [n_child_with(a), t2, y];
+        self.tris.push([m, b, c]);
+        self.adj.push([n_child_with(b), x, t]);
+        self.labels.push(self.labels[t as usize]);
+        self.relink(x, b, c, t, t2);
+        self.touched.extend([t, t2]);
+        if n != NONE {
+            let t_child_with = |v: u32| if v == a { t } else { t2 };
+            // n -> [p, m, d] (keeps its index), n2 -> [m, q, d].
+            self.tris[n as usize] = [p, m, d];
+            self.adj[n as usize] = [t_child_with(p), n2, yn];
+            self.tris.push([m, q, d]);
+            self.adj.push([t_child_with(q), xn, n]);
+            self.labels.push(self.labels[n as usize]);
+            self.relink(xn, q, d, n, n2);
+            self.touched.extend([n, n2]);
         }
     }
 
     /// Bisects `t0` across its longest edge, first refining along the longest-edge
     /// propagation path until the edge is also the longest of the triangle beyond it.
     pub fn refine(&mut self, t0: u32) -> Result<(), DefectError> {
-        let (ta, tb, _) = self.longest(t0);
-        let target = key(ta, tb);
+        let (k0, _) = self.longest(t0);
+        let tri0 = self.tris[t0 as usize];
+        let target = key(tri0[k0], tri0[(k0 + 1) % 3]);
         loop {
             if self.tris.len() > self.limit {
                 return Err(DefectError::TooLarge { limit: self.limit });
             }
             let mut cur = t0;
-            let (a, b) = loop {
-                let (a, b, _) = self.longest(cur);
-                match self.other(a, b, cur) {
-                    None => break (a, b),
-                    Some(n) => {
-                        let (c, d, _) = self.longest(n);
-                        if key(c, d) == key(a, b) {
-                            break (a, b);
-                        }
-                        cur = n;
-                    }
+            let (t, k) = loop {
+                let (k, _) = self.longest(cur);
+                let n = self.adj[cur as usize][k];
+                if n == NONE {
+                    break (cur, k);
                 }
+                let tri = self.tris[cur as usize];
+                let j = self.local_edge(n, tri[k], tri[(k + 1) % 3]);
+                if self.longest(n).0 == j {
+                    break (cur, k);
+                }
+                cur = n;
             };
-            self.bisect(a, b);
-            if key(a, b) == target {
+            let tri = self.tris[t as usize];
+            let split = key(tri[k], tri[(k + 1) % 3]);
+            self.bisect(t, k);
+            if split == target {
                 return Ok(());
             }
         }
