@@ -2,12 +2,9 @@
 
 pub mod gltf_io;
 pub mod mesh;
-<<<<<<< HEAD
 pub mod procedural;
-=======
 pub mod testbody;
->>>>>>> defect
 
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
-pub use testbody::{face_frames, testbody, FaceFrame, Variant};
+pub use testbody::{FaceFrame, Variant, face_frames, testbody};
