@@ -447,3 +447,66 @@ fn defects_that_cannot_fit_or_do_not_fit_this_mesh_are_errors() {
         Err(DefectError::NoFace { .. })
     ));
 }
+
+#[test]
+fn a_curvy_scratch_removes_the_volume_of_its_path_length() {
+    // Constant depth, so removed volume = (2/3) w d L + the rounded ends (pi r^2 d / 2),
+    // less the small overlaps on the inside of each bend: the length recovered from the
+    // volume must match the path length.
+    let b = testbody(Variant::B);
+    let spec = dents_only(
+        r#"
+        faces = ["B"]
+        [[scratch]]
+        name = "curvy"
+        quantity = 1
+        width_mm = 0.08
+        depth = 0.25
+        path_length_mm = 15.0
+        step_mm = 1.0
+        curviness_deg = 20
+        depth_variation = 0
+        "#,
+    );
+    let set = sample_defects(&b, &spec, 17).unwrap();
+    let out = imprint(&b, &set).unwrap();
+    check_imprinted(&b, &set, &out);
+    let Shape::Scratch(s) = &set.defects[0].shape else {
+        unreachable!()
+    };
+    let f = frame_of(&face_frames(&b), "B");
+    let n = f.normal.as_dvec3();
+    let mut removed = 0.0;
+    for t in 0..out.triangles.len() {
+        if out.labels[t].instance == 1 {
+            let area = 0.5 * out.area_normal(t).as_dvec3().dot(n);
+            removed += area
+                * out
+                    .corners(t)
+                    .iter()
+                    .map(|p| depth(f, p.as_dvec3()))
+                    .sum::<f64>()
+                / 3.0;
+        }
+    }
+    let (w, d) = (s.width_mm, s.depth_mm[0]);
+    let caps = std::f64::consts::PI / 2.0 * (w / 2.0).powi(2) * d;
+    let measured = (removed - caps) / (2.0 / 3.0 * w * d);
+    let turns: f64 = s
+        .path_uv_mm
+        .windows(3)
+        .map(|p| {
+            let (a, b, c) = (DVec2::from(p[0]), DVec2::from(p[1]), DVec2::from(p[2]));
+            (b - a).angle_to(c - b).abs()
+        })
+        .sum();
+    assert!(
+        turns > 1.0,
+        "the walk should bend (total turning {turns} rad)"
+    );
+    assert!(
+        (measured - s.length_mm).abs() < 0.02 * s.length_mm,
+        "length from volume {measured} vs path {}",
+        s.length_mm
+    );
+}

@@ -12,10 +12,10 @@ use glam::{DVec2, DVec3, Vec3};
 use super::DefectError;
 use super::refine::Refiner;
 use super::region::Region;
-use super::sample::DefectSet;
+use super::sample::{Defect, DefectSet, Shape};
 use super::tool::{DefectTool, combined_height};
 use crate::scene::Mesh;
-use crate::scene::mesh::{FaceId, TriLabel};
+use crate::scene::mesh::{CLASS_DENT, CLASS_SCRATCH, FaceId, TriLabel};
 
 /// Upper bound on output triangles, so a silly spec fails cleanly instead of exhausting
 /// memory.
@@ -28,6 +28,61 @@ pub struct ImprintStats {
     pub triangles_out: usize,
     pub vertices_displaced: usize,
     pub triangles_labelled: usize,
+}
+
+/// A set may come from a user's JSON file: check what the tools index or divide by.
+fn check_defect(d: &Defect) -> Result<(), DefectError> {
+    let bad = |what: &str| {
+        Err(DefectError::BadSet(format!(
+            "defect instance {}: {what}",
+            d.instance
+        )))
+    };
+    let pos = |x: f64| x.is_finite() && x > 0.0;
+    if d.instance == 0 {
+        return bad("instance must be 1 or more");
+    }
+    match &d.shape {
+        Shape::Dent(s) => {
+            if d.class != CLASS_DENT {
+                return bad("a dent must have class 1");
+            }
+            if !(pos(s.diameter_mm) && pos(s.minor_mm) && pos(s.depth_mm))
+                || s.minor_mm > s.diameter_mm
+            {
+                return bad(
+                    "diameter_mm, minor_mm, depth_mm must be positive, minor_mm <= diameter_mm",
+                );
+            }
+            let finite =
+                s.centre_uv_mm
+                    .iter()
+                    .chain([&s.rotation_deg, &s.rim_height_mm, &s.rim_width]);
+            if finite.into_iter().any(|x| !x.is_finite())
+                || s.rim_height_mm < 0.0
+                || s.rim_width < 0.0
+            {
+                return bad("centre, rotation and rim must be finite, rim non-negative");
+            }
+        }
+        Shape::Scratch(s) => {
+            if d.class != CLASS_SCRATCH {
+                return bad("a scratch must have class 2");
+            }
+            if s.path_uv_mm.len() < 2 || s.depth_mm.len() != s.path_uv_mm.len() {
+                return bad("path_uv_mm needs at least 2 points and depth_mm one value per point");
+            }
+            if !pos(s.width_mm)
+                || s.path_uv_mm.iter().flatten().any(|x| !x.is_finite())
+                || s.depth_mm.iter().any(|&x| !(x.is_finite() && x >= 0.0))
+            {
+                return bad(
+                    "width_mm must be positive, path finite, depths finite and non-negative",
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Imprints `set` into `mesh`; see [`imprint_with_stats`].
@@ -51,6 +106,7 @@ pub fn imprint_with_stats(
     }
     let mut faces: Vec<FaceId> = Vec::new();
     for d in &set.defects {
+        check_defect(d)?;
         let f = d.face_id().ok_or_else(|| DefectError::MissingFace {
             instance: d.instance,
             face: d.face.clone(),
