@@ -1,3 +1,4 @@
 //! GPU passes that make images: first-hit raycasts (and, later, the path tracer).
 
+pub mod annotate;
 pub mod raycast;
