@@ -3,6 +3,8 @@
 pub mod gltf_io;
 pub mod mesh;
 pub mod procedural;
+pub mod testbody;
 
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
+pub use testbody::{face_frames, testbody, FaceFrame, Variant};
