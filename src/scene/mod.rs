@@ -7,4 +7,6 @@ pub mod testbody;
 
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
-pub use testbody::{face_frames, testbody, FaceFrame, Variant};
+pub use testbody::{FaceFrame, Variant, face_frames, testbody};
+pub mod camera;
+pub mod config;
