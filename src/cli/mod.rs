@@ -3,6 +3,7 @@
 mod defects;
 mod gpu;
 mod metrics;
+mod render;
 mod testbody;
 mod texture;
 
@@ -33,6 +34,8 @@ pub enum Command {
     Testbody(testbody::TestbodyArgs),
     /// Similarity metrics (histogram Wasserstein, MAE, SSIM) between two images.
     Metrics(metrics::MetricsArgs),
+    /// Path-trace an inspection image of a scene file (radiance.exr, image.png).
+    Render(render::RenderArgs),
     /// Compare a real and a synthetic image set (domain similarity, as the paper).
     Compare(metrics::CompareArgs),
 }
@@ -46,5 +49,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Testbody(a) => testbody::run(a),
         Command::Metrics(a) => metrics::run_metrics(a),
         Command::Compare(a) => metrics::run_compare(a),
+        Command::Render(a) => render::run(a),
     }
 }
