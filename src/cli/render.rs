@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{RenderScene, load_object, path_trace};
+use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_frame};
 use synosis::render::sensor;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::trace::{AccelChoice, resolve};
@@ -16,7 +17,8 @@ use synosis::vk::{Context, ContextOptions, Profiler};
 pub struct RenderArgs {
     /// Scene file (TOML, docs/scene-format.md).
     scene: PathBuf,
-    /// Output directory (created if missing): radiance.exr and image.png.
+    /// Output directory (created if missing): radiance.exr, image.png and the
+    /// annotation masks mask.png, instances.png, faces.png, coverage.png.
     #[arg(long)]
     out: PathBuf,
     /// Samples per pixel (overrides render.spp).
@@ -76,15 +78,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let start = std::time::Instant::now();
-    let img = path_trace(
-        &ctx,
-        &scene,
-        &cfg,
-        backend,
-        &tables,
-        Some(&profiler),
-        |done| bar.set_position(done as u64),
-    )?;
+    let opts = FrameOptions {
+        annotate_grid: Some(DEFAULT_COVERAGE_GRID),
+        profiler: Some(&profiler),
+    };
+    let frame = render_frame(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
+        bar.set_position(done as u64)
+    })?;
+    let img = frame.radiance;
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     let errors = ctx.validation_errors();
@@ -109,6 +110,10 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             synosis::image_io::write_png_gray8(&png, w, h, &sensor::quantise8(&img.data, e, g))
         }
         .with_context(|| format!("writing {}", png.display()))?;
+        if let Some(ann) = &frame.annotation {
+            ann.write_pngs(&a.out)
+                .context("writing the annotation masks")?;
+        }
         Ok(())
     })?;
     let mean = img.data.iter().map(|&v| v as f64).sum::<f64>() / img.data.len().max(1) as f64;

@@ -6,7 +6,9 @@ use std::sync::Arc;
 use ash::vk;
 use glam::Vec3;
 
+use super::annotate::{AnnotatePass, Annotation, AnnotationTargets};
 use super::energy::EnergyTables;
+use super::raycast::PinholeCamera;
 use crate::graph::Graph;
 use crate::scene::Mesh;
 use crate::scene::camera::{Camera, ring_light};
@@ -188,8 +190,52 @@ pub fn path_trace(
     backend: Backend,
     tables: &EnergyTables,
     profiler: Option<&Profiler>,
-    mut progress: impl FnMut(u32),
+    progress: impl FnMut(u32),
 ) -> Result<Radiance, RenderError> {
+    let opts = FrameOptions {
+        annotate_grid: None,
+        profiler,
+    };
+    render_frame(ctx, scene, cfg, backend, tables, opts, progress).map(|f| f.radiance)
+}
+
+/// What [`render_frame`] does besides path tracing.
+#[derive(Clone, Copy, Default)]
+pub struct FrameOptions<'a> {
+    /// Run the annotation pass too, with this many coverage rays per pixel side.
+    pub annotate_grid: Option<u32>,
+    pub profiler: Option<&'a Profiler>,
+}
+
+/// A rendered image and, when asked for, its annotation from the same camera rays'
+/// first hits (the annotation pass runs in the first batch's graph).
+pub struct Frame {
+    pub radiance: Radiance,
+    pub annotation: Option<Annotation>,
+}
+
+/// The scene camera as the first-hit passes take it (square pixels).
+pub fn pinhole(cam: &Camera) -> PinholeCamera {
+    PinholeCamera {
+        eye: cam.eye,
+        forward: cam.forward,
+        up: cam.up,
+        vfov_deg: 2.0 * cam.tan_half_h.atan().to_degrees(),
+    }
+}
+
+/// Path traces `scene` and, if `opts.annotate_grid` is set, annotates it in the same
+/// render graph; `progress(done_spp)` after each batch.
+pub fn render_frame(
+    ctx: &Arc<Context>,
+    scene: &RenderScene,
+    cfg: &SceneConfig,
+    backend: Backend,
+    tables: &EnergyTables,
+    opts: FrameOptions<'_>,
+    mut progress: impl FnMut(u32),
+) -> Result<Frame, RenderError> {
+    let profiler = opts.profiler;
     let (width, height) = (scene.camera.width, scene.camera.height);
     let tiles_x = width.div_ceil(8);
     let tiles = tiles_x * height.div_ceil(8);
@@ -204,6 +250,13 @@ pub fn path_trace(
     }
     let trace = TraceScene::build(ctx, &scene.mesh, backend, profiler)?;
     let off = TraceScene::binding_kinds(backend).len() as u32;
+    let annotation = match opts.annotate_grid {
+        Some(grid) => Some((
+            AnnotatePass::new(ctx, &trace, &scene.mesh, grid)?,
+            AnnotationTargets::new(ctx, width, height)?,
+        )),
+        None => None,
+    };
     let pipeline = trace_pipeline(
         ctx,
         "path_trace",
@@ -285,6 +338,18 @@ pub fn path_trace(
         let mut acc = g.import(&accum);
         if done == 0 {
             g.fill("clear radiance", &mut acc, 0);
+            if let Some((pass, targets)) = &annotation {
+                let mut ids = g.import(&targets.ids);
+                let mut cov = g.import(&targets.coverage);
+                pass.record(
+                    &mut g,
+                    &refs,
+                    off,
+                    &pinhole(&scene.camera),
+                    (&mut ids, &mut cov),
+                    (width, height),
+                );
+            }
         }
         refs.bind(g.dispatch("path trace", &pipeline, [tiles, 1, 1]))
             .read(off, &geo)
@@ -305,10 +370,17 @@ pub fn path_trace(
     }
     let sum: Vec<f32> = accum.read()?;
     let inv = 1.0 / spp as f32;
-    Ok(Radiance {
-        width,
-        height,
-        data: sum.iter().map(|v| v * inv).collect(),
-        gpu_ms,
+    let annotation = match &annotation {
+        Some((_, targets)) => Some(targets.read()?),
+        None => None,
+    };
+    Ok(Frame {
+        radiance: Radiance {
+            width,
+            height,
+            data: sum.iter().map(|v| v * inv).collect(),
+            gpu_ms,
+        },
+        annotation,
     })
 }
