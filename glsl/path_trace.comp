@@ -38,6 +38,16 @@ layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 4) readonly buffer Param
 } prm;
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 5) buffer Accum { float accum[]; };
 
+// Slope maps, one header per face id (0 = other: never a map); see src/render/slope.rs.
+struct FaceMapHeader {
+    vec4 origin;    // xyz map centre (world, mm), w texels per mm
+    vec4 axis_x;    // xyz map x axis (world)
+    vec4 axis_up;   // xyz map up axis (-y, world)
+    uvec4 dims;     // width, height, first texel, present
+};
+layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 6) readonly buffer FaceMaps { FaceMapHeader face_maps[]; };
+layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 7) readonly buffer Slopes { vec2 slopes[]; };
+
 layout(push_constant) uniform Push {
     uint sample_start; uint sample_count; uint tiles_x; uint mult;
 } pc;
@@ -57,6 +67,67 @@ uint pick_light(float u) {
 }
 
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
+
+// Steepest slope a map may give (85 degrees): keeps the shading normal off the tangent
+// plane so its frame stays well conditioned.
+const float MAX_SLOPE = 11.43;
+// The viewer must sit at least this far (cosine) above the shading hemisphere; see
+// bend_towards_viewer.
+const float SHADE_MIN_COS = 0.1;
+
+// Bilinear slopes [dh/dx, dh/dy] (image axes, y down) at p; zero outside the map.
+vec2 map_slopes(uint face, vec3 p) {
+    FaceMapHeader m = face_maps[face];
+    if (m.dims.w == 0u) return vec2(0.0);
+    vec3 d = p - m.origin.xyz;
+    vec2 wh = vec2(m.dims.xy);
+    float x = dot(d, m.axis_x.xyz) * m.origin.w + 0.5 * wh.x;
+    float y = -dot(d, m.axis_up.xyz) * m.origin.w + 0.5 * wh.y;
+    if (!(x >= 0.0 && y >= 0.0 && x <= wh.x && y <= wh.y)) return vec2(0.0);
+    float fx = clamp(x - 0.5, 0.0, wh.x - 1.0);
+    float fy = clamp(y - 0.5, 0.0, wh.y - 1.0);
+    uint x0 = uint(fx), y0 = uint(fy);
+    uint x1 = min(x0 + 1u, m.dims.x - 1u), y1 = min(y0 + 1u, m.dims.y - 1u);
+    float tx = fx - float(x0), ty = fy - float(y0);
+    uint b = m.dims.z;
+    vec2 a = mix(slopes[b + y0 * m.dims.x + x0], slopes[b + y0 * m.dims.x + x1], tx);
+    vec2 c = mix(slopes[b + y1 * m.dims.x + x0], slopes[b + y1 * m.dims.x + x1], tx);
+    return mix(a, c, ty);
+}
+
+// Shading normal from the face's slope map; ng is the geometric normal facing the ray.
+// Exactly ng where the slopes are zero (a flat map renders as no map). The map axes are
+// projected into the triangle's plane, so triangles that are not coplanar with the face
+// (defect patches labelled with it) still get a normal in their own hemisphere.
+vec3 shading_normal(uint face, vec3 p, vec3 ng) {
+    FaceMapHeader m = face_maps[face];
+    if (m.dims.w == 0u) return ng;
+    // Seen from inside (not the face's outward side): no perturbation.
+    if (dot(cross(m.axis_x.xyz, m.axis_up.xyz), ng) <= 0.0) return ng;
+    vec2 s = map_slopes(face, p);
+    if (s.x == 0.0 && s.y == 0.0) return ng;
+    float len = length(s);
+    if (len > MAX_SLOPE) s *= MAX_SLOPE / len;
+    vec3 ax = m.axis_x.xyz - dot(m.axis_x.xyz, ng) * ng;
+    vec3 up = m.axis_up.xyz - dot(m.axis_up.xyz, ng) * ng;
+    // n = normalize(-dh/dx, -dh/dup, 1) in (x, up, n) with dh/dup = -dh/dy.
+    return normalize(ng - s.x * ax + s.y * up);
+}
+
+// A perturbed normal can face away from the viewer (slope + view angle > 90 degrees),
+// which would make the BSDF zero there: black fringes. The normal is rotated towards wo,
+// in the plane of (ns, wo), until cos(ns, wo) = min(SHADE_MIN_COS, cos(ng, wo)); the
+// rotated normal stays in ng's hemisphere (both components have a positive dot with ng)
+// and an unperturbed normal (ns = ng) is never changed.
+vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
+    float target = min(SHADE_MIN_COS, dot(ng, wo));
+    float c = dot(ns, wo);
+    if (c >= target) return ns;
+    vec3 perp = ns - c * wo;
+    float pl = length(perp);
+    if (!(pl > 1e-6)) return ng;
+    return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
+}
 
 // f * cos and pdf of the surface at a hit, in the local frame (normal +z).
 float surface_eval(uint mat, Conductor c, vec3 wo, vec3 wi, out float pdf) {
@@ -98,7 +169,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         Hit h = trace(o, d, 0.0, 3.0e38);
         if (h.prim == NO_HIT) break;   // no environment light
         Tri t = tris[h.prim];
-        uint mat = mats[h.prim];
+        uint mat = mats[h.prim] & 0xffu;
+        uint face = (mats[h.prim] >> 8) & 0xffu;
         vec3 ng_raw = tri_normal(t);
         vec3 ng = normalize(ng_raw);
         if (mat == MAT_LIGHT) {
@@ -118,9 +190,16 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         // unlike o + t d whose error grows with the distance travelled.
         vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
         if (dot(ng, d) > 0.0) ng = -ng;
+        // Shading frame: the slope-mapped normal (conductor on an inspected face), bent
+        // towards the viewer if needed. Side and visibility tests use ng: directions below
+        // the geometric surface are never lit nor continued (no light leaks).
+        vec3 ns = ng;
+        if (mat == MAT_CONDUCTOR && face != 0u && face < 4u) {
+            ns = bend_towards_viewer(shading_normal(face, p, ng), ng, -d);
+        }
         vec3 tb, bt;
-        onb(ng, tb, bt);
-        vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ng));
+        onb(ns, tb, bt);
+        vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
         vec3 origin = offset_ray(p, ng);
 
         // Next-event estimation on the ring light.
@@ -135,14 +214,14 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
             float dist = sqrt(dist2);
             vec3 wi_w = to / dist;
             float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
-            vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ng));
-            if (cos_l > 0.0 && wi.z > 0.0) {
+            vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+            if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                 float pdf_b;
                 float f = surface_eval(mat, cond, wo, wi, pdf_b);
                 if (f > 0.0) {
                     Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
                     bool visible = s.prim == NO_HIT
-                        || (mats[s.prim] == MAT_LIGHT && s.t >= dist * 0.999);
+                        || ((mats[s.prim] & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
                     if (visible) {
                         float pdf_light = dist2 / (cos_l * prm.light_area);
                         L += T * f * prm.radiance * power_heuristic(pdf_light, pdf_b) / pdf_light;
@@ -165,7 +244,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         }
         prev_pdf = pdf;
         o = origin;
-        d = normalize(wi.x * tb + wi.y * bt + wi.z * ng);
+        d = normalize(wi.x * tb + wi.y * bt + wi.z * ns);
+        if (dot(d, ng) <= 0.0) break;   // reflected into the surface by a shading normal
     }
     return L;
 }

@@ -7,3 +7,4 @@ pub mod energy;
 pub mod path_trace;
 pub mod raycast;
 pub mod sensor;
+pub mod slope;

@@ -9,12 +9,13 @@ use glam::Vec3;
 use super::annotate::{AnnotatePass, Annotation, AnnotationTargets};
 use super::energy::EnergyTables;
 use super::raycast::PinholeCamera;
+use super::slope::{FaceMap, SlopeMap};
 use crate::graph::Graph;
 use crate::scene::Mesh;
 use crate::scene::camera::{Camera, ring_light};
 use crate::scene::config::{SceneConfig, parse_view};
 use crate::scene::mesh::{FACE_OTHER, TriLabel};
-use crate::scene::testbody::face_frames;
+use crate::scene::testbody::{FaceFrame, face_frames};
 use crate::trace::{Backend, TraceScene, scramble_multiplier, trace_pipeline};
 use crate::vk::{Buffer, Context, MemoryKind, Profiler, VkError};
 
@@ -41,6 +42,8 @@ pub enum RenderError {
     Mesh(#[from] crate::scene::MeshError),
     #[error(transparent)]
     Vk(#[from] VkError),
+    #[error(transparent)]
+    Slope(#[from] super::slope::SlopeError),
 }
 
 /// The configured object (built-in test body or glTF), translated to its position.
@@ -74,6 +77,11 @@ pub struct RenderScene {
     pub lights: Vec<(u32, f32)>,
     pub light_area: f32,
     pub camera: Camera,
+    /// Frames of the object's inspected faces (where slope maps are projected).
+    pub face_frames: Vec<FaceFrame>,
+    /// Slope maps on inspected faces; none = shading normal is the geometric normal.
+    /// Filled from `[texture]` by `assemble`; the dataset generator may replace them.
+    pub face_maps: Vec<FaceMap>,
 }
 
 impl RenderScene {
@@ -130,14 +138,51 @@ impl RenderScene {
         if let Some(last) = lights.last_mut() {
             last.1 = 1.0;
         }
+        let face_maps = texture_maps(&cfg.texture, &frames);
         Ok(RenderScene {
             mesh,
             materials,
             lights,
             light_area: area as f32,
             camera,
+            face_frames: frames,
+            face_maps,
         })
     }
+}
+
+/// The maps `[texture]` asks for: none for "flat"; for "test-grooves" one groove map,
+/// shared by faces A, B and C, large enough to cover each face at any rotation.
+fn texture_maps(t: &crate::scene::config::TextureConfig, frames: &[FaceFrame]) -> Vec<FaceMap> {
+    if t.kind != "test-grooves" || frames.is_empty() {
+        return Vec::new();
+    }
+    let extent = frames
+        .iter()
+        .map(|f| {
+            let i = (f.face as usize).clamp(1, 3) - 1;
+            let o = t.offset_mm[i];
+            2.0 * (f.half_size.length() + (o[0] * o[0] + o[1] * o[1]).sqrt())
+        })
+        .fold(0.0f32, f32::max);
+    let map = Arc::new(SlopeMap::test_grooves(
+        extent,
+        t.spacing_um as f64,
+        t.groove_period_mm,
+        t.groove_max_slope_deg,
+    ));
+    frames
+        .iter()
+        .map(|f| {
+            let i = (f.face as usize).clamp(1, 3) - 1;
+            FaceMap {
+                face: f.face,
+                slopes: map.clone(),
+                rotation_deg: t.rotation_deg[i],
+                offset_mm: t.offset_mm[i],
+            }
+        })
+        .collect()
 }
 
 #[repr(C)]
@@ -261,7 +306,7 @@ pub fn render_frame(
         ctx,
         "path_trace",
         backend,
-        6,
+        8,
         std::mem::size_of::<Push>() as u32,
         [8, 8, 1],
     )?;
@@ -303,7 +348,18 @@ pub fn render_frame(
             .map(|&(t, c)| [t, c.to_bits()])
             .collect()
     };
-    let mat_buf = Buffer::from_slice(ctx, "materials", &scene.materials, storage)?;
+    // Material in the low byte, inspected face id in the next: the shader finds the
+    // face's slope map without another buffer.
+    let mat_words: Vec<u32> = scene
+        .materials
+        .iter()
+        .zip(&scene.mesh.labels)
+        .map(|(&m, l)| m | (l.face as u32) << 8)
+        .collect();
+    let (map_headers, map_texels) = super::slope::pack(&scene.face_maps, &scene.face_frames)?;
+    let mat_buf = Buffer::from_slice(ctx, "materials", &mat_words, storage)?;
+    let map_head_buf = Buffer::from_slice(ctx, "slope map headers", &map_headers, storage)?;
+    let map_buf = Buffer::from_slice(ctx, "slope maps", &map_texels, storage)?;
     let light_buf = Buffer::from_slice(ctx, "lights", &light_words, storage)?;
     let energy_buf = Buffer::from_slice(ctx, "energy tables", &tables.packed(), storage)?;
     let param_buf = Buffer::from_slice(ctx, "path params", &[params], storage)?;
@@ -336,6 +392,8 @@ pub fn render_frame(
         let en = g.import(&energy_buf);
         let pr = g.import(&param_buf);
         let mut acc = g.import(&accum);
+        let mh = g.import(&map_head_buf);
+        let mt = g.import(&map_buf);
         if done == 0 {
             g.fill("clear radiance", &mut acc, 0);
             if let Some((pass, targets)) = &annotation {
@@ -358,6 +416,8 @@ pub fn render_frame(
             .read(off + 3, &en)
             .read(off + 4, &pr)
             .read_write(off + 5, &mut acc)
+            .read(off + 6, &mh)
+            .read(off + 7, &mt)
             .push(&push)
             .submit();
         for t in g.execute(profiler)? {

@@ -41,6 +41,7 @@ pub struct SceneConfig {
     pub light: LightConfig,
     pub camera: CameraConfig,
     pub render: RenderConfig,
+    pub texture: TextureConfig,
 }
 
 /// The inspected object: a glTF file or a built-in test body, and where it stands.
@@ -202,6 +203,40 @@ impl Default for RenderConfig {
             seed: 0,
             batch_spp: 16,
             accel: AccelChoice::Auto,
+        }
+    }
+}
+
+/// Slope maps on the inspected faces (docs/scene-format.md, `[texture]`).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TextureConfig {
+    /// "flat" (no map: shading normal = geometric normal) or "test-grooves" (analytic
+    /// sinusoidal grooves on faces A, B and C, a test pattern).
+    pub kind: String,
+    /// Texel spacing of generated maps, µm, [1, 1000].
+    pub spacing_um: f32,
+    /// Groove period, mm, (0, 100].
+    pub groove_period_mm: f32,
+    /// Steepest groove slope, degrees, [0, 85].
+    pub groove_max_slope_deg: f32,
+    /// Rotation of the map on faces A, B, C about the face normal, degrees, from the face's
+    /// u axis towards v, [-360, 360].
+    pub rotation_deg: [f32; 3],
+    /// Map centre relative to the face centre along (u, v) on faces A, B, C, mm,
+    /// [-1000, 1000] each.
+    pub offset_mm: [[f32; 2]; 3],
+}
+
+impl Default for TextureConfig {
+    fn default() -> Self {
+        TextureConfig {
+            kind: "flat".into(),
+            spacing_um: 20.0,
+            groove_period_mm: 1.0,
+            groove_max_slope_deg: 30.0,
+            rotation_deg: [0.0; 3],
+            offset_mm: [[0.0; 2]; 3],
         }
     }
 }
@@ -417,6 +452,57 @@ impl SceneConfig {
         range_u("render.spp", r.spp, 1, 1 << 20, "[1, 1048576]")?;
         range_u("render.max_bounces", r.max_bounces, 1, 64, "[1, 64]")?;
         range_u("render.batch_spp", r.batch_spp, 1, 1024, "[1, 1024]")?;
+        let t = &self.texture;
+        if t.kind != "flat" && t.kind != "test-grooves" {
+            return Err(ConfigError::Invalid {
+                field: "texture.kind",
+                message: format!("{:?}: allowed \"flat\" or \"test-grooves\"", t.kind),
+            });
+        }
+        range_f(
+            "texture.spacing_um",
+            t.spacing_um,
+            1.0,
+            1000.0,
+            false,
+            "[1, 1000] µm",
+        )?;
+        range_f(
+            "texture.groove_period_mm",
+            t.groove_period_mm,
+            0.0,
+            100.0,
+            true,
+            "(0, 100] mm",
+        )?;
+        range_f(
+            "texture.groove_max_slope_deg",
+            t.groove_max_slope_deg,
+            0.0,
+            85.0,
+            false,
+            "[0, 85] degrees",
+        )?;
+        for r in t.rotation_deg {
+            range_f(
+                "texture.rotation_deg",
+                r,
+                -360.0,
+                360.0,
+                false,
+                "[-360, 360] degrees",
+            )?;
+        }
+        for o in t.offset_mm.iter().flatten() {
+            range_f(
+                "texture.offset_mm",
+                *o,
+                -1000.0,
+                1000.0,
+                false,
+                "[-1000, 1000] mm",
+            )?;
+        }
         Ok(())
     }
 

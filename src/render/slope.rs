@@ -1,0 +1,257 @@
+//! Slope (normal) maps on the inspected faces: planar projection of a per-face slope map,
+//! rotated and translated in the face plane, packed for glsl/path_trace.comp.
+//!
+//! Conventions follow the texture module (docs/texture.md): a map is row-major, row 0 at
+//! the top, slopes `[dh/dx, dh/dy]` in image axes (x right, y down), unitless (µm/µm).
+//! On a face, the map's x axis is the face frame's `u` rotated by `rotation_deg` about the
+//! face normal (counter-clockwise seen from outside, i.e. towards `v`), its "up" (-y) is
+//! the rotated `v`, and its centre sits at `centre + offset_mm[0] u + offset_mm[1] v`.
+
+use std::sync::Arc;
+
+use glam::Vec3;
+
+use crate::scene::mesh::FaceId;
+use crate::scene::testbody::FaceFrame;
+
+/// Per-texel slopes; the same layout as the texture module's `SlopeMap`
+/// (`synosis::texture::maps::SlopeMap`), so its data moves over field by field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlopeMap {
+    pub width: usize,
+    pub height: usize,
+    /// Texel spacing, µm.
+    pub spacing_um: f64,
+    /// `[dh/dx, dh/dy]`, row-major, row 0 at the top, y down.
+    pub data: Vec<[f32; 2]>,
+}
+
+impl SlopeMap {
+    /// All slopes zero: renders exactly as no map (tested).
+    pub fn flat(width: usize, height: usize, spacing_um: f64) -> SlopeMap {
+        SlopeMap {
+            width,
+            height,
+            spacing_um,
+            data: vec![[0.0; 2]; width * height],
+        }
+    }
+
+    /// Parallel sinusoidal grooves running along the map's y axis:
+    /// h(x) = A sin(2 pi x / period), with A chosen so the steepest slope is
+    /// `max_slope_deg`. Covers `extent_mm` x `extent_mm`. A test pattern, not a finish.
+    pub fn test_grooves(
+        extent_mm: f32,
+        spacing_um: f64,
+        period_mm: f32,
+        max_slope_deg: f32,
+    ) -> SlopeMap {
+        let n = ((extent_mm as f64 * 1000.0 / spacing_um).ceil() as usize).max(1);
+        let smax = max_slope_deg.to_radians().tan();
+        let k = std::f64::consts::TAU / (period_mm as f64 * 1000.0);
+        let mut data = vec![[0.0f32; 2]; n * n];
+        for y in 0..n {
+            for x in 0..n {
+                let xu = (x as f64 + 0.5) * spacing_um;
+                // dh/dx = A k cos(k x) with A k = tan(max slope).
+                data[y * n + x] = [(smax as f64 * (k * xu).cos()) as f32, 0.0];
+            }
+        }
+        SlopeMap {
+            width: n,
+            height: n,
+            spacing_um,
+            data,
+        }
+    }
+}
+
+/// A slope map placed on one inspected face.
+#[derive(Clone, Debug)]
+pub struct FaceMap {
+    pub face: FaceId,
+    pub slopes: Arc<SlopeMap>,
+    /// Rotation of the map about the face normal, degrees, from `u` towards `v`.
+    pub rotation_deg: f32,
+    /// Map centre relative to the face centre along (u, v), mm.
+    pub offset_mm: [f32; 2],
+}
+
+/// One face's placement as the shader reads it (4 x vec4, std430).
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FaceMapGpu {
+    /// xyz: map centre (world, mm); w: texels per mm.
+    pub origin: [f32; 4],
+    /// xyz: the map's x axis in the world; w: unused.
+    pub axis_x: [f32; 4],
+    /// xyz: the map's up axis (-y) in the world; w: unused.
+    pub axis_up: [f32; 4],
+    /// width, height, first texel in the data buffer, 1 = present.
+    pub dims: [u32; 4],
+}
+
+/// Face ids 0..=3 index the header table (0, "other", never has a map).
+pub const FACE_SLOTS: usize = 4;
+
+/// Why face maps cannot be packed.
+#[derive(Debug, thiserror::Error)]
+pub enum SlopeError {
+    #[error("slope map for face {face}: {message}")]
+    Invalid { face: &'static str, message: String },
+}
+
+/// Headers (one per face id) and all texels concatenated. Maps on faces that the mesh
+/// does not have are refused, so a typo in a face id cannot silently render flat.
+pub fn pack(
+    maps: &[FaceMap],
+    frames: &[FaceFrame],
+) -> Result<(Vec<FaceMapGpu>, Vec<[f32; 2]>), SlopeError> {
+    let mut headers = vec![FaceMapGpu::default(); FACE_SLOTS];
+    let mut texels: Vec<[f32; 2]> = Vec::new();
+    for m in maps {
+        let name = crate::scene::mesh::face_name(m.face);
+        let bad = |message: String| SlopeError::Invalid {
+            face: name,
+            message,
+        };
+        let frame = frames
+            .iter()
+            .find(|f| f.face == m.face)
+            .ok_or_else(|| bad("the mesh has no such face".into()))?;
+        let s = &m.slopes;
+        if s.width == 0 || s.height == 0 || s.data.len() != s.width * s.height {
+            return Err(bad(format!(
+                "{} x {} texels but {} values",
+                s.width,
+                s.height,
+                s.data.len()
+            )));
+        }
+        if !(s.spacing_um.is_finite() && s.spacing_um > 0.0) {
+            return Err(bad(format!("spacing_um = {} must be > 0", s.spacing_um)));
+        }
+        if s.data
+            .iter()
+            .any(|v| !(v[0].is_finite() && v[1].is_finite()))
+        {
+            return Err(bad("slopes must be finite".into()));
+        }
+        if !(m.rotation_deg.is_finite() && m.offset_mm.iter().all(|v| v.is_finite())) {
+            return Err(bad("rotation and offset must be finite".into()));
+        }
+        if headers[m.face as usize].dims[3] != 0 {
+            return Err(bad("two maps on one face".into()));
+        }
+        let (sin, cos) = m.rotation_deg.to_radians().sin_cos();
+        let ax = frame.u * cos + frame.v * sin;
+        let up = frame.v * cos - frame.u * sin;
+        let centre = frame.centre + frame.u * m.offset_mm[0] + frame.v * m.offset_mm[1];
+        let first = texels.len() as u32;
+        texels.extend_from_slice(&s.data);
+        headers[m.face as usize] = FaceMapGpu {
+            origin: centre.extend(1000.0 / s.spacing_um as f32).into(),
+            axis_x: ax.extend(0.0).into(),
+            axis_up: up.extend(0.0).into(),
+            dims: [s.width as u32, s.height as u32, first, 1],
+        };
+    }
+    if texels.is_empty() {
+        texels.push([0.0; 2]); // a binding may not be empty; no header points at it
+    }
+    Ok((headers, texels))
+}
+
+/// The shading normal the shader computes at `p` on a face with outward normal `n`
+/// (CPU mirror for tests and docs): bilinear slopes, perturbed normal in the map axes.
+pub fn shading_normal(h: &FaceMapGpu, texels: &[[f32; 2]], p: Vec3, n: Vec3) -> Vec3 {
+    let s = lookup(h, texels, p);
+    let ax = Vec3::from_slice(&h.axis_x[..3]);
+    let up = Vec3::from_slice(&h.axis_up[..3]);
+    // dh/d(up) = -dh/dy because image y points down.
+    (n - ax * s[0] + up * s[1]).normalize()
+}
+
+/// Bilinear slopes at `p` (zero outside the map), as the shader computes them.
+pub fn lookup(h: &FaceMapGpu, texels: &[[f32; 2]], p: Vec3) -> [f32; 2] {
+    if h.dims[3] == 0 {
+        return [0.0; 2];
+    }
+    let d = p - Vec3::from_slice(&h.origin[..3]);
+    let k = h.origin[3];
+    let (w, ht) = (h.dims[0] as f32, h.dims[1] as f32);
+    let x = d.dot(Vec3::from_slice(&h.axis_x[..3])) * k + 0.5 * w;
+    let y = -d.dot(Vec3::from_slice(&h.axis_up[..3])) * k + 0.5 * ht;
+    if !(x >= 0.0 && y >= 0.0 && x <= w && y <= ht) {
+        return [0.0; 2];
+    }
+    let fx = (x - 0.5).clamp(0.0, w - 1.0);
+    let fy = (y - 0.5).clamp(0.0, ht - 1.0);
+    let (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
+    let (x1, y1) = ((x0 + 1).min(h.dims[0] - 1), (y0 + 1).min(h.dims[1] - 1));
+    let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
+    let at = |x: u32, y: u32| texels[(h.dims[2] + y * h.dims[0] + x) as usize];
+    let mut out = [0.0; 2];
+    for (c, o) in out.iter_mut().enumerate() {
+        let a = at(x0, y0)[c] + (at(x1, y0)[c] - at(x0, y0)[c]) * tx;
+        let b = at(x0, y1)[c] + (at(x1, y1)[c] - at(x0, y1)[c]) * tx;
+        *o = a + (b - a) * ty;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn placement_follows_rotation_offset_and_image_axes() {
+        use glam::Vec2;
+        let frame = FaceFrame {
+            face: crate::scene::mesh::FACE_A,
+            centre: Vec3::new(1.0, 2.0, 3.0),
+            normal: Vec3::Z,
+            u: Vec3::X,
+            v: Vec3::Y,
+            half_size: Vec2::splat(10.0),
+            area: 400.0,
+        };
+        // 4 x 4 texels of 1 mm; the top row (y = 0) slopes in y, the rest in x.
+        let mut map = SlopeMap::flat(4, 4, 1000.0);
+        for (i, s) in map.data.iter_mut().enumerate() {
+            *s = if i < 4 { [0.0, 1.0] } else { [1.0, 0.0] };
+        }
+        let map = Arc::new(map);
+        let place = |rotation_deg, offset_mm| FaceMap {
+            face: frame.face,
+            slopes: map.clone(),
+            rotation_deg,
+            offset_mm,
+        };
+        let (h, t) = pack(&[place(90.0, [5.0, 0.0])], &[frame]).expect("pack");
+        let h = h[frame.face as usize];
+        // Rotated 90 degrees: map x = v (+y), map up = -u; centre at (6, 2, 3).
+        let centre = Vec3::new(6.0, 2.0, 3.0);
+        // 1.5 mm along map x from the centre, 0.5 mm down: texel row 2 (dh/dx = 1), so
+        // the normal leans against map x, i.e. towards -y.
+        let p = centre + Vec3::Y * 1.5 + Vec3::X * 0.5;
+        let n = shading_normal(&h, &t, p, Vec3::Z);
+        assert!((n - Vec3::new(0.0, -1.0, 1.0).normalize()).length() < 1e-5, "{n}");
+        // Top row (1.5 mm along map up = -x): dh/dy = 1 with y down, so the height
+        // falls towards map up and the normal leans that way: towards -x.
+        let p = centre + Vec3::Y * 0.5 - Vec3::X * 1.5;
+        let n = shading_normal(&h, &t, p, Vec3::Z);
+        assert!((n - Vec3::new(-1.0, 0.0, 1.0).normalize()).length() < 1e-5, "{n}");
+        // Outside the 4 mm map: flat.
+        assert_eq!(lookup(&h, &t, centre + Vec3::Y * 2.5), [0.0, 0.0]);
+        assert!(pack(&[place(0.0, [0.0; 2]), place(0.0, [0.0; 2])], &[frame]).is_err());
+    }
+
+    #[test]
+    fn grooves_reach_their_max_slope() {
+        let m = SlopeMap::test_grooves(2.0, 10.0, 0.5, 60.0);
+        let max = m.data.iter().map(|s| s[0].abs()).fold(0.0f32, f32::max);
+        // 50 texels per period: the sampled peak is within cos(pi / 50) of the true one.
+        assert!((max / 60f32.to_radians().tan() - 1.0).abs() < 0.003, "{max}");
+    }
+}
