@@ -8,7 +8,7 @@
 // See docs/rendering.md for every approximation and its parameter.
 #include "common/trace.glsl"
 #include "common/scramble.glsl"
-#include "common/rng.glsl"
+#include "common/sampler.glsl"
 #include "common/offset_ray.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;
@@ -33,7 +33,7 @@ layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 4) readonly buffer Param
     vec4 forward;   // unit view direction
     uint width; uint height; uint max_bounces; uint seed;
     float alpha; float ior_n; float ior_k; float f_avg;
-    uint comp; uint light_count; uint pad0; uint pad1;
+    uint comp; uint light_count; uint sample_gen; uint light_sampling;
     float table_albedo; float radiance; float light_area; float pad2;
 } prm;
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 5) buffer Accum { float accum[]; };
@@ -150,8 +150,8 @@ bool surface_sample(uint mat, Conductor c, vec3 wo, vec3 u, out vec3 wi, out flo
 }
 
 float radiance_sample(uint pixel, uint px, uint py, uint s) {
-    Rng rng = rng_init(pixel, s, prm.seed);
-    vec2 jitter = vec2(rng_next(rng), rng_next(rng));
+    Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
+    vec2 jitter = sample_2d(rng);
     vec2 ndc = (vec2(px, py) + jitter) / vec2(prm.width, prm.height) * 2.0 - 1.0;
     vec3 o = prm.eye.xyz;
     vec3 d = normalize(prm.forward.xyz + ndc.x * prm.right.xyz - ndc.y * prm.up.xyz);
@@ -204,10 +204,11 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
 
         // Next-event estimation on the ring light.
         if (prm.light_count > 0u && prm.radiance > 0.0) {
-            uint li = pick_light(rng_next(rng));
+            uint li = pick_light(sample_1d(rng));
             Tri lt = tris[li];
-            float su = sqrt(rng_next(rng));
-            float u2 = rng_next(rng);
+            vec2 ul = sample_2d(rng);
+            float su = sqrt(ul.x);
+            float u2 = ul.y;
             vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
             vec3 to = q - origin;
             float dist2 = dot(to, to);
@@ -231,7 +232,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         }
 
         // BSDF sampling continues the path.
-        vec3 u = vec3(rng_next(rng), rng_next(rng), rng_next(rng));
+        float u_lobe = sample_1d(rng);
+        vec3 u = vec3(u_lobe, sample_2d(rng));
         vec3 wi;
         float weight, pdf;
         if (!surface_sample(mat, cond, wo, u, wi, weight, pdf)) break;
@@ -239,7 +241,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         if (!(T > 0.0)) break;
         if (depth >= 3u) {
             float q = min(T, 0.95);
-            if (rng_next(rng) >= q) break;
+            if (sample_1d(rng) >= q) break;
             T /= q;
         }
         prev_pdf = pdf;

@@ -498,3 +498,51 @@ fn steep_slope_map_has_no_black_fringes() {
         );
     }
 }
+
+fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    (a.iter()
+        .zip(b)
+        .map(|(x, y)| ((x - y) as f64).powi(2))
+        .sum::<f64>()
+        / a.len() as f64)
+        .sqrt()
+}
+
+/// Owen-scrambled Sobol against independent random numbers at equal spp (16 and 64),
+/// each against a 2048-spp independent reference with another seed: Sobol must not be
+/// worse (measured numbers in docs/rendering.md).
+#[test]
+fn sobol_is_not_worse_than_independent() {
+    use synosis::scene::config::SamplerKind;
+    let backend = Backend::RayQuery;
+    let mut rcfg = small_cfg("");
+    rcfg.render.sampler = SamplerKind::Independent;
+    rcfg.render.spp = 2048;
+    rcfg.render.batch_spp = 256;
+    rcfg.render.seed = 99;
+    let reference = render(&rcfg, backend, |_| {});
+    for spp in [16u32, 64] {
+        let mut errs = Vec::new();
+        for kind in [SamplerKind::Independent, SamplerKind::Sobol] {
+            let mut cfg = small_cfg("");
+            cfg.render.sampler = kind;
+            cfg.render.spp = spp;
+            let img = render(&cfg, backend, |_| {});
+            assert_sane("sampler", &img);
+            errs.push(rmse(&img.data, &reference.data));
+        }
+        println!(
+            "{spp} spp: RMSE independent {:.3e}, sobol {:.3e} (ratio {:.3}); reference mean {:.4}",
+            errs[0],
+            errs[1],
+            errs[1] / errs[0],
+            mean(&reference.data)
+        );
+        assert!(
+            errs[1] <= errs[0],
+            "{spp} spp: sobol {} > independent {}",
+            errs[1],
+            errs[0]
+        );
+    }
+}

@@ -236,12 +236,18 @@ mod tests {
         // the normal leans against map x, i.e. towards -y.
         let p = centre + Vec3::Y * 1.5 + Vec3::X * 0.5;
         let n = shading_normal(&h, &t, p, Vec3::Z);
-        assert!((n - Vec3::new(0.0, -1.0, 1.0).normalize()).length() < 1e-5, "{n}");
+        assert!(
+            (n - Vec3::new(0.0, -1.0, 1.0).normalize()).length() < 1e-5,
+            "{n}"
+        );
         // Top row (1.5 mm along map up = -x): dh/dy = 1 with y down, so the height
         // falls towards map up and the normal leans that way: towards -x.
         let p = centre + Vec3::Y * 0.5 - Vec3::X * 1.5;
         let n = shading_normal(&h, &t, p, Vec3::Z);
-        assert!((n - Vec3::new(-1.0, 0.0, 1.0).normalize()).length() < 1e-5, "{n}");
+        assert!(
+            (n - Vec3::new(-1.0, 0.0, 1.0).normalize()).length() < 1e-5,
+            "{n}"
+        );
         // Outside the 4 mm map: flat.
         assert_eq!(lookup(&h, &t, centre + Vec3::Y * 2.5), [0.0, 0.0]);
         assert!(pack(&[place(0.0, [0.0; 2]), place(0.0, [0.0; 2])], &[frame]).is_err());
@@ -252,6 +258,9 @@ mod tests {
         let m = SlopeMap::test_grooves(2.0, 10.0, 0.5, 60.0);
         let max = m.data.iter().map(|s| s[0].abs()).fold(0.0f32, f32::max);
         // 50 texels per period: the sampled peak is within cos(pi / 50) of the true one.
-        assert!((max / 60f32.to_radians().tan() - 1.0).abs() < 0.003, "{max}");
+        assert!(
+            (max / 60f32.to_radians().tan() - 1.0).abs() < 0.003,
+            "{max}"
+        );
     }
 }

@@ -193,6 +193,19 @@ pub struct RenderConfig {
     pub batch_spp: u32,
     /// Trace backend: "auto", "ray-query", "software".
     pub accel: AccelChoice,
+    /// Random numbers: "sobol" (Owen-scrambled, low discrepancy) or "independent".
+    pub sampler: SamplerKind,
+}
+
+/// Which sample generator the path tracer uses (ids match glsl/common/sampler.glsl).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SamplerKind {
+    /// PCG hash per (pixel, sample, seed, dimension): plain Monte Carlo.
+    Independent = 0,
+    /// Owen-scrambled Sobol, padded per 1D/2D request (Burley 2020).
+    #[default]
+    Sobol = 1,
 }
 
 impl Default for RenderConfig {
@@ -203,6 +216,7 @@ impl Default for RenderConfig {
             seed: 0,
             batch_spp: 16,
             accel: AccelChoice::Auto,
+            sampler: SamplerKind::Sobol,
         }
     }
 }
