@@ -35,7 +35,13 @@ layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 4) readonly buffer Param
     float alpha; float ior_n; float ior_k; float f_avg;
     uint comp; uint light_count; uint sample_gen; uint light_sampling;
     float table_albedo; float radiance; float light_area; float pad2;
+    // Ring layout for facing sampling: first light triangle, ring segments, triangles
+    // per segment (all light triangles are one ring, segment by segment).
+    uint light_first; uint ring_segments; uint segment_tris; uint pad3;
 } prm;
+
+#define LIGHT_UNIFORM 0u
+#define LIGHT_FACING 1u
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 5) buffer Accum { float accum[]; };
 
 // Slope maps, one header per face id (0 = other: never a map); see src/render/slope.rs.
@@ -67,6 +73,56 @@ uint pick_light(float u) {
 }
 
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
+
+// Facing sampling: selection weight of one light triangle seen from x (normal n), an
+// estimate of its contribution from the centroid: area cos_l cos_x / d^2, each cosine
+// floored at 0.05 so every triangle keeps a non-zero probability (unbiased even where
+// the centroid faces away but part of the triangle does not).
+float light_weight(uint tri, vec3 x, vec3 n) {
+    Tri lt = tris[tri];
+    vec3 nl = tri_normal(lt);
+    float area2 = length(nl);
+    vec3 to = (lt.a.xyz + lt.b.xyz + lt.c.xyz) * (1.0 / 3.0) - x;
+    float d2 = max(dot(to, to), 1e-12);
+    vec3 w = to * inversesqrt(d2);
+    float cl = max(-dot(nl, w) / area2, 0.0) + 0.05;
+    float cx = max(dot(n, w), 0.0) + 0.05;
+    return area2 * cl * cx / d2;
+}
+
+// Sum of the weights of one ring segment's triangles.
+float segment_weight(uint seg, vec3 x, vec3 n) {
+    uint base = prm.light_first + seg * prm.segment_tris;
+    float sum = 0.0;
+    for (uint k = 0u; k < prm.segment_tris; k++) sum += light_weight(base + k, x, n);
+    return sum;
+}
+
+// Area pdf of a point on light triangle `tri`, as chosen from x with normal n.
+float light_area_pdf(uint tri, vec3 x, vec3 n) {
+    if (prm.light_sampling != LIGHT_FACING) return 1.0 / prm.light_area;
+    uint seg = (tri - prm.light_first) / prm.segment_tris;
+    float wsum = segment_weight(seg, x, n);
+    float area = 0.5 * length(tri_normal(tris[tri]));
+    return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(prm.ring_segments) * area) : 0.0;
+}
+
+// Picks a light triangle with u in [0, 1): uniform by area from the CDF, or (facing) a
+// ring segment uniformly (they have equal areas) and within it a triangle by weight.
+uint choose_light(float u, vec3 x, vec3 n) {
+    if (prm.light_sampling != LIGHT_FACING) return pick_light(u);
+    float fs = u * float(prm.ring_segments);
+    uint seg = min(uint(fs), prm.ring_segments - 1u);
+    float target = clamp(fs - float(seg), 0.0, 1.0) * segment_weight(seg, x, n);
+    uint base = prm.light_first + seg * prm.segment_tris;
+    float acc = 0.0;
+    uint k = 0u;
+    for (; k + 1u < prm.segment_tris; k++) {
+        acc += light_weight(base + k, x, n);
+        if (acc > target) break;
+    }
+    return base + k;
+}
 
 // Steepest slope a map may give (85 degrees): keeps the shading normal off the tangent
 // plane so its frame stays well conditioned.
@@ -165,6 +221,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
     float L = 0.0;
     float T = 1.0;
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
+    vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
         if (h.prim == NO_HIT) break;   // no environment light
@@ -178,7 +235,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
             if (cos_l > 0.0) {
                 float w = 1.0;
                 if (prev_pdf > 0.0) {
-                    float pdf_light = h.t * h.t / (cos_l * prm.light_area);
+                    float pdf_light = h.t * h.t / cos_l * light_area_pdf(h.prim, o, prev_n);
                     w = power_heuristic(prev_pdf, pdf_light);
                 }
                 L += T * prm.radiance * w;
@@ -204,7 +261,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
 
         // Next-event estimation on the ring light.
         if (prm.light_count > 0u && prm.radiance > 0.0) {
-            uint li = pick_light(sample_1d(rng));
+            uint li = choose_light(sample_1d(rng), origin, ng);
             Tri lt = tris[li];
             vec2 ul = sample_2d(rng);
             float su = sqrt(ul.x);
@@ -224,7 +281,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                     bool visible = s.prim == NO_HIT
                         || ((mats[s.prim] & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
                     if (visible) {
-                        float pdf_light = dist2 / (cos_l * prm.light_area);
+                        float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
                         L += T * f * prm.radiance * power_heuristic(pdf_light, pdf_b) / pdf_light;
                     }
                 }
@@ -245,6 +302,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
             T /= q;
         }
         prev_pdf = pdf;
+        prev_n = ng;
         o = origin;
         d = normalize(wi.x * tb + wi.y * bt + wi.z * ns);
         if (dot(d, ng) <= 0.0) break;   // reflected into the surface by a shading normal

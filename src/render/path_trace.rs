@@ -76,6 +76,9 @@ pub struct RenderScene {
     /// (triangle, inclusive area CDF) of the emissive triangles.
     pub lights: Vec<(u32, f32)>,
     pub light_area: f32,
+    /// Ring layout of the light triangles: [segments, triangles per segment], in order
+    /// (used by `light.sampling = "facing"`).
+    pub ring_segments: [u32; 2],
     pub camera: Camera,
     /// Frames of the object's inspected faces (where slope maps are projected).
     pub face_frames: Vec<FaceFrame>,
@@ -144,6 +147,7 @@ impl RenderScene {
             materials,
             lights,
             light_area: area as f32,
+            ring_segments: [cfg.light.segments_major, 2 * cfg.light.segments_minor],
             camera,
             face_frames: frames,
             face_maps,
@@ -208,6 +212,10 @@ struct Params {
     radiance: f32,
     light_area: f32,
     pad2: f32,
+    light_first: u32,
+    ring_segments: u32,
+    segment_tris: u32,
+    pad3: u32,
 }
 
 #[repr(C)]
@@ -333,11 +341,20 @@ pub fn render_frame(
         comp: m.energy_compensation as u32,
         light_count: scene.lights.len() as u32,
         sampler: cfg.render.sampler as u32,
-        light_sampling: 0,
+        light_sampling: match scene.ring_segments {
+            [m, t] if m > 0 && t > 0 && m * t == scene.lights.len() as u32 => {
+                cfg.light.sampling as u32
+            }
+            _ => 0, // not one ring of equal segments: uniform by area
+        },
         table_albedo: cfg.table.albedo,
         radiance: cfg.light.radiance,
         light_area: scene.light_area,
         pad2: 0.0,
+        light_first: scene.lights.first().map_or(0, |l| l.0),
+        ring_segments: scene.ring_segments[0],
+        segment_tris: scene.ring_segments[1],
+        pad3: 0,
     };
     let light_words: Vec<[u32; 2]> = if scene.lights.is_empty() {
         vec![[0, 0]] // a binding may not be empty; light_count = 0 keeps it unread

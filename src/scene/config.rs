@@ -128,6 +128,20 @@ pub struct LightConfig {
     /// Tessellation: segments around the ring [8, 1024] and around the tube [4, 256].
     pub segments_major: u32,
     pub segments_minor: u32,
+    /// Next-event estimation: "facing" (default) or "uniform" (docs/rendering.md).
+    pub sampling: LightSampling,
+}
+
+/// How the path tracer picks points on the ring light (ids match path_trace.comp).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LightSampling {
+    /// Uniform by area over all triangles of the tessellated torus.
+    Uniform = 0,
+    /// A ring segment uniformly, then a triangle of it by area cos_light cos_surface / d^2
+    /// from the shading point (cosines floored at 0.05).
+    #[default]
+    Facing = 1,
 }
 
 impl Default for LightConfig {
@@ -138,6 +152,7 @@ impl Default for LightConfig {
             radiance: 1.0,
             segments_major: 96,
             segments_minor: 16,
+            sampling: LightSampling::Facing,
         }
     }
 }
