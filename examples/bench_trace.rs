@@ -8,7 +8,9 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use synosis::render::raycast::{PinholeCamera, RayIn, trace_rays};
 use synosis::scene::procedural::bumpy_sphere;
-use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
+use synosis::trace::software_bvh::{
+    TraversalStats, build_bvh, cpu_closest_hit, cpu_closest_hit_counted, obvhs_triangles,
+};
 use synosis::trace::{Backend, TraceScene};
 use synosis::vk::{Context, ContextOptions};
 
