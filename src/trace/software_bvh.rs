@@ -198,9 +198,7 @@ pub fn cpu_closest_hit_counted(
                 }
             }
         };
-    let Some(root) = bvh.nodes.first() else {
-        return None;
-    };
+    let root = bvh.nodes.first()?;
     if root.prim_count > 0 {
         leaf(root, &mut t_best, stats);
         return best;
