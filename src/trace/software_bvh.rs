@@ -203,7 +203,7 @@ pub fn cpu_closest_hit_counted(
         leaf(root, &mut t_best, stats);
         return best;
     }
-    let mut stack: Vec<usize> = Vec::with_capacity(64);
+    let mut stack: Vec<(f32, usize)> = Vec::with_capacity(64);
     let mut node = 0usize;
     loop {
         let first = bvh.nodes[node].first_index as usize;
@@ -222,12 +222,13 @@ pub fn cpu_closest_hit_counted(
         node = match near {
             [Some(a), Some(b)] => {
                 let (n, f) = if a.0 <= b.0 { (a, b) } else { (b, a) };
-                stack.push(f.1);
+                stack.push(f);
                 n.1
             }
             [Some(a), None] | [None, Some(a)] => a.1,
-            [None, None] => match stack.pop() {
-                Some(n) => n,
+            // Nodes farther than a hit found since they were pushed are dropped.
+            [None, None] => match std::iter::from_fn(|| stack.pop()).find(|&(t, _)| t <= t_best) {
+                Some((_, n)) => n,
                 None => break,
             },
         };
