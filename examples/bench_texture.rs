@@ -15,13 +15,19 @@ fn main() -> anyhow::Result<()> {
     let (map, setup) = match kind {
         "milled" => {
             let p = MilledParams::default();
-            (generate_milled(&p, size, size, spacing, 1, &NoProgress)?, 0.0)
+            (
+                generate_milled(&p, size, size, spacing, 1, &NoProgress)?,
+                0.0,
+            )
         }
         "sandblasted" => {
             let ex = StandInExemplar::default().generate(1)?;
             let setup = t0.elapsed().as_secs_f64();
             let p = SandblastParams::default();
-            (generate_sandblasted(&ex, &p, size, size, spacing, 1, &NoProgress)?, setup)
+            (
+                generate_sandblasted(&ex, &p, size, size, spacing, 1, &NoProgress)?,
+                setup,
+            )
         }
         other => anyhow::bail!("unknown kind {other}: milled | sandblasted"),
     };

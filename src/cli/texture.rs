@@ -32,8 +32,15 @@ pub enum UnitArg {
     Um,
 }
 
+/// Boxed so the `Command` enum stays small (clippy::large_enum_variant).
 #[derive(Args)]
 pub struct TextureArgs {
+    #[command(flatten)]
+    opts: Box<TextureOpts>,
+}
+
+#[derive(Args)]
+pub struct TextureOpts {
     /// Surface finish to synthesise.
     pub finish: Finish,
     /// Width in pixels (square unless --height is given).
@@ -133,6 +140,7 @@ impl Progress for Bar {
 }
 
 pub fn run(a: TextureArgs) -> Result<()> {
+    let a = *a.opts;
     let mut file = match &a.params {
         Some(p) => {
             let text = std::fs::read_to_string(p)

@@ -31,16 +31,18 @@ fn rows(planner: &mut FftPlanner<f32>, data: &mut [Complex32], n: usize, inverse
 fn transpose(src: &[Complex32], w: usize, h: usize) -> Vec<Complex32> {
     let mut out = vec![Complex32::new(0.0, 0.0); w * h];
     const B: usize = 32;
-    out.par_chunks_mut(h * B).enumerate().for_each(|(bx, chunk)| {
-        let x0 = bx * B;
-        let xs = chunk.len() / h;
-        for y0 in (0..h).step_by(B) {
-            for y in y0..(y0 + B).min(h) {
-                for dx in 0..xs {
-                    chunk[dx * h + y] = src[y * w + x0 + dx];
+    out.par_chunks_mut(h * B)
+        .enumerate()
+        .for_each(|(bx, chunk)| {
+            let x0 = bx * B;
+            let xs = chunk.len() / h;
+            for y0 in (0..h).step_by(B) {
+                for y in y0..(y0 + B).min(h) {
+                    for dx in 0..xs {
+                        chunk[dx * h + y] = src[y * w + x0 + dx];
+                    }
                 }
             }
-        }
-    });
+        });
     out
 }

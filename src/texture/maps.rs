@@ -66,13 +66,11 @@ impl HeightMap {
             0.0
         };
         let (mu, tmu) = (m.mean_um, target.mean_um);
-        self.data
-            .par_chunks_mut(self.width.max(1))
-            .for_each(|row| {
-                for v in row {
-                    *v = (scale * (*v as f64 - mu) + tmu) as f32;
-                }
-            });
+        self.data.par_chunks_mut(self.width.max(1)).for_each(|row| {
+            for v in row {
+                *v = (scale * (*v as f64 - mu) + tmu) as f32;
+            }
+        });
     }
 
     /// Slopes by central differences at the spacing (one-sided at the borders).

@@ -134,12 +134,18 @@ fn fill_invalid(data: &mut [f32]) {
 /// Reads a one-channel float EXR height map (micrometres) with the given spacing. With
 /// several channels, `Y` is used if present, else the first.
 pub fn read_exr(path: &Path, spacing_um: f64) -> Result<HeightMap> {
-    check(spacing_um > 0.0, "exemplar_spacing_um", spacing_um, "> 0 um")?;
+    check(
+        spacing_um > 0.0,
+        "exemplar_spacing_um",
+        spacing_um,
+        "> 0 um",
+    )?;
     let err = |message: String| TextureError::Exr {
         path: path.to_owned(),
         message,
     };
-    let img = exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
+    let img =
+        exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
     let layer = &img.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
     let chans = &layer.channel_data.list;

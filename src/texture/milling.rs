@@ -20,7 +20,7 @@ use rustfft::FftPlanner;
 use rustfft::num_complex::Complex32;
 use serde::{Deserialize, Serialize};
 
-use super::error::{Result, TextureError, check};
+use super::error::{Result, check};
 use super::maps::{HeightMap, Moments};
 use super::progress::Progress;
 use super::rng::stream;
@@ -74,7 +74,8 @@ pub struct MilledParams {
     pub delta_mm: f64,
     /// conf: divisor of all standard deviations (3-sigma rule). Paper: 3.
     pub conf: f64,
-    /// Sigma_c factor: (Sigma_c)_ii = factor * delta / conf, a variance in mm^2. Paper: 0.01.
+    /// Sigma_c factor: centre jitter standard deviation = factor * delta / conf, mm, >= 0
+    /// (the paper writes (Sigma_c)_ii = factor * delta / conf). Paper: 0.01.
     pub center_noise: f64,
     /// epsilon: fraction of rings whose order is changed, in [0, 1]. Paper: 0.01.
     pub flip_fraction: f64,
@@ -189,7 +190,12 @@ impl MilledParams {
 
     pub fn validate(&self) -> Result<()> {
         let p = self;
-        check(p.head_diameter_mm > 0.0, "head_diameter_mm", p.head_diameter_mm, "> 0 mm")?;
+        check(
+            p.head_diameter_mm > 0.0,
+            "head_diameter_mm",
+            p.head_diameter_mm,
+            "> 0 mm",
+        )?;
         check(
             p.radial_depth > 0.0 && p.radial_depth < 1.0,
             "radial_depth",
@@ -204,7 +210,12 @@ impl MilledParams {
         )?;
         check(p.delta_mm > 0.0, "delta_mm", p.delta_mm, "> 0 mm")?;
         check(p.conf > 0.0, "conf", p.conf, "> 0")?;
-        check(p.center_noise >= 0.0, "center_noise", p.center_noise, ">= 0")?;
+        check(
+            p.center_noise >= 0.0,
+            "center_noise",
+            p.center_noise,
+            ">= 0",
+        )?;
         check(
             (0.0..=1.0).contains(&p.flip_fraction),
             "flip_fraction",
@@ -227,7 +238,12 @@ impl MilledParams {
             p.w_inner_mean_mm,
             "[0, d/2 - w_minus_mean_mm) mm",
         )?;
-        check(p.w_outer_mean_mm >= 0.0, "w_outer_mean_mm", p.w_outer_mean_mm, ">= 0 mm")?;
+        check(
+            p.w_outer_mean_mm >= 0.0,
+            "w_outer_mean_mm",
+            p.w_outer_mean_mm,
+            ">= 0 mm",
+        )?;
         let nonneg: [(&'static str, f64); 15] = [
             ("w_minus_sigma_mm", p.w_minus_sigma_mm),
             ("w_inner_sigma_mm", p.w_inner_sigma_mm),
@@ -248,14 +264,39 @@ impl MilledParams {
         for (f, v) in nonneg {
             check(v >= 0.0, f, v, ">= 0")?;
         }
-        check(p.noise_lambda <= 1e4, "noise_lambda", p.noise_lambda, "[0, 10000]")?;
+        check(
+            p.noise_lambda <= 1e4,
+            "noise_lambda",
+            p.noise_lambda,
+            "[0, 10000]",
+        )?;
         check(p.noise_tau <= 1e4, "noise_tau", p.noise_tau, "[0, 10000]")?;
         check((0.0..=1.0).contains(&p.a_min), "a_min", p.a_min, "[0, 1]")?;
-        check(p.a_max >= p.a_min && p.a_max <= 1.0, "a_max", p.a_max, "[a_min, 1]")?;
+        check(
+            p.a_max >= p.a_min && p.a_max <= 1.0,
+            "a_max",
+            p.a_max,
+            "[a_min, 1]",
+        )?;
         check((0.0..=1.0).contains(&p.b_min), "b_min", p.b_min, "[0, 1]")?;
-        check(p.b_max >= p.b_min && p.b_max <= 1.0, "b_max", p.b_max, "[b_min, 1]")?;
-        check(p.moments.sq_um >= 0.0, "moments.sq_um", p.moments.sq_um, ">= 0 um")?;
-        check(p.moments.mean_um.is_finite(), "moments.mean_um", p.moments.mean_um, "finite")?;
+        check(
+            p.b_max >= p.b_min && p.b_max <= 1.0,
+            "b_max",
+            p.b_max,
+            "[b_min, 1]",
+        )?;
+        check(
+            p.moments.sq_um >= 0.0,
+            "moments.sq_um",
+            p.moments.sq_um,
+            ">= 0 um",
+        )?;
+        check(
+            p.moments.mean_um.is_finite(),
+            "moments.mean_um",
+            p.moments.mean_um,
+            "finite",
+        )?;
         if let Some(c) = p.spiral_center_mm {
             check(c[0].is_finite(), "spiral_center_mm[0]", c[0], "finite")?;
             check(c[1].is_finite(), "spiral_center_mm[1]", c[1], "finite")?;
@@ -406,8 +447,18 @@ pub fn generate_milled(
 pub(crate) fn check_size(width: usize, height: usize, spacing_um: f64) -> Result<()> {
     check(width > 0, "size (width)", width as f64, ">= 1 pixel")?;
     check(height > 0, "size (height)", height as f64, ">= 1 pixel")?;
-    check(width <= 65_536, "size (width)", width as f64, "<= 65536 pixels")?;
-    check(height <= 65_536, "size (height)", height as f64, "<= 65536 pixels")?;
+    check(
+        width <= 65_536,
+        "size (width)",
+        width as f64,
+        "<= 65536 pixels",
+    )?;
+    check(
+        height <= 65_536,
+        "size (height)",
+        height as f64,
+        "<= 65536 pixels",
+    )?;
     check(spacing_um > 0.0, "spacing_um", spacing_um, "> 0 um")
 }
 
@@ -438,7 +489,7 @@ fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Vec<PathPoint> {
                     break;
                 }
                 for i in 0..nx {
-                    let (x, dir) = if j % 2 == 0 {
+                    let (x, dir) = if j.is_multiple_of(2) {
                         (x0 + i as f64 * delta, [1.0, 0.0])
                     } else {
                         (x0 + (nx - 1 - i) as f64 * delta, [-1.0, 0.0])
@@ -495,15 +546,26 @@ fn sample_rings(
     seed: u64,
 ) -> (Vec<Ring>, Vec<f32>) {
     let conf = p.conf;
-    let sd_c = (p.center_noise * p.delta_mm / conf).sqrt();
+    // (Sigma_c)_ii = factor * delta / conf is linear in a length, so it is read as a
+    // standard deviation in mm (a variance would scale with delta^2); see docs/texture.md.
+    let sd_c = p.center_noise * p.delta_mm / conf;
     let normal = |m: f64, s: f64| Gauss(m, s / conf);
     let d_wm = normal(p.w_minus_mean_mm, p.w_minus_sigma_mm);
     let d_wi = normal(p.w_inner_mean_mm, p.w_inner_sigma_mm);
     let d_wo = normal(p.w_outer_mean_mm, p.w_outer_sigma_mm);
     let d_t = [
-        (normal(p.l_minus_mean, p.lh_minus_sigma), normal(p.h_minus_mean, p.lh_minus_sigma)),
-        (normal(p.l_inner_mean, p.lh_inner_sigma), normal(p.h_inner_mean, p.lh_inner_sigma)),
-        (normal(p.l_outer_mean, p.lh_outer_sigma), normal(p.h_outer_mean, p.lh_outer_sigma)),
+        (
+            normal(p.l_minus_mean, p.lh_minus_sigma),
+            normal(p.h_minus_mean, p.lh_minus_sigma),
+        ),
+        (
+            normal(p.l_inner_mean, p.lh_inner_sigma),
+            normal(p.h_inner_mean, p.lh_inner_sigma),
+        ),
+        (
+            normal(p.l_outer_mean, p.lh_outer_sigma),
+            normal(p.h_outer_mean, p.lh_outer_sigma),
+        ),
     ];
     let d_a = Uniform::new_inclusive(p.a_min, p.a_max).ok();
     let d_b = Uniform::new_inclusive(p.b_min, p.b_max).ok();
@@ -631,7 +693,16 @@ fn ring_noise(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn annulus_hits_rect(cx: f64, cy: f64, r_in: f64, r_out: f64, x0: f64, y0: f64, x1: f64, y1: f64) -> bool {
+fn annulus_hits_rect(
+    cx: f64,
+    cy: f64,
+    r_in: f64,
+    r_out: f64,
+    x0: f64,
+    y0: f64,
+    x1: f64,
+    y1: f64,
+) -> bool {
     let nx = cx.clamp(x0, x1) - cx;
     let ny = cy.clamp(y0, y1) - cy;
     let near = nx * nx + ny * ny;
@@ -653,7 +724,16 @@ fn index_rings(rings: &[Ring], tiles_x: usize, tiles_y: usize, tile_mm: f64) -> 
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
                 let (x0, y0) = (tx as f64 * tile_mm, ty as f64 * tile_mm);
-                if annulus_hits_rect(cx, cy, r.r_in as f64, ro, x0, y0, x0 + tile_mm, y0 + tile_mm) {
+                if annulus_hits_rect(
+                    cx,
+                    cy,
+                    r.r_in as f64,
+                    ro,
+                    x0,
+                    y0,
+                    x0 + tile_mm,
+                    y0 + tile_mm,
+                ) {
                     buckets[ty * tiles_x + tx].push(k as u32);
                 }
             }
@@ -761,7 +841,7 @@ fn lookup(table: &[f32], angle: f32) -> f32 {
     table[i] * (1.0 - f) + table[(i + 1) % n] * f
 }
 
-/// atan2 with ~1e-5 rad error; the noise table does not need more.
+/// atan2 with ~2e-5 rad error; the noise table does not need more.
 #[inline]
 fn fast_atan2(y: f32, x: f32) -> f32 {
     let (ax, ay) = (x.abs(), y.abs());
@@ -788,10 +868,13 @@ mod tests {
     #[test]
     fn fast_atan2_matches_std() {
         for k in 0..1000 {
-            let a = k as f32 * 0.00628 - 3.14;
+            let a = k as f32 * 0.00628 - PI;
             let (y, x) = a.sin_cos();
             let e = (fast_atan2(y * 3.0, x * 3.0) - y.atan2(x)).abs();
-            assert!(e < 2e-5 || (e - 2.0 * PI).abs() < 2e-5, "angle {a}: err {e}");
+            assert!(
+                e < 2e-5 || (e - 2.0 * PI).abs() < 2e-5,
+                "angle {a}: err {e}"
+            );
         }
     }
 

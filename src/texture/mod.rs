@@ -24,7 +24,9 @@ pub use error::{Result, TextureError};
 pub use io::{preview, write_exr_height, write_normal_png16, write_preview_png};
 pub use maps::{HeightMap, Moments, SlopeMap, normal_from_slope};
 pub use measurement::{XyzUnit, load_height_map, read_exr, read_xyz};
-pub use milling::{MILLED_DEFAULT_MOMENTS, MilledParams, MilledVariation, ToolPath, generate_milled};
+pub use milling::{
+    MILLED_DEFAULT_MOMENTS, MilledParams, MilledVariation, ToolPath, generate_milled,
+};
 pub use progress::{NoProgress, Progress};
 pub use sandblast::adsn::{AdsnKernel, periodic_component};
 pub use sandblast::exemplar::{StandInExemplar, sandblast_default_moments};

@@ -69,8 +69,18 @@ impl StandInExemplar {
             self.pressure_bar,
             "(0, 20] bar",
         )?;
-        check(self.grain_size_um > 0.0, "grain_size_um", self.grain_size_um, "> 0 um")?;
-        check(self.spacing_um > 0.0, "spacing_um", self.spacing_um, "> 0 um")?;
+        check(
+            self.grain_size_um > 0.0,
+            "grain_size_um",
+            self.grain_size_um,
+            "> 0 um",
+        )?;
+        check(
+            self.spacing_um > 0.0,
+            "spacing_um",
+            self.spacing_um,
+            "> 0 um",
+        )?;
         check(
             (16..=16384).contains(&self.size_px),
             "size_px",

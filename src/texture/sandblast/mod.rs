@@ -54,7 +54,12 @@ impl SandblastParams {
         )?;
         if let Some(m) = self.moments {
             check(m.sq_um >= 0.0, "moments.sq_um", m.sq_um, ">= 0 um")?;
-            check(m.mean_um.is_finite(), "moments.mean_um", m.mean_um, "finite")?;
+            check(
+                m.mean_um.is_finite(),
+                "moments.mean_um",
+                m.mean_um,
+                "finite",
+            )?;
         }
         Ok(())
     }
