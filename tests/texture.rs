@@ -617,6 +617,22 @@ fn xyz_and_exr_round_trip() {
     write_exr_height(&m, &exr).unwrap();
     let back = read_exr(&exr, 1.75).unwrap();
     assert_eq!(back.data, m.data);
+
+    // The streamed 16-bit normal PNG decodes to the slope map's normals.
+    let png = dir.path().join("n.png");
+    write_normal_png16(&m, &png).unwrap();
+    let img = image::open(&png).unwrap().into_rgb16();
+    let slopes = m.slopes();
+    for y in 0..h {
+        for x in 0..w {
+            let n = slopes.normal(x, y);
+            let px = img.get_pixel(x as u32, y as u32).0;
+            for c in 0..3 {
+                let v = px[c] as f32 / 65535.0 * 2.0 - 1.0;
+                assert!((v - n[c]).abs() < 1e-4, "normal {c} at {x},{y}: {v} vs {}", n[c]);
+            }
+        }
+    }
 }
 
 #[test]

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use image::{ImageBuffer, Luma, Rgb};
+use image::{ImageBuffer, Luma};
 use rayon::prelude::*;
 
 use super::error::{Result, TextureError};
@@ -43,22 +43,38 @@ fn png_err(path: &Path, e: impl ToString) -> TextureError {
 }
 
 /// 16-bit RGB normal map, n mapped from [-1, 1] to [0, 65535], image axes (x right,
-/// y down, z out of the surface).
+/// y down, z out of the surface). Streamed in bands of rows so a 13107^2 map does not
+/// need a second full-size buffer (the image crate would hold two: 2 GB).
 pub fn write_normal_png16(map: &HeightMap, path: &Path) -> Result<()> {
     let (w, h) = (map.width, map.height);
-    let mut buf = vec![0u16; w * h * 3];
-    buf.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
-        map.slope_row(y, |x, s| {
-            let n = normal_from_slope(s);
-            for c in 0..3 {
-                row[3 * x + c] = ((n[c] * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0).round() as u16;
-            }
-        })
-    });
-    let img: ImageBuffer<Rgb<u16>, Vec<u16>> = ImageBuffer::from_raw(w as u32, h as u32, buf)
-        .ok_or_else(|| png_err(path, "image too large"))?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| png_err(path, e))
+    let file = std::fs::File::create(path).map_err(|e| png_err(path, e))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Sixteen);
+    enc.set_compression(png::Compression::Fast);
+    let mut writer = enc.write_header().map_err(|e| png_err(path, e))?;
+    let mut stream = writer.stream_writer().map_err(|e| png_err(path, e))?;
+    const BAND: usize = 256;
+    let mut bytes = vec![0u8; BAND * w * 6];
+    for y0 in (0..h).step_by(BAND) {
+        let rows = BAND.min(h - y0);
+        bytes[..rows * w * 6]
+            .par_chunks_mut(w * 6)
+            .enumerate()
+            .for_each(|(r, row)| {
+                map.slope_row(y0 + r, |x, s| {
+                    let n = normal_from_slope(s);
+                    for c in 0..3 {
+                        let v = ((n[c] * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0).round() as u16;
+                        row[6 * x + 2 * c..6 * x + 2 * c + 2].copy_from_slice(&v.to_be_bytes());
+                    }
+                })
+            });
+        std::io::Write::write_all(&mut stream, &bytes[..rows * w * 6])
+            .map_err(|e| png_err(path, e))?;
+    }
+    stream.finish().map_err(|e| png_err(path, e))?;
+    writer.finish().map_err(|e| png_err(path, e))
 }
 
 /// 8-bit grey preview, box-downsampled to at most `max_side`, mean +- 2.5 Sq mapped to
