@@ -629,7 +629,11 @@ fn xyz_and_exr_round_trip() {
             let px = img.get_pixel(x as u32, y as u32).0;
             for c in 0..3 {
                 let v = px[c] as f32 / 65535.0 * 2.0 - 1.0;
-                assert!((v - n[c]).abs() < 1e-4, "normal {c} at {x},{y}: {v} vs {}", n[c]);
+                assert!(
+                    (v - n[c]).abs() < 1e-4,
+                    "normal {c} at {x},{y}: {v} vs {}",
+                    n[c]
+                );
             }
         }
     }

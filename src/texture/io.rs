@@ -80,9 +80,23 @@ pub fn write_normal_png16(map: &HeightMap, path: &Path) -> Result<()> {
 /// 8-bit grey preview, box-downsampled to at most `max_side`, mean +- 2.5 Sq mapped to
 /// black..white.
 pub fn write_preview_png(map: &HeightMap, path: &Path, max_side: usize) -> Result<()> {
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let img = preview(map, max_side);
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| png_err(path, e))
+    let file = std::fs::File::create(path).map_err(|e| png_err(path, e))?;
+    // Previews go into docs: small files matter more than encode time here.
+    PngEncoder::new_with_quality(
+        std::io::BufWriter::new(file),
+        CompressionType::Best,
+        FilterType::Adaptive,
+    )
+    .write_image(
+        img.as_raw(),
+        img.width(),
+        img.height(),
+        image::ExtendedColorType::L8,
+    )
+    .map_err(|e| png_err(path, e))
 }
 
 pub fn preview(map: &HeightMap, max_side: usize) -> ImageBuffer<Luma<u8>, Vec<u8>> {
