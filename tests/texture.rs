@@ -518,6 +518,24 @@ fn bad_parameters_name_the_field() {
     });
     assert!(e.contains("delta_mm"), "{e}");
     let e = mk(MilledParams {
+        spiral_center_mm: Some([1e6, 0.0]),
+        path: ToolPath::Spiral,
+        ..base.clone()
+    });
+    assert!(e.contains("spiral_center_mm"), "{e}");
+    let e = err_text(generate_milled(
+        &MilledParams {
+            delta_mm: 1e-6,
+            ..base.clone()
+        },
+        1000,
+        1000,
+        6.1,
+        0,
+        &NoProgress,
+    ));
+    assert!(e.contains("delta_mm") && e.contains("20 million"), "{e}");
+    let e = mk(MilledParams {
         b_max: 0.05,
         ..base.clone()
     });

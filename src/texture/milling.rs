@@ -407,7 +407,17 @@ pub fn generate_milled(
     check_size(width, height, spacing_um)?;
     let s_mm = spacing_um * 1e-3;
     let (w_mm, h_mm) = (width as f64 * s_mm, height as f64 * s_mm);
-    let path = tool_path(p, w_mm, h_mm, seed);
+    // Guards memory: rings ~ covered area / (rho * delta).
+    let margin = p.head_diameter_mm + 1.0;
+    let span = (w_mm + margin).max(h_mm + margin);
+    let rings_est = span * span / (p.rho_mm() * p.delta_mm);
+    check(
+        rings_est <= 2e7,
+        "delta_mm",
+        p.delta_mm,
+        "large enough that the texture needs at most 20 million rings (~ area / (rho * delta))",
+    )?;
+    let path = tool_path(p, w_mm, h_mm, seed)?;
     let (rings, pool) = sample_rings(p, &path, w_mm, h_mm, seed);
 
     let tiles_x = width.div_ceil(TILE);
@@ -467,7 +477,7 @@ pub(crate) fn check_size(width: usize, height: usize, spacing_um: f64) -> Result
 /// Nominal ring centres in chronological order. Both paths overshoot the texture by
 /// d/2 + 0.5 mm so every ring touching the texture exists; the meander's turn-arounds
 /// and the spiral's entry/exit moves therefore lie outside the texture and are not drawn.
-fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Vec<PathPoint> {
+fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Result<Vec<PathPoint>> {
     let d = p.head_diameter_mm;
     let rho = p.rho_mm();
     let delta = p.delta_mm;
@@ -508,6 +518,14 @@ fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Vec<PathPoint> {
                 .map(|&(x, y)| ((x - cx).powi(2) + (y - cy).powi(2)).sqrt())
                 .fold(0.0f64, f64::max);
             let r_max = far + margin;
+            // The spiral is walked from its centre even when that lies far outside.
+            let steps = std::f64::consts::PI * r_max * r_max / (rho * delta);
+            check(
+                steps <= 2e8,
+                "spiral_center_mm",
+                cx.hypot(cy),
+                "close enough to the texture that the spiral needs <= 2e8 steps",
+            )?;
             let k = rho / (2.0 * std::f64::consts::PI);
             let mut theta = 0.0f64;
             let rot = ph_rho * 2.0 * std::f64::consts::PI;
@@ -520,11 +538,14 @@ fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Vec<PathPoint> {
                 let tx = k * cs - r * sn;
                 let ty = k * sn + r * cs;
                 let norm = (tx * tx + ty * ty).sqrt();
-                pts.push(PathPoint {
-                    x: cx + r * cs,
-                    y: cy + r * sn,
-                    dir: [tx / norm, ty / norm],
-                });
+                let (x, y) = (cx + r * cs, cy + r * sn);
+                if x > -margin && x < w + margin && y > -margin && y < h + margin {
+                    pts.push(PathPoint {
+                        x,
+                        y,
+                        dir: [tx / norm, ty / norm],
+                    });
+                }
                 theta += delta / norm;
             }
             if !p.spiral_outward {
@@ -535,7 +556,7 @@ fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Vec<PathPoint> {
             }
         }
     }
-    pts
+    Ok(pts)
 }
 
 /// Samples every ring's appearance, applies the order flips, and drops rings whose band

@@ -111,6 +111,12 @@ impl StandInExemplar {
         let count = (self.coverage * (side as f64).powi(2)
             / (std::f64::consts::PI * (1.5 * r_med).powi(2)))
         .ceil() as usize;
+        check(
+            count <= 50_000_000,
+            "grain_size_um",
+            self.grain_size_um,
+            "large enough for at most 50 million craters (coverage * area / crater area)",
+        )?;
         let ratio = 0.12 * (self.pressure_bar / 2.5).sqrt();
         let mut rng = stream(seed, 3, 0);
         let radius = LogNormal::new(r_med.ln(), 0.35).map_err(|_| {
