@@ -716,3 +716,55 @@ fn cli_writes_all_files_or_nothing() {
         .collect();
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+#[test]
+fn spiral_exit_line_only_touches_its_strip() {
+    let base = MilledParams {
+        head_diameter_mm: 1.0,
+        path: ToolPath::Spiral,
+        spiral_outward: false,
+        ..Default::default()
+    };
+    let (n, s) = (200usize, 20.0);
+    let a = generate_milled(&base, n, n, s, 2, &NoProgress).unwrap();
+    let line = MilledParams {
+        spiral_exit_line: true,
+        spiral_exit_angle_deg: 0.0,
+        ..base
+    };
+    let b = generate_milled(&line, n, n, s, 2, &NoProgress).unwrap();
+    // The line runs right from the centre along y = centre; its rings (diameter 1 mm)
+    // reach 0.5 mm + band widths from it. Moment matching is affine per map, so compare
+    // correlations: far from the strip the maps agree up to that affine map.
+    let corr = |keep: &dyn Fn(usize, usize) -> bool| {
+        let (mut xs, mut ys) = (Vec::new(), Vec::new());
+        for y in 0..n {
+            for x in 0..n {
+                if keep(x, y) {
+                    xs.push(a.get(x, y) as f64);
+                    ys.push(b.get(x, y) as f64);
+                }
+            }
+        }
+        let m = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (mx, my) = (m(&xs), m(&ys));
+        let cov: f64 = xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+        let vx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+        let vy: f64 = ys.iter().map(|y| (y - my).powi(2)).sum();
+        cov / (vx * vy).sqrt()
+    };
+    let c = n as f64 / 2.0;
+    // Distance (mm) to the ray from the centre towards +x.
+    let dist_mm = |x: usize, y: usize| {
+        let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+        let dx = if px < c { px - c } else { 0.0 };
+        (dx * dx + (py - c).powi(2)).sqrt() * s / 1000.0
+    };
+    let far = corr(&|x, y| dist_mm(x, y) > 0.9);
+    let near = corr(&|x, y| dist_mm(x, y) < 0.3 && x > n / 2 + 10);
+    assert!(
+        far > 0.9999,
+        "far from the exit line the maps differ: corr {far}"
+    );
+    assert!(near < 0.9, "the exit line left no mark: corr {near}");
+}

@@ -128,6 +128,12 @@ pub struct MilledParams {
     pub spiral_outward: bool,
     /// Spiral centre in texture coordinates, mm (x right, y down); None: texture centre.
     pub spiral_center_mm: Option<[f64; 2]>,
+    /// Mill the straight move between the spiral centre and the outside (the paper
+    /// leaves it open): before an outward spiral (entry), after an inward one (exit, on
+    /// top of everything). Off by default (plunge / retract at the centre).
+    pub spiral_exit_line: bool,
+    /// Direction of that line from the centre, degrees from +x (image axes, y down).
+    pub spiral_exit_angle_deg: f64,
     /// Shift the path grid by a seeded random phase (less than rho across, delta along),
     /// so textures of different seeds do not share ring positions.
     pub random_path_phase: bool,
@@ -171,6 +177,8 @@ impl Default for MilledParams {
             b_max: 0.4,
             spiral_outward: true,
             spiral_center_mm: None,
+            spiral_exit_line: false,
+            spiral_exit_angle_deg: 0.0,
             random_path_phase: true,
             moments: MILLED_DEFAULT_MOMENTS,
         }
@@ -296,6 +304,12 @@ impl MilledParams {
             "moments.mean_um",
             p.moments.mean_um,
             "finite",
+        )?;
+        check(
+            p.spiral_exit_angle_deg.is_finite(),
+            "spiral_exit_angle_deg",
+            p.spiral_exit_angle_deg,
+            "finite degrees",
         )?;
         if let Some(c) = p.spiral_center_mm {
             check(c[0].is_finite(), "spiral_center_mm[0]", c[0], "finite")?;
@@ -552,6 +566,33 @@ fn tool_path(p: &MilledParams, w: f64, h: f64, seed: u64) -> Result<Vec<PathPoin
                 pts.reverse();
                 for q in &mut pts {
                     q.dir = [-q.dir[0], -q.dir[1]];
+                }
+            }
+            if p.spiral_exit_line {
+                let (sn, cs) = p.spiral_exit_angle_deg.to_radians().sin_cos();
+                let line = (0..=(r_max / delta).ceil() as usize).filter_map(|i| {
+                    let r = i as f64 * delta;
+                    let (x, y) = (cx + r * cs, cy + r * sn);
+                    let inside = x > -margin && x < w + margin && y > -margin && y < h + margin;
+                    inside.then_some(PathPoint {
+                        x,
+                        y,
+                        dir: [cs, sn],
+                    })
+                });
+                if p.spiral_outward {
+                    // Entry: from outside to the centre, before the spiral.
+                    let mut entry: Vec<PathPoint> = line
+                        .map(|q| PathPoint {
+                            dir: [-cs, -sn],
+                            ..q
+                        })
+                        .collect();
+                    entry.reverse();
+                    entry.append(&mut pts);
+                    pts = entry;
+                } else {
+                    pts.extend(line);
                 }
             }
         }
