@@ -11,7 +11,7 @@ pub enum TextureError {
         value: f64,
         allowed: &'static str,
     },
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         path: PathBuf,
         #[source]

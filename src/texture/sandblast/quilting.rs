@@ -118,4 +118,35 @@ mod tests {
             assert_eq!(x, valley(y));
         }
     }
+
+    /// L-shaped overlap: old content matches the new patch exactly along row 5 of the
+    /// top overlap and column 6 of the left overlap, so both cuts follow those lines and
+    /// the new patch wins only right of column 6 and below row 5.
+    #[test]
+    fn l_shaped_cut_follows_valleys() {
+        let (p, o, ow) = (16usize, 8usize, 24usize);
+        let (x0, y0) = (8usize, 8usize);
+        let patch: Vec<f32> = (0..p * p).map(|i| 100.0 + i as f32).collect();
+        let mut out = vec![0.0f32; ow * ow];
+        for y in 0..p {
+            for x in 0..p {
+                let on_valley = (y < o && y == 5) || (x < o && x == 6);
+                out[(y0 + y) * ow + x0 + x] = if on_valley { patch[y * p + x] } else { -1.0 };
+            }
+        }
+        let before = out.clone();
+        place_patch(&mut out, ow, 0, &patch, p, x0, y0, o, true, true);
+        for y in 0..p {
+            for x in 0..p {
+                let v = out[(y0 + y) * ow + x0 + x];
+                let new = x >= 6 && y >= 5;
+                let want = if new {
+                    patch[y * p + x]
+                } else {
+                    before[(y0 + y) * ow + x0 + x]
+                };
+                assert_eq!(v, want, "pixel {x},{y}");
+            }
+        }
+    }
 }
