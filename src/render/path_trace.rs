@@ -44,6 +44,8 @@ pub enum RenderError {
     Vk(#[from] VkError),
     #[error(transparent)]
     Slope(#[from] super::slope::SlopeError),
+    #[error("texture.path: {0}")]
+    Texture(#[from] crate::texture::TextureError),
 }
 
 /// The configured object (built-in test body or glTF), translated to its position.
@@ -141,7 +143,7 @@ impl RenderScene {
         if let Some(last) = lights.last_mut() {
             last.1 = 1.0;
         }
-        let face_maps = texture_maps(&cfg.texture, &frames);
+        let face_maps = texture_maps(&cfg.texture, &frames)?;
         Ok(RenderScene {
             mesh,
             materials,
@@ -156,10 +158,39 @@ impl RenderScene {
 }
 
 /// The maps `[texture]` asks for: none for "flat"; for "test-grooves" one groove map,
-/// shared by faces A, B and C, large enough to cover each face at any rotation.
-fn texture_maps(t: &crate::scene::config::TextureConfig, frames: &[FaceFrame]) -> Vec<FaceMap> {
-    if t.kind != "test-grooves" || frames.is_empty() {
-        return Vec::new();
+/// shared by faces A, B and C, large enough to cover each face at any rotation; for
+/// "file" the slopes (central differences) of an EXR height map in µm, on all three faces.
+fn texture_maps(
+    t: &crate::scene::config::TextureConfig,
+    frames: &[FaceFrame],
+) -> Result<Vec<FaceMap>, RenderError> {
+    if t.kind == "flat" || frames.is_empty() {
+        return Ok(Vec::new());
+    }
+    let place = |map: Arc<SlopeMap>| -> Vec<FaceMap> {
+        frames
+            .iter()
+            .map(|f| {
+                let i = (f.face as usize).clamp(1, 3) - 1;
+                FaceMap {
+                    face: f.face,
+                    slopes: map.clone(),
+                    rotation_deg: t.rotation_deg[i],
+                    offset_mm: t.offset_mm[i],
+                }
+            })
+            .collect()
+    };
+    if t.kind == "file" {
+        let path = t
+            .path
+            .as_ref()
+            .ok_or(crate::scene::config::ConfigError::Invalid {
+                field: "texture.path",
+                message: "kind = \"file\" needs `path` (an EXR height map in µm)".into(),
+            })?;
+        let height = crate::texture::read_exr(path, t.spacing_um as f64)?;
+        return Ok(place(Arc::new(height.slopes())));
     }
     let extent = frames
         .iter()
@@ -169,24 +200,12 @@ fn texture_maps(t: &crate::scene::config::TextureConfig, frames: &[FaceFrame]) -
             2.0 * (f.half_size.length() + (o[0] * o[0] + o[1] * o[1]).sqrt())
         })
         .fold(0.0f32, f32::max);
-    let map = Arc::new(SlopeMap::test_grooves(
+    Ok(place(Arc::new(SlopeMap::test_grooves(
         extent,
         t.spacing_um as f64,
         t.groove_period_mm,
         t.groove_max_slope_deg,
-    ));
-    frames
-        .iter()
-        .map(|f| {
-            let i = (f.face as usize).clamp(1, 3) - 1;
-            FaceMap {
-                face: f.face,
-                slopes: map.clone(),
-                rotation_deg: t.rotation_deg[i],
-                offset_mm: t.offset_mm[i],
-            }
-        })
-        .collect()
+    ))))
 }
 
 #[repr(C)]

@@ -14,17 +14,9 @@ use glam::Vec3;
 use crate::scene::mesh::FaceId;
 use crate::scene::testbody::FaceFrame;
 
-/// Per-texel slopes; the same layout as the texture module's `SlopeMap`
-/// (`synosis::texture::maps::SlopeMap`), so its data moves over field by field.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SlopeMap {
-    pub width: usize,
-    pub height: usize,
-    /// Texel spacing, µm.
-    pub spacing_um: f64,
-    /// `[dh/dx, dh/dy]`, row-major, row 0 at the top, y down.
-    pub data: Vec<[f32; 2]>,
-}
+/// Per-texel slopes from the texture module (`[dh/dx, dh/dy]`, row 0 at the top, y down,
+/// `spacing_um`); the renderer takes it as is.
+pub use crate::texture::SlopeMap;
 
 impl SlopeMap {
     /// All slopes zero: renders exactly as no map (tested).

@@ -240,10 +240,13 @@ impl Default for RenderConfig {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TextureConfig {
-    /// "flat" (no map: shading normal = geometric normal) or "test-grooves" (analytic
-    /// sinusoidal grooves on faces A, B and C, a test pattern).
+    /// "flat" (no map: shading normal = geometric normal), "test-grooves" (analytic
+    /// sinusoidal grooves on faces A, B and C, a test pattern) or "file" (`path`).
     pub kind: String,
-    /// Texel spacing of generated maps, µm, [1, 1000].
+    /// EXR height map in µm (one channel; `Y` if several), relative to the scene file;
+    /// its slopes go on faces A, B and C. Needed by kind = "file".
+    pub path: Option<PathBuf>,
+    /// Texel spacing of generated maps and of the `path` map, µm, [1, 1000].
     pub spacing_um: f32,
     /// Groove period, mm, (0, 100].
     pub groove_period_mm: f32,
@@ -261,6 +264,7 @@ impl Default for TextureConfig {
     fn default() -> Self {
         TextureConfig {
             kind: "flat".into(),
+            path: None,
             spacing_um: 20.0,
             groove_period_mm: 1.0,
             groove_max_slope_deg: 30.0,
@@ -359,6 +363,12 @@ impl SceneConfig {
         {
             let base = path.parent().unwrap_or(Path::new("."));
             cfg.object.gltf = Some(base.join(g));
+        }
+        if let Some(t) = &cfg.texture.path
+            && t.is_relative()
+        {
+            let base = path.parent().unwrap_or(Path::new("."));
+            cfg.texture.path = Some(base.join(t));
         }
         Ok(cfg)
     }
@@ -482,10 +492,19 @@ impl SceneConfig {
         range_u("render.max_bounces", r.max_bounces, 1, 64, "[1, 64]")?;
         range_u("render.batch_spp", r.batch_spp, 1, 1024, "[1, 1024]")?;
         let t = &self.texture;
-        if t.kind != "flat" && t.kind != "test-grooves" {
+        if !["flat", "test-grooves", "file"].contains(&t.kind.as_str()) {
             return Err(ConfigError::Invalid {
                 field: "texture.kind",
-                message: format!("{:?}: allowed \"flat\" or \"test-grooves\"", t.kind),
+                message: format!(
+                    "{:?}: allowed \"flat\", \"test-grooves\" or \"file\"",
+                    t.kind
+                ),
+            });
+        }
+        if t.kind == "file" && t.path.is_none() {
+            return Err(ConfigError::Invalid {
+                field: "texture.path",
+                message: "kind = \"file\" needs `path` (an EXR height map in µm)".into(),
             });
         }
         range_f(
