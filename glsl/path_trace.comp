@@ -101,7 +101,10 @@ float segment_weight(uint seg, vec3 x, vec3 n) {
 // Area pdf of a point on light triangle `tri`, as chosen from x with normal n.
 float light_area_pdf(uint tri, vec3 x, vec3 n) {
     if (prm.light_sampling != LIGHT_FACING) return 1.0 / prm.light_area;
+    // Only ring triangles can be chosen; anything else has pdf 0 (and no out-of-range reads).
+    if (tri < prm.light_first) return 0.0;
     uint seg = (tri - prm.light_first) / prm.segment_tris;
+    if (seg >= prm.ring_segments) return 0.0;
     float wsum = segment_weight(seg, x, n);
     float area = 0.5 * length(tri_normal(tris[tri]));
     return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(prm.ring_segments) * area) : 0.0;
