@@ -420,14 +420,15 @@ impl Job {
                     }
                 }
             }
-            if let Some(toml::Value::String(s)) = &f.variation {
-                if s != "paper" && s != "none" {
-                    return Err(self.field(
-                        format!("{p}.variation"),
-                        format!("{s:?}"),
-                        "\"paper\", \"none\" or a table of value sets",
-                    ));
-                }
+            if let Some(toml::Value::String(s)) = &f.variation
+                && s != "paper"
+                && s != "none"
+            {
+                return Err(self.field(
+                    format!("{p}.variation"),
+                    format!("{s:?}"),
+                    "\"paper\", \"none\" or a table of value sets",
+                ));
             }
             super::textures::validate_finish(f)
                 .map_err(|msg| self.field(p.clone(), &f.name, &msg))?;

@@ -178,10 +178,7 @@ pub fn trace_polygons(mask: &[bool], width: usize, height: usize) -> Vec<Vec<[f6
                 let mut lp = vec![s];
                 let mut prev_dir: Option<(i64, i64)> = None;
                 let mut cur = s;
-                loop {
-                    let Some(cands) = out.get_mut(&cur) else {
-                        break;
-                    };
+                while let Some(cands) = out.get_mut(&cur) {
                     if cands.is_empty() {
                         break;
                     }

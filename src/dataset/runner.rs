@@ -378,10 +378,10 @@ impl<'p> Ctx<'p> {
     /// The mesh of an instance: the object, with its defect set imprinted if defective.
     /// Only the current one is kept.
     fn mesh(&mut self, inst_index: usize) -> Result<Arc<Mesh>> {
-        if let Some((k, m)) = &self.mesh {
-            if *k == inst_index {
-                return Ok(m.clone());
-            }
+        if let Some((k, m)) = &self.mesh
+            && *k == inst_index
+        {
+            return Ok(m.clone());
         }
         self.mesh = None;
         let inst = &self.prep.plan.instances[inst_index];

@@ -13,14 +13,11 @@ pub const UNAVAILABLE: &str =
 
 /// Shape checks that need no texture code.
 pub fn validate(f: &Finish) -> Result<(), String> {
-    if f.kind == FinishKind::Milled {
-        if let Some(v) = &f.variation {
-            if !(v.is_str() || v.is_table()) {
-                return Err(
-                    "variation must be \"paper\", \"none\" or a table of value sets".into(),
-                );
-            }
-        }
+    if f.kind == FinishKind::Milled
+        && let Some(v) = &f.variation
+        && !(v.is_str() || v.is_table())
+    {
+        return Err("variation must be \"paper\", \"none\" or a table of value sets".into());
     }
     Ok(())
 }
