@@ -8,7 +8,9 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use synosis::render::raycast::{PinholeCamera, RayIn, trace_rays};
 use synosis::scene::procedural::bumpy_sphere;
-use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
+use synosis::trace::software_bvh::{
+    TraversalStats, build_bvh, cpu_closest_hit, cpu_closest_hit_counted, obvhs_triangles,
+};
 use synosis::trace::{Backend, TraceScene};
 use synosis::vk::{Context, ContextOptions};
 
@@ -125,5 +127,30 @@ fn main() -> anyhow::Result<()> {
         "| our CPU reference (watertight), {threads} threads | {build:.1} | {:.2} | {:.2} |",
         ours_rates[0], ours_rates[1]
     );
+    // Work per ray of the software traversal (the CPU reference visits nodes in the
+    // shader's order), to say where the time goes.
+    println!();
+    println!("| rays | box tests / ray | triangle tests / ray |");
+    println!("|---|---|---|");
+    for (name, rays) in [("primary", &primary), ("random", &random)] {
+        let mut st = TraversalStats::default();
+        for r in rays.iter().step_by(16) {
+            cpu_closest_hit_counted(
+                &bvh,
+                &tris,
+                r.origin.into(),
+                r.dir.into(),
+                r.tmin,
+                r.tmax,
+                &mut st,
+            );
+        }
+        let n = rays.len().div_ceil(16) as f64;
+        println!(
+            "| {name} | {:.1} | {:.1} |",
+            st.box_tests as f64 / n,
+            st.triangle_tests as f64 / n
+        );
+    }
     Ok(())
 }

@@ -115,7 +115,10 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
     vec3 inv_d = 1.0 / dd;
     TraceRay tr = trace_setup(o, d);
+    // Each pushed node keeps its entry distance, so a node farther than a hit found
+    // meanwhile is dropped on pop without loading it.
     uint stack[TRACE_STACK];
+    float stack_t[TRACE_STACK];
     int sp = 0;
     uint node = 0u;
     while (true) {
@@ -132,15 +135,19 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
         if (hl && hr) {
             uint near = nl <= nr ? li : ri;
             uint far = nl <= nr ? ri : li;
-            if (sp < TRACE_STACK) { stack[sp++] = far; }
+            if (sp < TRACE_STACK) { stack[sp] = far; stack_t[sp] = max(nl, nr); ++sp; }
             node = near;
         } else if (hl) {
             node = li;
         } else if (hr) {
             node = ri;
         } else {
-            if (sp == 0) break;
-            node = stack[--sp];
+            bool found = false;
+            while (sp > 0) {
+                --sp;
+                if (stack_t[sp] <= h.t) { node = stack[sp]; found = true; break; }
+            }
+            if (!found) break;
         }
     }
     return h;

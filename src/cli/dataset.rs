@@ -101,6 +101,17 @@ fn resolve_shard(a: &RunArgs) -> Result<Shard> {
     Ok(Shard::ALL)
 }
 
+fn gpu_renderer() -> Result<GpuRenderer> {
+    let accel = match std::env::var("SYNOSIS_ACCEL").as_deref() {
+        Ok("software") => synosis::trace::AccelChoice::Software,
+        Ok("ray-query") => synosis::trace::AccelChoice::RayQuery,
+        _ => synosis::trace::AccelChoice::Auto,
+    };
+    GpuRenderer::new(accel, false)
+        .map_err(anyhow::Error::msg)
+        .context("starting the GPU renderer")
+}
+
 pub fn run(a: DatasetArgs) -> Result<()> {
     match a.cmd {
         Cmd::Run(r) => run_job(r),
@@ -119,8 +130,14 @@ pub fn run(a: DatasetArgs) -> Result<()> {
         }
         Cmd::RenderOne { job, index, out } => {
             let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
-            let mut renderer = GpuRenderer::new().map_err(anyhow::Error::msg)?;
-            let e = dataset::render_one(&prep, index, &out, &mut renderer, &mut ModuleTextures)?;
+            let mut renderer = gpu_renderer()?;
+            let e = dataset::render_one(
+                &prep,
+                index,
+                &out,
+                &mut renderer,
+                &mut ModuleTextures::default(),
+            )?;
             println!("{}", serde_json::to_string_pretty(&e)?);
             Ok(())
         }
@@ -148,7 +165,7 @@ fn run_job(a: RunArgs) -> Result<()> {
     let shard = resolve_shard(&a)?;
     // Everything is checked before the renderer starts or a file is written.
     let prep = dataset::prepare(&a.job).with_context(|| format!("job {}", a.job.display()))?;
-    let mut renderer = GpuRenderer::new().map_err(anyhow::Error::msg)?;
+    let mut renderer = gpu_renderer()?;
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -169,7 +186,7 @@ fn run_job(a: RunArgs) -> Result<()> {
         &prep,
         &a.out,
         &mut renderer,
-        &mut ModuleTextures,
+        &mut ModuleTextures::default(),
         RunOptions {
             shard,
             fail_after: None,

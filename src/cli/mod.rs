@@ -4,6 +4,7 @@ mod dataset;
 mod defects;
 mod gpu;
 mod metrics;
+mod render;
 mod testbody;
 mod texture;
 
@@ -34,6 +35,8 @@ pub enum Command {
     Testbody(testbody::TestbodyArgs),
     /// Similarity metrics (histogram Wasserstein, MAE, SSIM) between two images.
     Metrics(metrics::MetricsArgs),
+    /// Path-trace an inspection image of a scene file (radiance.exr, image.png).
+    Render(render::RenderArgs),
     /// Compare a real and a synthetic image set (domain similarity, as the paper).
     Compare(metrics::CompareArgs),
     /// Dataset jobs: run (sharded, resumable), merge, postprocess, render-one, check.
@@ -49,6 +52,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Testbody(a) => testbody::run(a),
         Command::Metrics(a) => metrics::run_metrics(a),
         Command::Compare(a) => metrics::run_compare(a),
+        Command::Render(a) => render::run(a),
         Command::Dataset(a) => dataset::run(a),
     }
 }

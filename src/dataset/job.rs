@@ -204,9 +204,6 @@ pub struct Finish {
     /// Sandblasted only: the stand-in exemplar's fields (e.g. pressure_bar).
     #[serde(default)]
     pub exemplar: Option<toml::Table>,
-    /// Sandblasted only: a measured height map to use as exemplar instead.
-    #[serde(default)]
-    pub measurement: Option<PathBuf>,
 }
 
 impl Finish {
@@ -402,7 +399,7 @@ impl Job {
             self.int(&format!("{p}.textures"), f.textures, 1, 10_000)?;
             match f.kind {
                 FinishKind::Milled => {
-                    if f.exemplar.is_some() || f.measurement.is_some() {
+                    if f.exemplar.is_some() {
                         return Err(self.field(
                             format!("{p}.exemplar"),
                             "set",

@@ -1,3 +1,9 @@
-//! GPU passes that make images: first-hit raycasts (and, later, the path tracer).
+//! GPU passes that make images: the path tracer, the annotation pass, first-hit
+//! raycasts, and the CPU-side models they share (BSDF, energy tables, sensor).
 
+pub mod annotate;
+pub mod bsdf;
+pub mod energy;
+pub mod path_trace;
 pub mod raycast;
+pub mod sensor;

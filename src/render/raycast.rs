@@ -155,9 +155,12 @@ impl PinholeCamera {
     }
 }
 
+/// A pinhole camera as the shaders take it (push-constant block shared by the
+/// first-hit passes): eye, image-plane axes scaled to the half extents at distance 1,
+/// forward, image size, 8x8 tiles per row and the workgroup scramble multiplier.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct RaycastPush {
+pub struct CameraPush {
     eye: [f32; 4],
     right: [f32; 4],
     up: [f32; 4],
@@ -166,6 +169,29 @@ struct RaycastPush {
     height: u32,
     tiles_x: u32,
     mult: u32,
+}
+
+impl CameraPush {
+    pub fn new(cam: &PinholeCamera, width: u32, height: u32) -> Self {
+        let tiles_x = width.div_ceil(8);
+        let tiles = tiles_x * height.div_ceil(8);
+        let (right, up) = cam.plane_axes(width, height);
+        CameraPush {
+            eye: cam.eye.extend(0.0).into(),
+            right: right.extend(0.0).into(),
+            up: up.extend(0.0).into(),
+            forward: cam.forward.normalize().extend(0.0).into(),
+            width,
+            height,
+            tiles_x,
+            mult: scramble_multiplier(tiles),
+        }
+    }
+
+    /// Number of 8x8 tiles (workgroups) covering the image.
+    pub fn tiles(&self) -> u32 {
+        self.tiles_x * self.height.div_ceil(8)
+    }
 }
 
 /// Depth (hit distance, 0 = miss) and packed RGBA8 normals of a raycast image.
@@ -191,26 +217,15 @@ pub fn raycast(
         "raycast",
         scene.backend,
         3,
-        std::mem::size_of::<RaycastPush>() as u32,
+        std::mem::size_of::<CameraPush>() as u32,
         [8, 8, 1],
     )?;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let n = width as u64 * height as u64;
     let depth_buf = Buffer::new(ctx, "depth", n * 4, storage, MemoryKind::Readback)?;
     let normal_buf = Buffer::new(ctx, "normals", n * 4, storage, MemoryKind::Readback)?;
-    let tiles_x = width.div_ceil(8);
-    let tiles = tiles_x * height.div_ceil(8);
-    let (right, up) = cam.plane_axes(width, height);
-    let push = RaycastPush {
-        eye: cam.eye.extend(0.0).into(),
-        right: right.extend(0.0).into(),
-        up: up.extend(0.0).into(),
-        forward: cam.forward.normalize().extend(0.0).into(),
-        width,
-        height,
-        tiles_x,
-        mult: scramble_multiplier(tiles),
-    };
+    let push = CameraPush::new(cam, width, height);
+    let tiles = push.tiles();
     let mut g = Graph::new(ctx, "raycast");
     let refs = scene.import(&mut g);
     let geo = g.import(&scene.shade_tris);

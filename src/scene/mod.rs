@@ -1,5 +1,8 @@
-//! Scene description: meshes and their labels, glTF import/export.
+//! Scene description: meshes and their labels, glTF import/export, the test body, the
+//! scene file, cameras and the ring light.
 
+pub mod camera;
+pub mod config;
 pub mod gltf_io;
 pub mod mesh;
 pub mod procedural;

@@ -149,32 +149,89 @@ pub fn cpu_closest_hit(
     tmin: f32,
     tmax: f32,
 ) -> Option<(f32, u32)> {
-    let ray = obvhs::ray::Ray::new(origin.into(), dir.into(), tmin, tmax);
+    cpu_closest_hit_counted(
+        bvh,
+        tris,
+        origin,
+        dir,
+        tmin,
+        tmax,
+        &mut TraversalStats::default(),
+    )
+}
+
+/// Work done by a traversal: box tests and triangle tests.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TraversalStats {
+    pub box_tests: u64,
+    pub triangle_tests: u64,
+}
+
+/// [`cpu_closest_hit`], counting its work. The order is the shader's: both children's
+/// boxes are tested, leaves are intersected at once, the nearer inner child is visited
+/// first and the farther one pushed, so the counts describe the GPU traversal too.
+pub fn cpu_closest_hit_counted(
+    bvh: &Bvh2,
+    tris: &[Triangle],
+    origin: glam::Vec3,
+    dir: glam::Vec3,
+    tmin: f32,
+    tmax: f32,
+    stats: &mut TraversalStats,
+) -> Option<(f32, u32)> {
+    let o = glam::Vec3A::from(origin);
     let inv_d = glam::Vec3A::from(dir).recip();
     let mut best: Option<(f32, u32)> = None;
     let mut t_best = tmax;
     let sheared = super::watertight::ShearedRay::new(origin, dir);
-    let mut stack = vec![0usize];
-    while let Some(i) = stack.pop() {
-        let n = &bvh.nodes[i];
-        if robust_box_t(n.aabb.min, n.aabb.max, ray.origin, inv_d, tmin, t_best).is_none() {
-            continue;
-        }
-        if n.prim_count > 0 {
+    let mut leaf =
+        |n: &obvhs::bvh2::node::Bvh2Node, t_best: &mut f32, stats: &mut TraversalStats| {
             for k in n.first_index..n.first_index + n.prim_count {
                 let p = bvh.primitive_indices[k as usize];
                 let tri = &tris[p as usize];
-                let hit =
-                    sheared.intersect(tri.v0.into(), tri.v1.into(), tri.v2.into(), tmin, t_best);
-                if let Some((t, _)) = hit {
-                    t_best = t;
+                stats.triangle_tests += 1;
+                if let Some((t, _)) =
+                    sheared.intersect(tri.v0.into(), tri.v1.into(), tri.v2.into(), tmin, *t_best)
+                {
+                    *t_best = t;
                     best = Some((t, p));
                 }
             }
-        } else {
-            stack.push(n.first_index as usize + 1);
-            stack.push(n.first_index as usize);
+        };
+    let root = bvh.nodes.first()?;
+    if root.prim_count > 0 {
+        leaf(root, &mut t_best, stats);
+        return best;
+    }
+    let mut stack: Vec<(f32, usize)> = Vec::with_capacity(64);
+    let mut node = 0usize;
+    loop {
+        let first = bvh.nodes[node].first_index as usize;
+        let mut near: [Option<(f32, usize)>; 2] = [None, None];
+        for (k, c) in [first, first + 1].into_iter().enumerate() {
+            let n = &bvh.nodes[c];
+            stats.box_tests += 1;
+            if let Some(t) = robust_box_t(n.aabb.min, n.aabb.max, o, inv_d, tmin, t_best) {
+                if n.prim_count > 0 {
+                    leaf(n, &mut t_best, stats);
+                } else {
+                    near[k] = Some((t, c));
+                }
+            }
         }
+        node = match near {
+            [Some(a), Some(b)] => {
+                let (n, f) = if a.0 <= b.0 { (a, b) } else { (b, a) };
+                stack.push(f);
+                n.1
+            }
+            [Some(a), None] | [None, Some(a)] => a.1,
+            // Nodes farther than a hit found since they were pushed are dropped.
+            [None, None] => match std::iter::from_fn(|| stack.pop()).find(|&(t, _)| t <= t_best) {
+                Some((_, n)) => n,
+                None => break,
+            },
+        };
     }
     best
 }

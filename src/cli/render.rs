@@ -1,0 +1,139 @@
+//! `synosis render`: a path-traced inspection image of a scene file.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
+use synosis::render::energy::EnergyTables;
+use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_frame};
+use synosis::render::sensor;
+use synosis::scene::config::{SceneConfig, parse_view};
+use synosis::trace::{AccelChoice, resolve};
+use synosis::vk::{Context, ContextOptions, Profiler};
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML, docs/scene-format.md).
+    scene: PathBuf,
+    /// Output directory (created if missing): radiance.exr, image.png and the
+    /// annotation masks mask.png, instances.png, faces.png, coverage.png.
+    #[arg(long)]
+    out: PathBuf,
+    /// Samples per pixel (overrides render.spp).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_048_576))]
+    spp: Option<u32>,
+    /// Image width; keeps the sensor size, so the pixel pitch scales (overrides camera.width).
+    #[arg(long, requires = "height")]
+    width: Option<u32>,
+    #[arg(long, requires = "width")]
+    height: Option<u32>,
+    /// Trace backend (overrides render.accel).
+    #[arg(long, value_enum)]
+    accel: Option<AccelChoice>,
+    /// Viewpoint, e.g. A20 (overrides camera.view).
+    #[arg(long)]
+    view: Option<String>,
+    /// Write a 16-bit PNG instead of 8-bit.
+    #[arg(long)]
+    png16: bool,
+    /// Write a Chrome trace (Perfetto) of CPU phases and GPU passes.
+    #[arg(long)]
+    profile: Option<PathBuf>,
+}
+
+pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    let profiler = Profiler::new();
+    let mut cfg = SceneConfig::load(&a.scene)?;
+    if let Some(s) = a.spp {
+        cfg.render.spp = s;
+    }
+    if let (Some(w), Some(h)) = (a.width, a.height) {
+        cfg.set_resolution(w, h)?;
+    }
+    if let Some(acc) = a.accel {
+        cfg.render.accel = acc;
+    }
+    if let Some(v) = &a.view {
+        parse_view(v).context("--view")?;
+        cfg.camera.view = v.clone();
+    }
+    cfg.validate()?;
+    let object = profiler
+        .cpu("load object", || load_object(&cfg))
+        .context("loading the object")?;
+    let scene = RenderScene::assemble(&object, &cfg)?;
+    let tables = profiler.cpu("energy tables", EnergyTables::compute);
+    let ctx = profiler.cpu("Vulkan init", || {
+        Context::new(&ContextOptions {
+            validation: false,
+            ray_query: true,
+        })
+    })?;
+    let backend = resolve(cfg.render.accel, &ctx.info)?;
+    let bar = ProgressBar::new(cfg.render.spp as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} spp {elapsed_precise} eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let start = std::time::Instant::now();
+    let opts = FrameOptions {
+        annotate_grid: Some(DEFAULT_COVERAGE_GRID),
+        profiler: Some(&profiler),
+    };
+    let frame = render_frame(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
+        bar.set_position(done as u64)
+    })?;
+    let img = frame.radiance;
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    let errors = ctx.validation_errors();
+    anyhow::ensure!(
+        errors.is_empty(),
+        "Vulkan validation reported {} error(s); first: {}",
+        errors.len(),
+        errors[0]
+    );
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let (w, h) = (img.width, img.height);
+    profiler.cpu("write images", || -> anyhow::Result<()> {
+        let exr = a.out.join("radiance.exr");
+        synosis::image_io::write_exr_f32(&exr, w as usize, h as usize, "Y", &img.data)
+            .with_context(|| format!("writing {}", exr.display()))?;
+        let png = a.out.join("image.png");
+        let (e, g) = (cfg.camera.exposure, cfg.camera.gain);
+        if a.png16 {
+            synosis::image_io::write_png_gray16(&png, w, h, &sensor::quantise16(&img.data, e, g))
+        } else {
+            synosis::image_io::write_png_gray8(&png, w, h, &sensor::quantise8(&img.data, e, g))
+        }
+        .with_context(|| format!("writing {}", png.display()))?;
+        if let Some(ann) = &frame.annotation {
+            ann.write_pngs(&a.out)
+                .context("writing the annotation masks")?;
+        }
+        Ok(())
+    })?;
+    let mean = img.data.iter().map(|&v| v as f64).sum::<f64>() / img.data.len().max(1) as f64;
+    println!(
+        "{} view {}: {}x{}, {} spp, {} bounces, {} in {:.1} s (GPU {:.0} ms), mean radiance {:.4}",
+        a.scene.display(),
+        cfg.camera.view,
+        w,
+        h,
+        cfg.render.spp,
+        cfg.render.max_bounces,
+        backend.name(),
+        secs,
+        img.gpu_ms,
+        mean
+    );
+    if let Some(p) = &a.profile {
+        profiler
+            .write_chrome_trace(p)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,482 @@
+//! The render scene file (TOML): object, material, table, ring light, camera, render
+//! settings. Every field has a unit, a default and an allowed range; `validate` names the
+//! field and the range on error. The format is documented in docs/scene-format.md.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::trace::AccelChoice;
+
+/// What went wrong reading a scene file.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read scene file {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("scene file {path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{field} = {value} is out of range: allowed {range}")]
+    Range {
+        field: &'static str,
+        value: String,
+        range: &'static str,
+    },
+    #[error("{field}: {message}")]
+    Invalid {
+        field: &'static str,
+        message: String,
+    },
+}
+
+/// The scene file's top level.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneConfig {
+    pub object: ObjectConfig,
+    pub material: MaterialConfig,
+    pub table: TableConfig,
+    pub light: LightConfig,
+    pub camera: CameraConfig,
+    pub render: RenderConfig,
+}
+
+/// The inspected object: a glTF file or a built-in test body, and where it stands.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObjectConfig {
+    /// glTF (.gltf/.glb) path, relative to the scene file. Exclusive with `builtin`.
+    pub gltf: Option<PathBuf>,
+    /// "testbody-b" or "testbody-m". Used when `gltf` is absent.
+    pub builtin: Option<String>,
+    /// Translation of the object, mm (the table follows in x and y).
+    pub position_mm: [f32; 3],
+}
+
+impl Default for ObjectConfig {
+    fn default() -> Self {
+        ObjectConfig {
+            gltf: None,
+            builtin: Some("testbody-b".into()),
+            position_mm: [0.0; 3],
+        }
+    }
+}
+
+/// Aluminium at 550 nm after Rakic (1995), via refractiveindex.info (Al, Rakic 1995
+/// Lorentz-Drude model): n = 0.958, k = 6.69. The camera is grayscale, so one wavelength.
+pub const AL_N_550: f32 = 0.958;
+pub const AL_K_550: f32 = 6.69;
+
+/// The object's rough conductor.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MaterialConfig {
+    /// GGX alpha (roughness squared convention is NOT used: alpha itself), (0, 1].
+    pub alpha: f32,
+    /// Real part of the complex index of refraction, (0, 10].
+    pub ior_n: f32,
+    /// Imaginary part (extinction coefficient), [0, 20].
+    pub ior_k: f32,
+    /// Kulla-Conty multiple-scattering energy compensation.
+    pub energy_compensation: bool,
+}
+
+impl Default for MaterialConfig {
+    fn default() -> Self {
+        MaterialConfig {
+            alpha: 0.15,
+            ior_n: AL_N_550,
+            ior_k: AL_K_550,
+            energy_compensation: true,
+        }
+    }
+}
+
+/// The black velvet table: a square in the plane z = 0 under the object.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TableConfig {
+    /// Lambertian albedo, [0, 1].
+    pub albedo: f32,
+    /// Edge length, mm, [1, 100000].
+    pub size_mm: f32,
+}
+
+impl Default for TableConfig {
+    fn default() -> Self {
+        TableConfig {
+            albedo: 0.01,
+            size_mm: 400.0,
+        }
+    }
+}
+
+/// The ring light: a diffusely emitting torus centred on the camera, axis = view axis.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LightConfig {
+    /// Distance from the torus centre to the tube centre, mm, (0, 10000].
+    pub major_radius_mm: f32,
+    /// Tube radius, mm, (0, major_radius_mm).
+    pub minor_radius_mm: f32,
+    /// Emitted radiance, W sr^-1 m^-2 (relative units; the sensor model scales), [0, 1e6].
+    pub radiance: f32,
+    /// Tessellation: segments around the ring [8, 1024] and around the tube [4, 256].
+    pub segments_major: u32,
+    pub segments_minor: u32,
+}
+
+impl Default for LightConfig {
+    fn default() -> Self {
+        LightConfig {
+            major_radius_mm: 30.0,
+            minor_radius_mm: 5.0,
+            radiance: 1.0,
+            segments_major: 96,
+            segments_minor: 16,
+        }
+    }
+}
+
+/// Pinhole camera, sensor model and pose.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraConfig {
+    /// Pixels, [1, 16384] each.
+    pub width: u32,
+    pub height: u32,
+    /// Pixel pitch, µm, (0, 1000].
+    pub pixel_um: f32,
+    /// Focal length, mm, (0, 10000].
+    pub focal_mm: f32,
+    /// Distance from the pinhole to the viewed face centre, mm, (0, 100000].
+    pub working_distance_mm: f32,
+    /// Viewpoint: face letter A/B/C and the angle from the face normal in degrees,
+    /// [0, 89], e.g. "A20".
+    pub view: String,
+    /// Sensor model: value = clamp(radiance * exposure * gain, 0, 1). Exposure (0, 1e9].
+    pub exposure: f32,
+    /// Gain, (0, 1e6].
+    pub gain: f32,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        CameraConfig {
+            width: 1224,
+            height: 1025,
+            pixel_um: 6.9,
+            focal_mm: 25.0,
+            working_distance_mm: 90.0,
+            view: "A20".into(),
+            exposure: 1.0,
+            gain: 1.0,
+        }
+    }
+}
+
+/// Sampling settings.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderConfig {
+    /// Samples per pixel, [1, 1048576].
+    pub spp: u32,
+    /// Maximum number of scattering events per path, [1, 64] (1 = direct light only).
+    pub max_bounces: u32,
+    /// Random seed (any u32).
+    pub seed: u32,
+    /// Samples per pixel per dispatch, [1, 1024].
+    pub batch_spp: u32,
+    /// Trace backend: "auto", "ray-query", "software".
+    pub accel: AccelChoice,
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        RenderConfig {
+            spp: 64,
+            max_bounces: 8,
+            seed: 0,
+            batch_spp: 16,
+            accel: AccelChoice::Auto,
+        }
+    }
+}
+
+/// A parsed viewpoint: face id (1..=3) and angle from the normal, degrees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    pub face: crate::scene::mesh::FaceId,
+    pub angle_deg: f32,
+}
+
+/// Parses "A20", "B0", "C10" (face letter, then degrees in [0, 89]).
+pub fn parse_view(s: &str) -> Result<View, ConfigError> {
+    let bad = || ConfigError::Invalid {
+        field: "camera.view",
+        message: format!(
+            "{s:?} is not a view: expected a face letter A, B or C and an angle in degrees [0, 89], e.g. \"A20\""
+        ),
+    };
+    let mut chars = s.chars();
+    let face = match chars.next() {
+        Some('A') | Some('a') => crate::scene::mesh::FACE_A,
+        Some('B') | Some('b') => crate::scene::mesh::FACE_B,
+        Some('C') | Some('c') => crate::scene::mesh::FACE_C,
+        _ => return Err(bad()),
+    };
+    let angle: f32 = chars.as_str().parse().map_err(|_| bad())?;
+    if !(0.0..=89.0).contains(&angle) {
+        return Err(bad());
+    }
+    Ok(View {
+        face,
+        angle_deg: angle,
+    })
+}
+
+fn range_f(
+    field: &'static str,
+    v: f32,
+    lo: f32,
+    hi: f32,
+    lo_open: bool,
+    range: &'static str,
+) -> Result<(), ConfigError> {
+    let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::Range {
+            field,
+            value: v.to_string(),
+            range,
+        })
+    }
+}
+
+fn range_u(
+    field: &'static str,
+    v: u32,
+    lo: u32,
+    hi: u32,
+    range: &'static str,
+) -> Result<(), ConfigError> {
+    if (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(ConfigError::Range {
+            field,
+            value: v.to_string(),
+            range,
+        })
+    }
+}
+
+impl SceneConfig {
+    /// Reads and validates a scene file; a relative glTF path becomes relative to it.
+    pub fn load(path: &Path) -> Result<SceneConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut cfg = Self::parse(&text).map_err(|e| match e {
+            ConfigError::Parse { message, .. } => ConfigError::Parse {
+                path: path.to_path_buf(),
+                message,
+            },
+            other => other,
+        })?;
+        if let Some(g) = &cfg.object.gltf
+            && g.is_relative()
+        {
+            let base = path.parent().unwrap_or(Path::new("."));
+            cfg.object.gltf = Some(base.join(g));
+        }
+        Ok(cfg)
+    }
+
+    /// Parses and validates TOML text.
+    pub fn parse(text: &str) -> Result<SceneConfig, ConfigError> {
+        let cfg: SceneConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: PathBuf::from("<text>"),
+            message: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Checks every field against its documented range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let o = &self.object;
+        match (&o.gltf, &o.builtin) {
+            (Some(_), Some(_)) => {
+                // `builtin` has a default, so only complain when both were written; the
+                // loader clears the default when gltf is given (see `effective_builtin`).
+            }
+            (None, Some(b)) if b != "testbody-b" && b != "testbody-m" => {
+                return Err(ConfigError::Invalid {
+                    field: "object.builtin",
+                    message: format!("{b:?}: allowed \"testbody-b\" or \"testbody-m\""),
+                });
+            }
+            (None, None) => {
+                return Err(ConfigError::Invalid {
+                    field: "object",
+                    message: "needs `gltf` (a path) or `builtin`".into(),
+                });
+            }
+            _ => {}
+        }
+        for (i, field) in [
+            "object.position_mm[0]",
+            "object.position_mm[1]",
+            "object.position_mm[2]",
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            range_f(field, o.position_mm[i], -1e6, 1e6, false, "[-1e6, 1e6] mm")?;
+        }
+        let m = &self.material;
+        range_f("material.alpha", m.alpha, 0.0, 1.0, true, "(0, 1]")?;
+        range_f("material.ior_n", m.ior_n, 0.0, 10.0, true, "(0, 10]")?;
+        range_f("material.ior_k", m.ior_k, 0.0, 20.0, false, "[0, 20]")?;
+        let t = &self.table;
+        range_f("table.albedo", t.albedo, 0.0, 1.0, false, "[0, 1]")?;
+        range_f(
+            "table.size_mm",
+            t.size_mm,
+            1.0,
+            1e5,
+            false,
+            "[1, 100000] mm",
+        )?;
+        let l = &self.light;
+        range_f(
+            "light.major_radius_mm",
+            l.major_radius_mm,
+            0.0,
+            1e4,
+            true,
+            "(0, 10000] mm",
+        )?;
+        range_f("light.radiance", l.radiance, 0.0, 1e6, false, "[0, 1e6]")?;
+        if !(l.minor_radius_mm.is_finite()
+            && l.minor_radius_mm > 0.0
+            && l.minor_radius_mm < l.major_radius_mm)
+        {
+            return Err(ConfigError::Range {
+                field: "light.minor_radius_mm",
+                value: l.minor_radius_mm.to_string(),
+                range: "(0, light.major_radius_mm) mm",
+            });
+        }
+        range_u(
+            "light.segments_major",
+            l.segments_major,
+            8,
+            1024,
+            "[8, 1024]",
+        )?;
+        range_u("light.segments_minor", l.segments_minor, 4, 256, "[4, 256]")?;
+        let c = &self.camera;
+        range_u("camera.width", c.width, 1, 16384, "[1, 16384]")?;
+        range_u("camera.height", c.height, 1, 16384, "[1, 16384]")?;
+        range_f(
+            "camera.pixel_um",
+            c.pixel_um,
+            0.0,
+            1000.0,
+            true,
+            "(0, 1000] µm",
+        )?;
+        range_f(
+            "camera.focal_mm",
+            c.focal_mm,
+            0.0,
+            1e4,
+            true,
+            "(0, 10000] mm",
+        )?;
+        range_f(
+            "camera.working_distance_mm",
+            c.working_distance_mm,
+            0.0,
+            1e5,
+            true,
+            "(0, 100000] mm",
+        )?;
+        range_f("camera.exposure", c.exposure, 0.0, 1e9, true, "(0, 1e9]")?;
+        range_f("camera.gain", c.gain, 0.0, 1e6, true, "(0, 1e6]")?;
+        parse_view(&c.view)?;
+        let r = &self.render;
+        range_u("render.spp", r.spp, 1, 1 << 20, "[1, 1048576]")?;
+        range_u("render.max_bounces", r.max_bounces, 1, 64, "[1, 64]")?;
+        range_u("render.batch_spp", r.batch_spp, 1, 1024, "[1, 1024]")?;
+        Ok(())
+    }
+
+    /// The built-in body to use, if any: `gltf` wins over the default `builtin`.
+    pub fn effective_builtin(&self) -> Option<&str> {
+        if self.object.gltf.is_some() {
+            None
+        } else {
+            self.object.builtin.as_deref()
+        }
+    }
+
+    /// Changes the resolution keeping the sensor's physical size (the field of view):
+    /// the pixel pitch scales with the width ratio.
+    pub fn set_resolution(&mut self, width: u32, height: u32) -> Result<(), ConfigError> {
+        range_u("--width", width, 1, 16384, "[1, 16384]")?;
+        range_u("--height", height, 1, 16384, "[1, 16384]")?;
+        self.camera.pixel_um *= self.camera.width as f32 / width as f32;
+        self.camera.width = width;
+        self.camera.height = height;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid() {
+        let c = SceneConfig::parse("").expect("defaults");
+        assert_eq!(c.camera.width, 1224);
+        assert_eq!(c.render.max_bounces, 8);
+    }
+
+    #[test]
+    fn errors_name_field_and_range() {
+        let e = SceneConfig::parse("[material]\nalpha = 0.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("material.alpha") && e.contains("(0, 1]"), "{e}");
+        let e = SceneConfig::parse("[light]\nminor_radius_mm = 40.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("light.minor_radius_mm"), "{e}");
+        let e = SceneConfig::parse("[camera]\nview = \"D10\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("camera.view"), "{e}");
+        let e = SceneConfig::parse("[camera]\nfov = 3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("fov"), "{e}");
+    }
+
+    #[test]
+    fn views_parse() {
+        assert_eq!(parse_view("B10").unwrap().face, crate::scene::mesh::FACE_B);
+        assert_eq!(parse_view("C0").unwrap().angle_deg, 0.0);
+        assert!(parse_view("A90").is_err());
+        assert!(parse_view("A").is_err());
+    }
+}
