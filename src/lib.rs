@@ -5,6 +5,7 @@
 //! labels are read back -> the dataset writer. `vk` knows nothing about scenes; `texture`,
 //! `defect` and `metrics` know nothing about Vulkan.
 
+pub mod dataset;
 pub mod defect;
 pub mod graph;
 pub mod image_io;

@@ -1,5 +1,6 @@
 //! Subcommands. Each lives in its own file with a clap `Args` struct and a `run`.
 
+mod dataset;
 mod defects;
 mod gpu;
 mod metrics;
@@ -38,6 +39,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Compare a real and a synthetic image set (domain similarity, as the paper).
     Compare(metrics::CompareArgs),
+    /// Dataset jobs: run (sharded, resumable), merge, postprocess, render-one, check.
+    Dataset(dataset::DatasetArgs),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -50,5 +53,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Metrics(a) => metrics::run_metrics(a),
         Command::Compare(a) => metrics::run_compare(a),
         Command::Render(a) => render::run(a),
+        Command::Dataset(a) => dataset::run(a),
     }
 }

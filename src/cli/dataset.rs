@@ -1,0 +1,212 @@
+//! `synosis dataset`: run a dataset job (sharded, resumable), merge shards, re-run the
+//! post-processing, re-make one image, or check a job file.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+use synosis::dataset::{self, RunOptions, Shard, gpu::GpuRenderer, texture_bridge::ModuleTextures};
+
+#[derive(Args)]
+pub struct DatasetArgs {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Render a job's images into a folder; killed and restarted, it redoes only unfinished ones.
+    Run(RunArgs),
+    /// Join shard outputs (the first folder is the target) into one manifest and COCO files.
+    Merge {
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+    },
+    /// Re-run post-processing from the stored raw radiance and labels (no rendering).
+    Postprocess {
+        dir: PathBuf,
+        /// A job whose [[postprocess]] steps replace the stored ones (the rest must match).
+        #[arg(long)]
+        job: Option<PathBuf>,
+    },
+    /// Re-make image K of a job alone.
+    RenderOne {
+        job: PathBuf,
+        #[arg(long)]
+        index: usize,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Validate a job (meshes, defect sets included) and print its size; renders nothing.
+    Check { job: PathBuf },
+}
+
+#[derive(Args)]
+struct RunArgs {
+    job: PathBuf,
+    #[arg(long)]
+    out: PathBuf,
+    /// "i/n": this process renders shard i of n. Default: from SLURM_ARRAY_TASK_ID /
+    /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX with --shard-count (or
+    /// SYNOSIS_SHARD_COUNT); else the whole job.
+    #[arg(long)]
+    shard: Option<String>,
+    /// Shard count to pair with JOB_COMPLETION_INDEX (Kubernetes indexed jobs).
+    #[arg(long)]
+    shard_count: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn env_usize(name: &str) -> Result<Option<usize>> {
+    match std::env::var(name) {
+        Ok(v) => Ok(Some(v.trim().parse().with_context(|| {
+            format!("{name}={v:?} is not a non-negative integer")
+        })?)),
+        Err(_) => Ok(None),
+    }
+}
+
+fn resolve_shard(a: &RunArgs) -> Result<Shard> {
+    if let Some(s) = &a.shard {
+        return Shard::parse(s)
+            .with_context(|| format!("--shard {s:?}: expected i/n with 0 <= i < n"));
+    }
+    if let (Some(id), Some(count)) = (
+        env_usize("SLURM_ARRAY_TASK_ID")?,
+        env_usize("SLURM_ARRAY_TASK_COUNT")?,
+    ) {
+        let min = env_usize("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+        let index = id
+            .checked_sub(min)
+            .context("SLURM_ARRAY_TASK_ID below SLURM_ARRAY_TASK_MIN")?;
+        if count == 0 || index >= count {
+            bail!("SLURM array task {id} (min {min}) is not in 0..{count}");
+        }
+        return Ok(Shard { index, count });
+    }
+    if let Some(index) = env_usize("JOB_COMPLETION_INDEX")? {
+        let count = match a.shard_count {
+            Some(c) => c,
+            None => env_usize("SYNOSIS_SHARD_COUNT")?
+                .context("JOB_COMPLETION_INDEX is set: give the shard count with --shard-count or SYNOSIS_SHARD_COUNT")?,
+        };
+        if count == 0 || index >= count {
+            bail!("JOB_COMPLETION_INDEX={index} is not in 0..{count}");
+        }
+        return Ok(Shard { index, count });
+    }
+    Ok(Shard::ALL)
+}
+
+fn gpu_renderer() -> Result<GpuRenderer> {
+    let accel = match std::env::var("SYNOSIS_ACCEL").as_deref() {
+        Ok("software") => synosis::trace::AccelChoice::Software,
+        Ok("ray-query") => synosis::trace::AccelChoice::RayQuery,
+        _ => synosis::trace::AccelChoice::Auto,
+    };
+    GpuRenderer::new(accel, false)
+        .map_err(anyhow::Error::msg)
+        .context("starting the GPU renderer")
+}
+
+pub fn run(a: DatasetArgs) -> Result<()> {
+    match a.cmd {
+        Cmd::Run(r) => run_job(r),
+        Cmd::Merge { dirs } => {
+            let n = dataset::merge(&dirs).context("merge")?;
+            println!(
+                "{}: {n} images, manifest.jsonl and coco/*.json written",
+                dirs[0].display()
+            );
+            Ok(())
+        }
+        Cmd::Postprocess { dir, job } => {
+            let n = dataset::postprocess_dir(&dir, job.as_deref()).context("postprocess")?;
+            println!("{}: {n} images post-processed", dir.display());
+            Ok(())
+        }
+        Cmd::RenderOne { job, index, out } => {
+            let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
+            let mut renderer = gpu_renderer()?;
+            let e = dataset::render_one(
+                &prep,
+                index,
+                &out,
+                &mut renderer,
+                &mut ModuleTextures::default(),
+            )?;
+            println!("{}", serde_json::to_string_pretty(&e)?);
+            Ok(())
+        }
+        Cmd::Check { job } => {
+            let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
+            let count =
+                |s: dataset::Split| prep.plan.instances.iter().filter(|i| i.split == s).count();
+            println!(
+                "{}: OK: {} images, {} object instances (train {}, val {}, test {}), {} defect sets, {} views",
+                job.display(),
+                prep.plan.items.len(),
+                prep.plan.instances.len(),
+                count(dataset::Split::Train),
+                count(dataset::Split::Val),
+                count(dataset::Split::Test),
+                prep.defect_sets.len(),
+                prep.job.views.len()
+            );
+            Ok(())
+        }
+    }
+}
+
+fn run_job(a: RunArgs) -> Result<()> {
+    let shard = resolve_shard(&a)?;
+    // Everything is checked before the renderer starts or a file is written.
+    let prep = dataset::prepare(&a.job).with_context(|| format!("job {}", a.job.display()))?;
+    let mut renderer = gpu_renderer()?;
+    let bar = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(0)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta} ({per_sec})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.enable_steady_tick(Duration::from_millis(500));
+    let mut progress = |done: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let report = dataset::run(
+        &prep,
+        &a.out,
+        &mut renderer,
+        &mut ModuleTextures::default(),
+        RunOptions {
+            shard,
+            fail_after: None,
+            progress: Some(&mut progress),
+        },
+    )
+    .with_context(|| format!("dataset run into {}", a.out.display()))?;
+    bar.finish_and_clear();
+    println!(
+        "shard {}/{}: {} images ({} already done, {} rendered){}",
+        shard.index,
+        shard.count,
+        report.shard_items,
+        report.already_done,
+        report.rendered,
+        if report.finished {
+            "; dataset finished (manifest.jsonl, coco/)"
+        } else {
+            "; run `synosis dataset merge` when all shards are done"
+        }
+    );
+    Ok(())
+}

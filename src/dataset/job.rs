@@ -1,0 +1,580 @@
+//! The job file (TOML): everything a dataset run needs, validated as a whole before any
+//! rendering starts. Every error names the field and its allowed range.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{DatasetError, Result};
+use super::post::PostStep;
+
+/// The paper's viewpoint plan: faces A, B, C at 0, 10 and 20 degrees from the normal.
+pub const PAPER_VIEWS: [&str; 9] = ["A0", "A10", "A20", "B0", "B10", "B20", "C0", "C10", "C20"];
+
+/// A parsed job. Counts are read as signed integers so a negative count gets a clear
+/// message naming its field rather than a TOML type error; after [`Job::validate`] they
+/// are known to be in range.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Job {
+    /// The one seed every random choice is split from (see `seed.rs`).
+    pub seed: u64,
+    pub render: RenderSettings,
+    /// Viewpoint names "<face><degrees>", e.g. "A20". Default: [`PAPER_VIEWS`].
+    #[serde(default = "default_views")]
+    pub views: Vec<String>,
+    #[serde(default)]
+    pub material: MaterialSettings,
+    #[serde(default)]
+    pub mapping: MappingSettings,
+    pub texture: TextureSettings,
+    #[serde(default)]
+    pub defects: DefectSettings,
+    #[serde(default)]
+    pub sensor: SensorSettings,
+    #[serde(rename = "finish")]
+    pub finishes: Vec<Finish>,
+    #[serde(rename = "object")]
+    pub objects: Vec<Object>,
+    #[serde(default)]
+    pub split: SplitRatios,
+    /// Post-processing steps, applied in this order.
+    #[serde(default, rename = "postprocess")]
+    pub postprocess: Vec<PostStep>,
+    /// Where relative paths (glTF, defect spec) are resolved; the job file's folder.
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+    /// The file the job came from, for error messages.
+    #[serde(skip)]
+    pub origin: String,
+}
+
+fn default_views() -> Vec<String> {
+    PAPER_VIEWS.iter().map(|s| s.to_string()).collect()
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSettings {
+    pub width: i64,
+    pub height: i64,
+    pub spp: i64,
+    pub bounces: i64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSettings {
+    /// GGX alpha drawn uniformly per object instance from [min, max].
+    pub roughness: [f64; 2],
+}
+
+impl Default for MaterialSettings {
+    fn default() -> Self {
+        MaterialSettings {
+            roughness: [0.05, 0.3],
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MappingSettings {
+    /// Texture rotation per face drawn from [-rotation_deg, rotation_deg].
+    pub rotation_deg: f64,
+    /// Texture translation per face, texture pixels, each axis drawn from [-t, t].
+    pub translation_px: FaceTranslation,
+}
+
+impl Default for MappingSettings {
+    fn default() -> Self {
+        MappingSettings {
+            rotation_deg: 15.0,
+            translation_px: FaceTranslation::default(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FaceTranslation {
+    #[serde(rename = "A")]
+    pub a: f64,
+    #[serde(rename = "B")]
+    pub b: f64,
+    #[serde(rename = "C")]
+    pub c: f64,
+}
+
+impl Default for FaceTranslation {
+    fn default() -> Self {
+        // The paper's 5 / 3 / 1 px for faces A / B / C.
+        FaceTranslation {
+            a: 5.0,
+            b: 3.0,
+            c: 1.0,
+        }
+    }
+}
+
+impl FaceTranslation {
+    pub fn for_face(&self, face: u8) -> f64 {
+        match face {
+            1 => self.a,
+            2 => self.b,
+            _ => self.c,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextureSettings {
+    /// Side of each (square) texture map, pixels.
+    pub size_px: i64,
+    /// Texture pixel spacing, micrometres.
+    pub spacing_um: f64,
+    /// Textures kept in memory at once (bounded cache keyed by (finish, instance)).
+    #[serde(default = "default_cache")]
+    pub cache: i64,
+}
+
+fn default_cache() -> i64 {
+    8
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DefectSettings {
+    /// "paper" for the paper's table, or a defect spec TOML path (relative to the job).
+    pub spec: String,
+    /// Distinct defect geometries, sampled once and re-used across objects and finishes.
+    /// Default: the largest `defective` count of any object.
+    pub sets: Option<i64>,
+}
+
+impl Default for DefectSettings {
+    fn default() -> Self {
+        DefectSettings {
+            spec: "paper".into(),
+            sets: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorSettings {
+    /// Image value (8-bit units, 0..=255) = 255 * exposure * radiance, before the
+    /// post-processing steps.
+    pub exposure: f64,
+}
+
+impl Default for SensorSettings {
+    fn default() -> Self {
+        SensorSettings { exposure: 1.0 }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum FinishKind {
+    Milled,
+    Sandblasted,
+}
+
+/// A surface finish: how its textures are made. `params`, `variation` and `exemplar` are
+/// handed to the texture module (`docs/texture.md` lists their fields).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Finish {
+    /// Name, e.g. "parallel-d4-ae0.5"; the texture type (the part before the first '-')
+    /// selects the linear post-processing row and is what `synosis compare` groups by.
+    pub name: String,
+    pub kind: FinishKind,
+    /// Texture instances of this finish; each face draws one of them.
+    pub textures: i64,
+    /// Milled: `MilledParams` fields; sandblasted: `SandblastParams` fields.
+    #[serde(default)]
+    pub params: toml::Table,
+    /// Milled only: "paper" (the paper's variation sets), "none", or a table of sets.
+    #[serde(default)]
+    pub variation: Option<toml::Value>,
+    /// Sandblasted only: the stand-in exemplar's fields (e.g. pressure_bar).
+    #[serde(default)]
+    pub exemplar: Option<toml::Table>,
+}
+
+impl Finish {
+    /// Texture type: the name up to its first '-', lower case (as `synosis compare`).
+    pub fn texture_type(&self) -> String {
+        crate::metrics::dataset::texture_of(&self.name)
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Object {
+    pub name: String,
+    /// "testbody-b", "testbody-m", or a glTF path (relative to the job file).
+    pub mesh: String,
+    /// Finishes this object is made in; default all, in job order.
+    #[serde(default)]
+    pub finishes: Option<Vec<String>>,
+    /// Instances per finish carrying defect set 0, 1, ... (cycled if fewer sets).
+    pub defective: i64,
+    /// Instances per finish without defects.
+    pub defect_free: i64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SplitRatios {
+    pub train: f64,
+    pub val: f64,
+    pub test: f64,
+}
+
+impl Default for SplitRatios {
+    fn default() -> Self {
+        SplitRatios {
+            train: 0.7,
+            val: 0.1,
+            test: 0.2,
+        }
+    }
+}
+
+/// Largest accepted counts: far beyond any real job, they catch typos (an extra zero
+/// times nine views is hours of rendering).
+const MAX_INSTANCES: i64 = 100_000;
+const MAX_SIZE: i64 = 16_384;
+
+impl Job {
+    /// Reads and validates a job file; relative paths become relative to its folder.
+    pub fn load(path: &Path) -> Result<Job> {
+        let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+        let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        Job::parse(&text, &path.display().to_string(), &base)
+    }
+
+    /// Parses and validates job TOML; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str, base_dir: &Path) -> Result<Job> {
+        let mut job: Job = toml::from_str(text).map_err(|e| DatasetError::Parse {
+            file: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        job.base_dir = base_dir.to_path_buf();
+        job.origin = origin.to_string();
+        job.validate()?;
+        Ok(job)
+    }
+
+    /// Parses the copy of a job stored in a dataset folder: validated, except that mesh
+    /// files are not looked for (relative paths point beside the original job file).
+    pub fn parse_stored(text: &str, origin: &str) -> Result<Job> {
+        let mut job: Job = toml::from_str(text).map_err(|e| DatasetError::Parse {
+            file: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        job.origin = origin.to_string();
+        job.check(false)?;
+        Ok(job)
+    }
+
+    /// True if the two jobs make the same renders (only post-processing may differ).
+    pub fn same_except_postprocess(&self, other: &Job) -> bool {
+        let strip = |j: &Job| {
+            let mut j = j.clone();
+            j.postprocess.clear();
+            j.base_dir = PathBuf::new();
+            j.origin.clear();
+            toml::to_string(&j).ok()
+        };
+        strip(self).is_some() && strip(self) == strip(other)
+    }
+
+    fn field(&self, field: impl Into<String>, value: impl ToString, allowed: &str) -> DatasetError {
+        DatasetError::Field {
+            file: self.origin.clone(),
+            field: field.into(),
+            value: value.to_string(),
+            allowed: allowed.to_string(),
+        }
+    }
+
+    fn int(&self, field: &str, v: i64, lo: i64, hi: i64) -> Result<()> {
+        if (lo..=hi).contains(&v) {
+            Ok(())
+        } else {
+            Err(self.field(field, v, &format!("must be an integer in [{lo}, {hi}]")))
+        }
+    }
+
+    fn real(&self, field: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
+        if v.is_finite() && v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(self.field(field, v, &format!("must be a number in [{lo}, {hi}]")))
+        }
+    }
+
+    /// Every check that needs no file other than the job itself (meshes and the defect
+    /// spec are checked by `prepare`, still before rendering).
+    pub fn validate(&self) -> Result<()> {
+        self.check(true)
+    }
+
+    fn check(&self, check_files: bool) -> Result<()> {
+        let r = &self.render;
+        self.int("render.width", r.width, 1, MAX_SIZE)?;
+        self.int("render.height", r.height, 1, MAX_SIZE)?;
+        self.int("render.spp", r.spp, 1, 1 << 16)?;
+        self.int("render.bounces", r.bounces, 0, 64)?;
+        if self.views.is_empty() {
+            return Err(self.field("views", "[]", "at least one view, e.g. \"A20\""));
+        }
+        let mut seen = BTreeSet::new();
+        for (i, v) in self.views.iter().enumerate() {
+            parse_view(v).ok_or_else(|| {
+                self.field(
+                    format!("views[{i}]"),
+                    format!("{v:?}"),
+                    "a face letter A, B or C then degrees from the normal in [0, 89], e.g. \"A20\"",
+                )
+            })?;
+            if !seen.insert(v.as_str()) {
+                return Err(self.field(format!("views[{i}]"), format!("{v:?}"), "listed twice"));
+            }
+        }
+        let [lo, hi] = self.material.roughness;
+        self.real("material.roughness[0]", lo, 0.001, 1.0)?;
+        self.real("material.roughness[1]", hi, lo, 1.0)?;
+        self.real(
+            "mapping.rotation_deg",
+            self.mapping.rotation_deg,
+            0.0,
+            180.0,
+        )?;
+        let t = &self.mapping.translation_px;
+        for (f, v) in [("A", t.a), ("B", t.b), ("C", t.c)] {
+            self.real(&format!("mapping.translation_px.{f}"), v, 0.0, 1.0e4)?;
+        }
+        self.int("texture.size_px", self.texture.size_px, 16, 65_536)?;
+        self.real("texture.spacing_um", self.texture.spacing_um, 0.01, 1.0e4)?;
+        self.int("texture.cache", self.texture.cache, 1, 1024)?;
+        self.real("sensor.exposure", self.sensor.exposure, 0.0, 1.0e9)?;
+        if let Some(s) = self.defects.sets {
+            self.int("defects.sets", s, 1, MAX_INSTANCES)?;
+        }
+        if self.defects.spec.trim().is_empty() {
+            return Err(self.field(
+                "defects.spec",
+                "\"\"",
+                "\"paper\" or a defect spec TOML path",
+            ));
+        }
+
+        if self.finishes.is_empty() {
+            return Err(self.field("finish", "[]", "at least one [[finish]]"));
+        }
+        let mut names = BTreeSet::new();
+        for (i, f) in self.finishes.iter().enumerate() {
+            let p = format!("finish[{i}]");
+            if f.name.trim().is_empty() || f.name.contains(['/', '\\']) {
+                return Err(self.field(
+                    format!("{p}.name"),
+                    format!("{:?}", f.name),
+                    "a non-empty name without '/' or '\\'",
+                ));
+            }
+            if !names.insert(f.name.as_str()) {
+                return Err(self.field(
+                    format!("{p}.name"),
+                    format!("{:?}", f.name),
+                    "finish names must be unique",
+                ));
+            }
+            self.int(&format!("{p}.textures"), f.textures, 1, 10_000)?;
+            match f.kind {
+                FinishKind::Milled => {
+                    if f.exemplar.is_some() {
+                        return Err(self.field(
+                            format!("{p}.exemplar"),
+                            "set",
+                            "only for kind = \"sandblasted\"",
+                        ));
+                    }
+                }
+                FinishKind::Sandblasted => {
+                    if f.variation.is_some() {
+                        return Err(self.field(
+                            format!("{p}.variation"),
+                            "set",
+                            "only for kind = \"milled\"",
+                        ));
+                    }
+                }
+            }
+            if let Some(toml::Value::String(s)) = &f.variation
+                && s != "paper"
+                && s != "none"
+            {
+                return Err(self.field(
+                    format!("{p}.variation"),
+                    format!("{s:?}"),
+                    "\"paper\", \"none\" or a table of value sets",
+                ));
+            }
+            super::textures::validate_finish(f)
+                .map_err(|msg| self.field(p.clone(), &f.name, &msg))?;
+        }
+
+        if self.objects.is_empty() {
+            return Err(self.field("object", "[]", "at least one [[object]]"));
+        }
+        let mut onames = BTreeSet::new();
+        for (i, o) in self.objects.iter().enumerate() {
+            let p = format!("object[{i}]");
+            if o.name.trim().is_empty() || o.name.contains(['/', '\\']) {
+                return Err(self.field(
+                    format!("{p}.name"),
+                    format!("{:?}", o.name),
+                    "a non-empty name without '/' or '\\'",
+                ));
+            }
+            if !onames.insert(o.name.as_str()) {
+                return Err(self.field(
+                    format!("{p}.name"),
+                    format!("{:?}", o.name),
+                    "object names must be unique",
+                ));
+            }
+            self.int(&format!("{p}.defective"), o.defective, 0, MAX_INSTANCES)?;
+            self.int(&format!("{p}.defect_free"), o.defect_free, 0, MAX_INSTANCES)?;
+            if o.defective + o.defect_free == 0 {
+                return Err(self.field(
+                    format!("{p}.defective + defect_free"),
+                    0,
+                    "at least one instance",
+                ));
+            }
+            if let Some(fs) = &o.finishes {
+                if fs.is_empty() {
+                    return Err(self.field(
+                        format!("{p}.finishes"),
+                        "[]",
+                        "omit it for all finishes, or name at least one",
+                    ));
+                }
+                for (j, f) in fs.iter().enumerate() {
+                    if !names.contains(f.as_str()) {
+                        let known: Vec<&str> = names.iter().copied().collect();
+                        return Err(self.field(
+                            format!("{p}.finishes[{j}]"),
+                            format!("{f:?}"),
+                            &format!("unknown finish; defined: {}", known.join(", ")),
+                        ));
+                    }
+                }
+            }
+            if check_files && builtin_variant(&o.mesh).is_none() {
+                let path = self.resolve(&o.mesh);
+                if !path.is_file() {
+                    return Err(self.field(format!("{p}.mesh"), format!("{:?}", o.mesh), &format!("\"testbody-b\", \"testbody-m\" or an existing glTF file ({} not found)", path.display())));
+                }
+            }
+        }
+
+        let s = &self.split;
+        for (n, v) in [
+            ("split.train", s.train),
+            ("split.val", s.val),
+            ("split.test", s.test),
+        ] {
+            self.real(n, v, 0.0, 1.0)?;
+        }
+        let sum = s.train + s.val + s.test;
+        if (sum - 1.0).abs() > 1e-6 {
+            return Err(self.field(
+                "split",
+                format!("{} + {} + {} = {sum}", s.train, s.val, s.test),
+                "train + val + test must sum to 1",
+            ));
+        }
+
+        let types: BTreeSet<String> = self.finishes.iter().map(Finish::texture_type).collect();
+        for (i, step) in self.postprocess.iter().enumerate() {
+            step.validate(&types).map_err(|(f, v, allowed)| {
+                self.field(format!("postprocess[{i}].{f}"), v, &allowed)
+            })?;
+        }
+        Ok(())
+    }
+
+    /// A path from the job file, relative to its folder.
+    pub fn resolve(&self, p: &str) -> PathBuf {
+        let path = Path::new(p);
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.base_dir.join(path)
+        }
+    }
+
+    /// Finish indices an object is made in.
+    pub fn object_finishes(&self, object: usize) -> Vec<usize> {
+        match &self.objects[object].finishes {
+            None => (0..self.finishes.len()).collect(),
+            Some(names) => names
+                .iter()
+                .filter_map(|n| self.finishes.iter().position(|f| &f.name == n))
+                .collect(),
+        }
+    }
+
+    /// Distinct defect geometries to sample.
+    pub fn defect_sets(&self) -> usize {
+        match self.defects.sets {
+            Some(s) => s as usize,
+            None => self
+                .objects
+                .iter()
+                .map(|o| o.defective.max(0) as usize)
+                .max()
+                .unwrap_or(0),
+        }
+    }
+
+    /// Linear post-processing rows per texture type, for the docs and the manifest.
+    pub fn texture_types(&self) -> BTreeMap<String, Vec<String>> {
+        let mut m: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        for f in &self.finishes {
+            m.entry(f.texture_type()).or_default().push(f.name.clone());
+        }
+        m
+    }
+}
+
+/// The built-in test body a mesh string names, if any.
+pub fn builtin_variant(mesh: &str) -> Option<crate::scene::Variant> {
+    match mesh {
+        "testbody-b" => Some(crate::scene::Variant::B),
+        "testbody-m" => Some(crate::scene::Variant::M),
+        _ => None,
+    }
+}
+
+/// A viewpoint name "A20": face id (1..=3) and degrees from the face normal in [0, 89].
+pub fn parse_view(s: &str) -> Option<(u8, f64)> {
+    let mut chars = s.chars();
+    let face = match chars.next()? {
+        'A' => 1,
+        'B' => 2,
+        'C' => 3,
+        _ => return None,
+    };
+    let deg: f64 = chars.as_str().parse().ok()?;
+    (deg.is_finite() && (0.0..=89.0).contains(&deg)).then_some((face, deg))
+}

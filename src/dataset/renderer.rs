@@ -1,0 +1,128 @@
+//! The interface between the dataset job and whatever makes the pixels: the job calls
+//! [`ImageRenderer::render`] once per image. The production implementation is the GPU
+//! path tracer plus annotation pass (`gpu.rs`); tests plug in a CPU test double.
+
+use std::sync::Arc;
+
+use crate::scene::Mesh;
+
+/// A slope map as the renderer needs it: row 0 at the top, `[dh/dx, dh/dy]` (unitless)
+/// per texture pixel of `spacing_um`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureMap {
+    pub width: usize,
+    pub height: usize,
+    pub spacing_um: f64,
+    pub slopes: Vec<[f32; 2]>,
+}
+
+impl TextureMap {
+    /// Bytes held, for the cache's accounting.
+    pub fn bytes(&self) -> usize {
+        self.slopes.len() * std::mem::size_of::<[f32; 2]>()
+    }
+}
+
+/// The texture on one inspected face: a planar projection in the face's frame
+/// (`scene::face_frames`), rotated by `rotation_rad` and shifted by `offset_px` texture
+/// pixels, centred on the face centre.
+#[derive(Clone, Debug)]
+pub struct FaceTexture {
+    /// Face id (1 = A, 2 = B, 3 = C).
+    pub face: u8,
+    pub finish: String,
+    /// Which of the finish's texture instances this is.
+    pub texture_instance: u32,
+    pub map: Arc<TextureMap>,
+    pub rotation_rad: f32,
+    pub offset_px: [f32; 2],
+}
+
+/// One image to make.
+pub struct ImageRequest<'a> {
+    /// The (defected) object with per-triangle face, class and instance labels.
+    pub mesh: &'a Mesh,
+    /// Identifies `mesh`: equal keys mean the same mesh, so a renderer may keep its
+    /// acceleration structure between the views of one object instance.
+    pub mesh_key: u64,
+    /// Viewpoint name, e.g. "A20" (face A, 20 degrees from its normal, aimed at its centre).
+    pub view: &'a str,
+    /// GGX alpha of the aluminium.
+    pub roughness: f32,
+    pub face_textures: Vec<FaceTexture>,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub bounces: u32,
+    pub seed: u64,
+}
+
+/// What the renderer returns, every buffer row-major with row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderedImage {
+    pub width: u32,
+    pub height: u32,
+    /// Linear radiance, >= 0.
+    pub radiance: Vec<f32>,
+    /// Defect class of the first hit: 0 none, 1 dent, 2 scratch.
+    pub class: Vec<u8>,
+    /// Defect instance id of the first hit, 0 = none.
+    pub instance: Vec<u16>,
+    /// Face id of the first hit: 0 other / background, 1 A, 2 B, 3 C.
+    pub face: Vec<u8>,
+    /// Defect coverage fraction of the pixel, in [0, 1].
+    pub coverage: Vec<f32>,
+    /// 1 where the first hit is the object, 0 for the table or nothing.
+    pub object: Vec<u8>,
+}
+
+impl RenderedImage {
+    /// Checks sizes and values against the request, so a faulty renderer cannot write a
+    /// broken image into the dataset.
+    pub fn check(&self, req: &ImageRequest) -> Result<(), String> {
+        if (self.width, self.height) != (req.width, req.height) {
+            return Err(format!(
+                "returned {}x{}, asked {}x{}",
+                self.width, self.height, req.width, req.height
+            ));
+        }
+        let n = self.width as usize * self.height as usize;
+        let lens = [
+            ("radiance", self.radiance.len()),
+            ("class", self.class.len()),
+            ("instance", self.instance.len()),
+            ("face", self.face.len()),
+            ("coverage", self.coverage.len()),
+            ("object", self.object.len()),
+        ];
+        for (name, len) in lens {
+            if len != n {
+                return Err(format!("{name} has {len} values for {n} pixels"));
+            }
+        }
+        if let Some(p) = self
+            .radiance
+            .iter()
+            .position(|v| !v.is_finite() || *v < 0.0)
+        {
+            return Err(format!("radiance at pixel {p} is {}", self.radiance[p]));
+        }
+        if let Some(p) = self.class.iter().position(|&c| c > 2) {
+            return Err(format!("class at pixel {p} is {}", self.class[p]));
+        }
+        if let Some(p) = self.face.iter().position(|&f| f > 3) {
+            return Err(format!("face at pixel {p} is {}", self.face[p]));
+        }
+        if let Some(p) = self.coverage.iter().position(|c| !(0.0..=1.0).contains(c)) {
+            return Err(format!("coverage at pixel {p} is {}", self.coverage[p]));
+        }
+        Ok(())
+    }
+}
+
+/// Makes one image with its annotation.
+pub trait ImageRenderer {
+    /// A short description for the manifest (backend, device).
+    fn describe(&self) -> String;
+    fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String>;
+}

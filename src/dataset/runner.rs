@@ -1,0 +1,950 @@
+//! Running a job: preparation (everything checked before the first image), the resumable
+//! per-shard loop, finishing (merged manifest, COCO per split), re-running the
+//! post-processing, and re-making a single image.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use super::error::{DatasetError, Result};
+use super::files;
+use super::job::{Job, builtin_variant};
+use super::labels;
+use super::plan::{self, FaceChoice, InstancePlan, ItemPlan, Label, Plan, Split};
+use super::post::{self, DefectVisibility, Frame};
+use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
+use super::seed::{derive, name, tag};
+use super::textures::{TextureCache, TextureSource, texture_error};
+use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
+use crate::scene::{Degenerates, Mesh, face_frames, import_mesh, testbody};
+
+/// A job with everything loaded and checked: meshes, defect sets, the plan.
+pub struct Prepared {
+    pub job: Job,
+    /// The job file's text, copied into the output folder.
+    pub job_text: String,
+    pub plan: Plan,
+    pub meshes: Vec<Mesh>,
+    pub defect_sets: Vec<DefectSet>,
+}
+
+/// Loads and checks a job file; nothing is rendered or written.
+pub fn prepare(job_path: &Path) -> Result<Prepared> {
+    let text = std::fs::read_to_string(job_path).map_err(|e| DatasetError::io(job_path, e))?;
+    let base = job_path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    prepare_text(&text, &job_path.display().to_string(), &base)
+}
+
+/// As [`prepare`], from the job's text; relative paths resolve against `base_dir`.
+pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepared> {
+    let job = Job::parse(text, origin, base_dir)?;
+    let mut meshes = Vec::new();
+    for (i, o) in job.objects.iter().enumerate() {
+        let mesh = match builtin_variant(&o.mesh) {
+            Some(v) => testbody(v),
+            None => {
+                import_mesh(&job.resolve(&o.mesh), Degenerates::Drop)
+                    .map_err(|source| DatasetError::Mesh {
+                        object: o.name.clone(),
+                        source,
+                    })?
+                    .mesh
+            }
+        };
+        check_texture_cover(&job, i, &mesh)?;
+        meshes.push(mesh);
+    }
+    let spec = if job.defects.spec == "paper" {
+        DefectSpec::paper()
+    } else {
+        DefectSpec::load(&job.resolve(&job.defects.spec)).map_err(|source| {
+            DatasetError::Defect {
+                object: "(defects.spec)".into(),
+                source,
+            }
+        })?
+    };
+    let any_defective = job.objects.iter().any(|o| o.defective > 0);
+    let mut defect_sets = Vec::new();
+    if any_defective {
+        // Sampled once on the first object; re-applied to every object (face-local).
+        for k in 0..job.defect_sets() {
+            let seed = derive(job.seed, &[tag::DEFECT, k as u64]);
+            let set =
+                sample_defects(&meshes[0], &spec, seed).map_err(|source| DatasetError::Defect {
+                    object: job.objects[0].name.clone(),
+                    source,
+                })?;
+            defect_sets.push(set);
+        }
+        // Each set must fit each object that carries it: found now, not at image 4000.
+        for (oi, o) in job.objects.iter().enumerate() {
+            let used = (o.defective.max(0) as usize).min(defect_sets.len());
+            for set in &defect_sets[..used] {
+                imprint(&meshes[oi], set).map_err(|source| DatasetError::Defect {
+                    object: o.name.clone(),
+                    source,
+                })?;
+            }
+        }
+    }
+    let plan = plan::expand(&job);
+    Ok(Prepared {
+        job,
+        job_text: text.to_string(),
+        plan,
+        meshes,
+        defect_sets,
+    })
+}
+
+/// The textures must cover each face whatever its rotation and translation.
+fn check_texture_cover(job: &Job, object: usize, mesh: &Mesh) -> Result<()> {
+    let frames = face_frames(mesh);
+    if frames.is_empty() {
+        return Err(DatasetError::Field {
+            file: job.origin.clone(),
+            field: format!("object[{object}].mesh"),
+            value: job.objects[object].mesh.clone(),
+            allowed: "a mesh with triangles labelled as inspected faces A, B or C".into(),
+        });
+    }
+    let extent_mm = job.texture.size_px as f64 * job.texture.spacing_um / 1000.0;
+    let r = job
+        .mapping
+        .rotation_deg
+        .to_radians()
+        .min(std::f64::consts::FRAC_PI_4);
+    for f in frames {
+        let (hu, hv) = (f.half_size.x as f64, f.half_size.y as f64);
+        // Bounding box of the face rotated by up to r, plus the translation both ways.
+        let need_u = 2.0 * (hu * r.cos() + hv * r.sin());
+        let need_v = 2.0 * (hu * r.sin() + hv * r.cos());
+        let shift_mm =
+            2.0 * job.mapping.translation_px.for_face(f.face) * job.texture.spacing_um / 1000.0;
+        let need = need_u.max(need_v) + shift_mm;
+        if extent_mm + 1e-9 < need {
+            let px = (need * 1000.0 / job.texture.spacing_um).ceil();
+            return Err(DatasetError::Field {
+                file: job.origin.clone(),
+                field: "texture.size_px".into(),
+                value: job.texture.size_px.to_string(),
+                allowed: format!(
+                    "textures of {extent_mm:.2} mm do not cover face {} of object {} ({need:.2} mm with rotation and translation): need size_px >= {px} at spacing_um = {}",
+                    crate::scene::mesh::face_name(f.face),
+                    job.objects[object].name,
+                    job.texture.spacing_um
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Which part of the work this process does: instances with `instance % count == index`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// "i/n".
+    pub fn parse(s: &str) -> Option<Shard> {
+        let (i, n) = s.split_once('/')?;
+        let (index, count) = (i.trim().parse().ok()?, n.trim().parse().ok()?);
+        (count > 0 && index < count).then_some(Shard { index, count })
+    }
+
+    fn file_name(&self) -> String {
+        format!("shard-{}-of-{}.jsonl", self.index, self.count)
+    }
+
+    pub fn owns(&self, item: &ItemPlan) -> bool {
+        item.instance % self.count == self.index
+    }
+}
+
+/// One finished image, one line of the manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ManifestEntry {
+    pub index: usize,
+    pub id: String,
+    /// Paths relative to the dataset folder (the layout `synosis compare` reads).
+    pub image: String,
+    pub faces: String,
+    pub viewpoint: String,
+    pub finish: String,
+    pub texture_type: String,
+    pub split: Split,
+    pub object: String,
+    pub instance: String,
+    pub label: Label,
+    pub defect_set: Option<usize>,
+    pub roughness: f64,
+    pub face_textures: Vec<FaceChoice>,
+    pub seed: u64,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub bounces: u32,
+    pub renderer: String,
+    pub noise_sigma: Option<f64>,
+    pub defects: Vec<DefectVisibility>,
+    /// File name -> content hash.
+    pub files: BTreeMap<String, String>,
+    /// Timing: the only fields that differ between identical runs.
+    pub finished_unix: u64,
+    pub render_seconds: f64,
+}
+
+/// Files under `images/<id>/`.
+pub const IMAGE_FILES: [&str; 11] = [
+    "radiance.exr",
+    "raw_mask.png",
+    "raw_instances.png",
+    "object.png",
+    "faces.png",
+    "coverage.png",
+    "image.png",
+    "mask.png",
+    "instances.png",
+    "labelme.json",
+    "coco.json",
+];
+
+pub struct RunOptions<'a> {
+    pub shard: Shard,
+    /// Test hook: after this many images, write the first file of the next one and stop
+    /// with [`DatasetError::Interrupted`], as a kill would.
+    pub fail_after: Option<usize>,
+    /// Called after each image: (done in this shard, total in this shard).
+    pub progress: Option<&'a mut dyn FnMut(usize, usize)>,
+}
+
+impl Default for RunOptions<'_> {
+    fn default() -> Self {
+        RunOptions {
+            shard: Shard::ALL,
+            fail_after: None,
+            progress: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunReport {
+    pub shard_items: usize,
+    pub already_done: usize,
+    pub rendered: usize,
+    pub stray_temps_removed: usize,
+    /// True when this run also wrote `manifest.jsonl` and the COCO files.
+    pub finished: bool,
+}
+
+/// Renders this shard's unfinished images into `out`; with a single shard, finishes the
+/// dataset too. Safe to kill at any moment and run again.
+pub fn run(
+    prep: &Prepared,
+    out: &Path,
+    renderer: &mut dyn ImageRenderer,
+    textures: &mut dyn TextureSource,
+    mut opts: RunOptions,
+) -> Result<RunReport> {
+    if opts.shard.count == 0 || opts.shard.index >= opts.shard.count {
+        return Err(DatasetError::layout(
+            out,
+            format!("bad shard {}/{}", opts.shard.index, opts.shard.count),
+        ));
+    }
+    std::fs::create_dir_all(out.join("manifests")).map_err(|e| DatasetError::io(out, e))?;
+    claim_dir(out, &prep.job_text)?;
+    let manifest_path = out.join("manifests").join(opts.shard.file_name());
+    let done: BTreeSet<usize> = read_manifest(&manifest_path, true)?
+        .into_iter()
+        .map(|e| e.index)
+        .collect();
+    let mine: Vec<&ItemPlan> = prep
+        .plan
+        .items
+        .iter()
+        .filter(|i| opts.shard.owns(i))
+        .collect();
+    let mut stray =
+        files::remove_stray_temps(out)? + files::remove_stray_temps(&out.join("manifests"))?;
+    for item in &mine {
+        stray += files::remove_stray_temps(&out.join("images").join(item.id()))?;
+    }
+    let todo: Vec<&&ItemPlan> = mine.iter().filter(|i| !done.contains(&i.index)).collect();
+    let mut ctx = Ctx::new(prep);
+    let mut rendered = 0;
+    let already = mine.len() - todo.len();
+    for item in todo {
+        if opts.fail_after == Some(rendered) {
+            // Simulate a kill in the middle of an image: one file in place, no line.
+            let dir = out.join("images").join(item.id());
+            std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
+            files::write_gray8(&dir.join("faces.png"), 1, 1, &[0])?;
+            return Err(DatasetError::Interrupted { done: rendered });
+        }
+        let entry = ctx.render_item(item, out, renderer, textures)?;
+        append_line(&manifest_path, &entry)?;
+        rendered += 1;
+        if let Some(p) = opts.progress.as_deref_mut() {
+            p(already + rendered, mine.len());
+        }
+    }
+    let finished = opts.shard.count == 1;
+    if finished {
+        finish(out)?;
+    }
+    Ok(RunReport {
+        shard_items: mine.len(),
+        already_done: already,
+        rendered,
+        stray_temps_removed: stray,
+        finished,
+    })
+}
+
+/// Re-makes image `index` alone into `out/images/<id>/`; returns its manifest entry
+/// (also written to `out/one-<id>.json`, outside the shard manifests).
+pub fn render_one(
+    prep: &Prepared,
+    index: usize,
+    out: &Path,
+    renderer: &mut dyn ImageRenderer,
+    textures: &mut dyn TextureSource,
+) -> Result<ManifestEntry> {
+    let item = prep
+        .plan
+        .items
+        .get(index)
+        .ok_or_else(|| DatasetError::Field {
+            file: prep.job.origin.clone(),
+            field: "--index".into(),
+            value: index.to_string(),
+            allowed: format!("the job has images 0..{}", prep.plan.items.len()),
+        })?;
+    std::fs::create_dir_all(out).map_err(|e| DatasetError::io(out, e))?;
+    let mut ctx = Ctx::new(prep);
+    let entry = ctx.render_item(item, out, renderer, textures)?;
+    let v = serde_json::to_value(&entry)
+        .map_err(|e| DatasetError::io(out, std::io::Error::other(e)))?;
+    files::write_json(&out.join(format!("one-{}.json", item.id())), &v)?;
+    Ok(entry)
+}
+
+/// Writes `job.toml` into a new folder, or checks the folder holds this same job.
+fn claim_dir(out: &Path, job_text: &str) -> Result<()> {
+    let path = out.join("job.toml");
+    match std::fs::read_to_string(&path) {
+        Ok(existing) if existing == job_text => Ok(()),
+        Ok(_) => Err(DatasetError::layout(
+            out,
+            "holds a different job (job.toml differs); use another --out or the same job file",
+        )),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            crate::util::write_atomic(&path, job_text.as_bytes())
+                .map_err(|e| DatasetError::io(&path, e))
+        }
+        Err(e) => Err(DatasetError::io(path, e)),
+    }
+}
+
+/// State kept between images: the current instance's mesh and the texture cache.
+struct Ctx<'p> {
+    prep: &'p Prepared,
+    cache: TextureCache,
+    mesh: Option<(usize, Arc<Mesh>)>,
+}
+
+impl<'p> Ctx<'p> {
+    fn new(prep: &'p Prepared) -> Self {
+        Ctx {
+            prep,
+            cache: TextureCache::new(prep.job.texture.cache as usize),
+            mesh: None,
+        }
+    }
+
+    /// The mesh of an instance: the object, with its defect set imprinted if defective.
+    /// Only the current one is kept.
+    fn mesh(&mut self, inst_index: usize) -> Result<Arc<Mesh>> {
+        if let Some((k, m)) = &self.mesh
+            && *k == inst_index
+        {
+            return Ok(m.clone());
+        }
+        self.mesh = None;
+        let inst = &self.prep.plan.instances[inst_index];
+        let base = &self.prep.meshes[inst.object];
+        let mesh = match inst.defect_set {
+            Some(k) => {
+                imprint(base, &self.prep.defect_sets[k]).map_err(|source| DatasetError::Defect {
+                    object: self.prep.job.objects[inst.object].name.clone(),
+                    source,
+                })?
+            }
+            None => base.clone(),
+        };
+        let m = Arc::new(mesh);
+        self.mesh = Some((inst_index, m.clone()));
+        Ok(m)
+    }
+
+    fn render_item(
+        &mut self,
+        item: &ItemPlan,
+        out: &Path,
+        renderer: &mut dyn ImageRenderer,
+        textures: &mut dyn TextureSource,
+    ) -> Result<ManifestEntry> {
+        let t0 = Instant::now();
+        let job = &self.prep.job;
+        let inst: &InstancePlan = &self.prep.plan.instances[item.instance];
+        let finish = &job.finishes[inst.finish];
+        let params = plan::instance_params(job, inst);
+        let mesh = self.mesh(item.instance)?;
+        let present: BTreeSet<u8> = mesh.labels.iter().map(|l| l.face).collect();
+        let mut face_textures = Vec::new();
+        for fc in params.faces.iter().filter(|f| present.contains(&f.face)) {
+            let size = job.texture.size_px as usize;
+            let spacing = job.texture.spacing_um;
+            let tseed = derive(
+                job.seed,
+                &[tag::TEXTURE, name(&finish.name), fc.texture as u64],
+            );
+            let map = self.cache.get((inst.finish, fc.texture), || {
+                textures
+                    .make(finish, fc.texture, tseed, size, spacing)
+                    .map_err(|m| texture_error(finish, fc.texture, m))
+            })?;
+            face_textures.push(FaceTexture {
+                face: fc.face,
+                finish: finish.name.clone(),
+                texture_instance: fc.texture,
+                map,
+                rotation_rad: (fc.rotation_deg as f32).to_radians(),
+                offset_px: [fc.offset_px[0] as f32, fc.offset_px[1] as f32],
+            });
+        }
+        let view = &job.views[item.view];
+        let req = ImageRequest {
+            mesh: &mesh,
+            mesh_key: match inst.defect_set {
+                Some(_) => (1u64 << 32) | item.instance as u64,
+                None => inst.object as u64,
+            },
+            view,
+            roughness: params.roughness as f32,
+            face_textures,
+            width: job.render.width as u32,
+            height: job.render.height as u32,
+            spp: job.render.spp as u32,
+            bounces: job.render.bounces as u32,
+            seed: item.seed,
+        };
+        let fail = |message: String| DatasetError::Render {
+            index: item.index,
+            id: item.id(),
+            message,
+        };
+        let img = renderer.render(&req).map_err(fail)?;
+        img.check(&req).map_err(fail)?;
+        let dir = out.join("images").join(item.id());
+        std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
+        let mut hashes = write_raw(&dir, &img)?;
+        let frame = raw_frame(job, &img);
+        let (post_hashes, defects, noise_sigma) =
+            write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
+        hashes.extend(post_hashes);
+        let rel = |f: &str| format!("images/{}/{f}", item.id());
+        Ok(ManifestEntry {
+            index: item.index,
+            id: item.id(),
+            image: rel("image.png"),
+            faces: rel("faces.png"),
+            viewpoint: view.clone(),
+            finish: finish.name.clone(),
+            texture_type: finish.texture_type(),
+            split: inst.split,
+            object: job.objects[inst.object].name.clone(),
+            instance: inst.id.clone(),
+            label: inst.label,
+            defect_set: inst.defect_set,
+            roughness: params.roughness,
+            face_textures: params.faces,
+            seed: item.seed,
+            width: req.width,
+            height: req.height,
+            spp: req.spp,
+            bounces: req.bounces,
+            renderer: renderer.describe(),
+            noise_sigma,
+            defects,
+            files: hashes,
+            finished_unix: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0),
+            render_seconds: t0.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// The renderer's outputs, kept raw so post-processing can be re-run without rendering.
+fn write_raw(dir: &Path, img: &RenderedImage) -> Result<BTreeMap<String, String>> {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let mut m = BTreeMap::new();
+    m.insert(
+        "radiance.exr".into(),
+        files::write_exr(&dir.join("radiance.exr"), w, h, &img.radiance)?,
+    );
+    m.insert(
+        "raw_mask.png".into(),
+        files::write_gray8(&dir.join("raw_mask.png"), w, h, &img.class)?,
+    );
+    m.insert(
+        "raw_instances.png".into(),
+        files::write_gray16(&dir.join("raw_instances.png"), w, h, &img.instance)?,
+    );
+    let object: Vec<u8> = img
+        .object
+        .iter()
+        .map(|&o| if o != 0 { 255 } else { 0 })
+        .collect();
+    m.insert(
+        "object.png".into(),
+        files::write_gray8(&dir.join("object.png"), w, h, &object)?,
+    );
+    m.insert(
+        "faces.png".into(),
+        files::write_gray8(&dir.join("faces.png"), w, h, &img.face)?,
+    );
+    let cov: Vec<u16> = img
+        .coverage
+        .iter()
+        .map(|&c| (c.clamp(0.0, 1.0) * 65535.0).round() as u16)
+        .collect();
+    m.insert(
+        "coverage.png".into(),
+        files::write_gray16(&dir.join("coverage.png"), w, h, &cov)?,
+    );
+    Ok(m)
+}
+
+fn raw_frame(job: &Job, img: &RenderedImage) -> Frame {
+    let scale = post::FULL_SCALE * job.sensor.exposure as f32;
+    Frame {
+        width: img.width as usize,
+        height: img.height as usize,
+        image: img.radiance.iter().map(|&l| scale * l).collect(),
+        class: img.class.clone(),
+        instance: img.instance.clone(),
+        object: img.object.clone(),
+    }
+}
+
+/// Reads the raw files of an image back into a frame (for `postprocess`).
+fn read_raw_frame(job: &Job, dir: &Path) -> Result<Frame> {
+    let (w, h, radiance) = files::read_exr(&dir.join("radiance.exr"))?;
+    let (_, _, class) = files::read_gray8(&dir.join("raw_mask.png"))?;
+    let (_, _, instance) = files::read_gray16(&dir.join("raw_instances.png"))?;
+    let (_, _, object) = files::read_gray8(&dir.join("object.png"))?;
+    if [class.len(), instance.len(), object.len()]
+        .iter()
+        .any(|&n| n != w * h)
+    {
+        return Err(DatasetError::layout(dir, "raw files of different sizes"));
+    }
+    let scale = post::FULL_SCALE * job.sensor.exposure as f32;
+    Ok(Frame {
+        width: w,
+        height: h,
+        image: radiance.iter().map(|&l| scale * l).collect(),
+        class,
+        instance,
+        object: object.iter().map(|&o| (o != 0) as u8).collect(),
+    })
+}
+
+type PostFiles = (BTreeMap<String, String>, Vec<DefectVisibility>, Option<f64>);
+
+/// Post-processes a frame and writes image.png, mask.png, instances.png, labelme.json
+/// and the image's COCO annotations.
+fn write_post(
+    dir: &Path,
+    job: &Job,
+    texture_type: &str,
+    image_seed: u64,
+    frame: Frame,
+) -> Result<PostFiles> {
+    let r = post::apply(
+        &job.postprocess,
+        texture_type,
+        derive(image_seed, &[tag::POST]),
+        frame,
+    );
+    let f = &r.frame;
+    let (w, h) = (f.width, f.height);
+    let mut m = BTreeMap::new();
+    m.insert(
+        "image.png".into(),
+        files::write_gray8(&dir.join("image.png"), w, h, &post::quantize(&f.image))?,
+    );
+    m.insert(
+        "mask.png".into(),
+        files::write_gray8(&dir.join("mask.png"), w, h, &f.class)?,
+    );
+    m.insert(
+        "instances.png".into(),
+        files::write_gray16(&dir.join("instances.png"), w, h, &f.instance)?,
+    );
+    let faces = files::read_gray8(&dir.join("faces.png"))?.2;
+    m.insert(
+        "labelme.json".into(),
+        files::write_json(&dir.join("labelme.json"), &labelme_json(f, &faces))?,
+    );
+    m.insert(
+        "coco.json".into(),
+        files::write_json(&dir.join("coco.json"), &coco_fragment(f))?,
+    );
+    Ok((m, r.defects, r.noise_sigma))
+}
+
+pub fn class_name(c: u8) -> &'static str {
+    match c {
+        1 => "dent",
+        2 => "scratch",
+        _ => "background",
+    }
+}
+
+/// LabelMe 5 JSON: one polygon per connected part of each defect (label = class,
+/// group_id = instance), and the visible inspected faces (labels "A", "B", "C", which
+/// `synosis compare` reads in its LabelMe layout).
+fn labelme_json(f: &Frame, faces: &[u8]) -> serde_json::Value {
+    let mut shapes = Vec::new();
+    for (id, class, _) in post::defect_pixels(&f.class, &f.instance) {
+        let mask: Vec<bool> = f.instance.iter().map(|&i| i == id).collect();
+        for poly in labels::trace_polygons(&mask, f.width, f.height) {
+            shapes.push(json!({"label": class_name(class), "points": poly, "group_id": id, "shape_type": "polygon", "flags": {}}));
+        }
+    }
+    for face in 1u8..=3 {
+        let mask: Vec<bool> = faces.iter().map(|&x| x == face).collect();
+        for poly in labels::trace_polygons(&mask, f.width, f.height) {
+            shapes.push(json!({"label": crate::scene::mesh::face_name(face), "points": poly, "group_id": null, "shape_type": "polygon", "flags": {}}));
+        }
+    }
+    json!({
+        "version": "5.0.1",
+        "flags": {},
+        "shapes": shapes,
+        "imagePath": "image.png",
+        "imageData": null,
+        "imageHeight": f.height,
+        "imageWidth": f.width,
+    })
+}
+
+/// The image's COCO annotations (ids assigned when the split files are built).
+fn coco_fragment(f: &Frame) -> serde_json::Value {
+    let anns: Vec<serde_json::Value> = post::defect_pixels(&f.class, &f.instance)
+        .into_iter()
+        .map(|(id, class, area)| {
+            let mask: Vec<bool> = f.instance.iter().map(|&i| i == id).collect();
+            let counts = labels::rle_counts(&mask, f.width, f.height);
+            let [x, y, w, h] = labels::bbox(&mask, f.width).unwrap_or([0; 4]);
+            json!({
+                "instance": id,
+                "category_id": class,
+                "segmentation": {"size": [f.height, f.width], "counts": labels::rle_encode_string(&counts)},
+                "area": area,
+                "bbox": [x, y, w, h],
+                "iscrowd": 0,
+            })
+        })
+        .collect();
+    json!({ "annotations": anns })
+}
+
+/// Appends one line and syncs; the line is complete before the call returns.
+fn append_line(path: &Path, entry: &ManifestEntry) -> Result<()> {
+    let mut line = serde_json::to_string(entry)
+        .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?;
+    line.push('\n');
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| DatasetError::io(path, e))?;
+    f.write_all(line.as_bytes())
+        .map_err(|e| DatasetError::io(path, e))?;
+    f.sync_all().map_err(|e| DatasetError::io(path, e))
+}
+
+/// Reads a manifest. A kill during an append can leave a last line without its newline:
+/// with `repair`, that line is dropped (its image is redone) and the file rewritten.
+pub fn read_manifest(path: &Path, repair: bool) -> Result<Vec<ManifestEntry>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(DatasetError::io(path, e)),
+    };
+    let complete = match text.rfind('\n') {
+        Some(p) => &text[..=p],
+        None => "",
+    };
+    if complete.len() != text.len() {
+        if !repair {
+            return Err(DatasetError::Manifest {
+                path: path.into(),
+                line: complete.lines().count() + 1,
+                message: "incomplete last line (an interrupted run); run the shard again".into(),
+            });
+        }
+        crate::util::write_atomic(path, complete.as_bytes())
+            .map_err(|e| DatasetError::io(path, e))?;
+    }
+    let mut out = Vec::new();
+    for (n, line) in complete.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        out.push(
+            serde_json::from_str(line).map_err(|e| DatasetError::Manifest {
+                path: path.into(),
+                line: n + 1,
+                message: e.to_string(),
+            })?,
+        );
+    }
+    Ok(out)
+}
+
+fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<()> {
+    let mut text = String::new();
+    for e in entries {
+        text.push_str(
+            &serde_json::to_string(e)
+                .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?,
+        );
+        text.push('\n');
+    }
+    crate::util::write_atomic(path, text.as_bytes()).map_err(|e| DatasetError::io(path, e))
+}
+
+fn shard_manifests(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mdir = dir.join("manifests");
+    let rd = std::fs::read_dir(&mdir).map_err(|e| DatasetError::io(&mdir, e))?;
+    let mut v: Vec<PathBuf> = rd
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "jsonl")
+                && !files::is_temp_name(&p.file_name().unwrap_or_default().to_string_lossy())
+        })
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+/// The job stored in a dataset folder (its relative mesh paths are not re-checked).
+fn stored_job(dir: &Path) -> Result<(String, Job)> {
+    let path = dir.join("job.toml");
+    let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, e))?;
+    let job = Job::parse_stored(&text, &path.display().to_string())?;
+    Ok((text, job))
+}
+
+/// Joins the shard manifests of `dir` into `manifest.jsonl` (by index) and writes
+/// `coco/<split>.json`. Errors if any image of the job is missing.
+pub fn finish(dir: &Path) -> Result<usize> {
+    let (_, job) = stored_job(dir)?;
+    let plan = plan::expand(&job);
+    let mut by_index: BTreeMap<usize, ManifestEntry> = BTreeMap::new();
+    for m in shard_manifests(dir)? {
+        for e in read_manifest(&m, false)? {
+            by_index.entry(e.index).or_insert(e);
+        }
+    }
+    let missing: Vec<usize> = (0..plan.items.len())
+        .filter(|i| !by_index.contains_key(i))
+        .collect();
+    if !missing.is_empty() {
+        let first: Vec<String> = missing.iter().take(5).map(|i| i.to_string()).collect();
+        return Err(DatasetError::layout(
+            dir,
+            format!(
+                "{} of {} images not finished (e.g. {}); run the missing shards (or resume) first",
+                missing.len(),
+                plan.items.len(),
+                first.join(", ")
+            ),
+        ));
+    }
+    let entries: Vec<ManifestEntry> = by_index.into_values().collect();
+    std::fs::create_dir_all(dir.join("coco")).map_err(|e| DatasetError::io(dir, e))?;
+    for split in Split::ALL {
+        let v = coco_split(dir, &entries, split)?;
+        files::write_json(&dir.join("coco").join(format!("{}.json", split.name())), &v)?;
+    }
+    write_manifest(&dir.join("manifest.jsonl"), &entries)?;
+    Ok(entries.len())
+}
+
+fn coco_split(dir: &Path, entries: &[ManifestEntry], split: Split) -> Result<serde_json::Value> {
+    let mut images = Vec::new();
+    let mut anns = Vec::new();
+    for e in entries.iter().filter(|e| e.split == split) {
+        images.push(
+            json!({"id": e.index, "file_name": e.image, "width": e.width, "height": e.height}),
+        );
+        let path = dir.join("images").join(&e.id).join("coco.json");
+        let text = std::fs::read_to_string(&path).map_err(|err| DatasetError::io(&path, err))?;
+        let frag: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|err| DatasetError::io(&path, std::io::Error::other(err)))?;
+        if let Some(list) = frag.get("annotations").and_then(|a| a.as_array()) {
+            for a in list {
+                let mut a = a.clone();
+                if let Some(o) = a.as_object_mut() {
+                    o.insert("id".into(), json!(anns.len() + 1));
+                    o.insert("image_id".into(), json!(e.index));
+                }
+                anns.push(a);
+            }
+        }
+    }
+    Ok(json!({
+        "info": {"description": format!("synosis synthetic dataset, {} split", split.name()), "version": "1"},
+        "images": images,
+        "annotations": anns,
+        "categories": [
+            {"id": 1, "name": "dent", "supercategory": "defect"},
+            {"id": 2, "name": "scratch", "supercategory": "defect"},
+        ],
+    }))
+}
+
+/// Merges shard outputs: the first folder is the target; shard manifests and image
+/// folders of the others are moved into it; then the dataset is finished.
+pub fn merge(dirs: &[PathBuf]) -> Result<usize> {
+    let Some((target, others)) = dirs.split_first() else {
+        return Err(DatasetError::layout(".", "merge needs at least one folder"));
+    };
+    let (text, _) = stored_job(target)?;
+    for src in others {
+        let (t2, _) = stored_job(src)?;
+        if t2 != text {
+            return Err(DatasetError::layout(
+                src,
+                format!("holds a different job than {}", target.display()),
+            ));
+        }
+        for m in shard_manifests(src)? {
+            let entries = read_manifest(&m, false)?;
+            for e in &entries {
+                let from = src.join("images").join(&e.id);
+                let to = target.join("images").join(&e.id);
+                if from.is_dir() && !to.exists() {
+                    move_dir(&from, &to)?;
+                }
+            }
+            let dest = target
+                .join("manifests")
+                .join(m.file_name().unwrap_or_default());
+            if dest.exists() {
+                let a = std::fs::read(&dest).map_err(|e| DatasetError::io(&dest, e))?;
+                let b = std::fs::read(&m).map_err(|e| DatasetError::io(&m, e))?;
+                if a != b {
+                    return Err(DatasetError::layout(
+                        &dest,
+                        format!("exists with other content than {}", m.display()),
+                    ));
+                }
+            } else {
+                std::fs::create_dir_all(target.join("manifests"))
+                    .map_err(|e| DatasetError::io(target, e))?;
+                std::fs::copy(&m, &dest).map_err(|e| DatasetError::io(&dest, e))?;
+            }
+        }
+    }
+    finish(target)
+}
+
+fn move_dir(from: &Path, to: &Path) -> Result<()> {
+    if let Some(p) = to.parent() {
+        std::fs::create_dir_all(p).map_err(|e| DatasetError::io(p, e))?;
+    }
+    if std::fs::rename(from, to).is_ok() {
+        return Ok(());
+    }
+    // Another file system: copy to a temporary folder, then rename it into place.
+    let tmp = crate::util::temp_sibling(to);
+    std::fs::create_dir_all(&tmp).map_err(|e| DatasetError::io(&tmp, e))?;
+    for e in std::fs::read_dir(from)
+        .map_err(|e| DatasetError::io(from, e))?
+        .flatten()
+    {
+        std::fs::copy(e.path(), tmp.join(e.file_name()))
+            .map_err(|err| DatasetError::io(e.path(), err))?;
+    }
+    std::fs::rename(&tmp, to).map_err(|e| DatasetError::io(to, e))?;
+    std::fs::remove_dir_all(from).map_err(|e| DatasetError::io(from, e))
+}
+
+/// Re-runs the post-processing of every finished image from its raw files. With
+/// `new_job`, its `[[postprocess]]` steps replace the stored ones (everything else in
+/// it must equal the stored job). Returns the number of images processed.
+pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
+    use rayon::prelude::*;
+    let (_, mut job) = stored_job(dir)?;
+    if let Some(p) = new_job {
+        let text = std::fs::read_to_string(p).map_err(|e| DatasetError::io(p, e))?;
+        let other = Job::parse_stored(&text, &p.display().to_string())?;
+        if !job.same_except_postprocess(&other) {
+            return Err(DatasetError::layout(
+                dir,
+                format!(
+                    "{} differs from the stored job.toml in more than [[postprocess]]",
+                    p.display()
+                ),
+            ));
+        }
+        crate::util::write_atomic(&dir.join("job.toml"), text.as_bytes())
+            .map_err(|e| DatasetError::io(dir, e))?;
+        job = other;
+    }
+    let mut n = 0;
+    for m in shard_manifests(dir)? {
+        let entries = read_manifest(&m, false)?;
+        let updated: Vec<ManifestEntry> = entries
+            .into_par_iter()
+            .map(|mut e| -> Result<ManifestEntry> {
+                let idir = dir.join("images").join(&e.id);
+                let frame = read_raw_frame(&job, &idir)?;
+                let (hashes, defects, noise) =
+                    write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
+                e.files.extend(hashes);
+                e.defects = defects;
+                e.noise_sigma = noise;
+                Ok(e)
+            })
+            .collect::<Result<_>>()?;
+        n += updated.len();
+        write_manifest(&m, &updated)?;
+    }
+    if dir.join("manifest.jsonl").exists() {
+        finish(dir)?;
+    }
+    Ok(n)
+}

@@ -1,0 +1,117 @@
+//! The production [`TextureSource`]: the texture module (`crate::texture`). A finish's
+//! `params` / `variation` / `exemplar` tables are the texture module's own structs
+//! (`MilledParams`, `MilledVariation`, `SandblastParams`, `StandInExemplar`), so their
+//! fields, defaults and ranges are documented once, in docs/texture.md.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use rand::SeedableRng;
+
+use super::job::{Finish, FinishKind};
+use super::renderer::TextureMap;
+use super::seed::{derive, name};
+use super::textures::TextureSource;
+use crate::texture::{
+    HeightMap, MilledParams, MilledVariation, NoProgress, SandblastParams, StandInExemplar,
+    generate_milled, generate_sandblasted,
+};
+
+fn table<T: serde::de::DeserializeOwned>(t: &toml::Table, what: &str) -> Result<T, String> {
+    toml::Value::Table(t.clone())
+        .try_into()
+        .map_err(|e| format!("{what}: {e}"))
+}
+
+/// How a milled finish varies between texture instances.
+enum Variation {
+    None,
+    Sets(MilledVariation),
+}
+
+fn milled(f: &Finish) -> Result<(MilledParams, Variation), String> {
+    let p: MilledParams = table(&f.params, "params")?;
+    p.validate().map_err(|e| format!("params: {e}"))?;
+    let v = match &f.variation {
+        None => Variation::None,
+        Some(toml::Value::String(s)) if s == "none" => Variation::None,
+        Some(toml::Value::String(s)) if s == "paper" => Variation::Sets(MilledVariation::default()),
+        Some(toml::Value::Table(t)) => Variation::Sets(table(t, "variation")?),
+        Some(_) => return Err("variation: \"paper\", \"none\" or a table of value sets".into()),
+    };
+    Ok((p, v))
+}
+
+fn sandblasted(f: &Finish) -> Result<(SandblastParams, StandInExemplar), String> {
+    let p: SandblastParams = table(&f.params, "params")?;
+    p.validate().map_err(|e| format!("params: {e}"))?;
+    let ex: StandInExemplar = match &f.exemplar {
+        Some(t) => table(t, "exemplar")?,
+        None => StandInExemplar::default(),
+    };
+    ex.validate().map_err(|e| format!("exemplar: {e}"))?;
+    Ok((p, ex))
+}
+
+/// Checks a finish's texture parameters with the texture module's own validation.
+pub fn validate(f: &Finish) -> Result<(), String> {
+    match f.kind {
+        FinishKind::Milled => milled(f).map(|_| ()),
+        FinishKind::Sandblasted => sandblasted(f).map(|_| ()),
+    }
+}
+
+/// Textures from `crate::texture`; keeps one stand-in exemplar per sandblasted finish
+/// (the "measurement" all its texture instances are synthesised from).
+#[derive(Default)]
+pub struct ModuleTextures {
+    exemplars: HashMap<String, Arc<HeightMap>>,
+}
+
+impl TextureSource for ModuleTextures {
+    fn make(
+        &mut self,
+        f: &Finish,
+        _instance: u32,
+        seed: u64,
+        size: usize,
+        spacing_um: f64,
+    ) -> Result<TextureMap, String> {
+        let height = match f.kind {
+            FinishKind::Milled => {
+                let (base, var) = milled(f)?;
+                let p = match var {
+                    Variation::None => base,
+                    Variation::Sets(v) => {
+                        let mut rng = rand_pcg::Pcg64::seed_from_u64(derive(seed, &[1]));
+                        v.sample(&base, &mut rng)
+                    }
+                };
+                generate_milled(&p, size, size, spacing_um, seed, &NoProgress)
+                    .map_err(|e| e.to_string())?
+            }
+            FinishKind::Sandblasted => {
+                let (p, ex) = sandblasted(f)?;
+                let exemplar = match self.exemplars.get(&f.name) {
+                    Some(e) => e.clone(),
+                    None => {
+                        // One exemplar per finish, seeded by its name (not the job seed):
+                        // it stands in for a measurement of the real surface.
+                        let e = Arc::new(ex.generate(name(&f.name)).map_err(|e| e.to_string())?);
+                        self.exemplars.insert(f.name.clone(), e.clone());
+                        e
+                    }
+                };
+                generate_sandblasted(&exemplar, &p, size, size, spacing_um, seed, &NoProgress)
+                    .map_err(|e| e.to_string())?
+            }
+        };
+        let s = height.slopes();
+        Ok(TextureMap {
+            width: s.width,
+            height: s.height,
+            spacing_um: s.spacing_um,
+            slopes: s.data,
+        })
+    }
+}

@@ -1,0 +1,844 @@
+//! Dataset job machinery: resume after a kill, shards merged equal the whole, splits,
+//! bad job files, labels (COCO RLE, LabelMe polygons), the compare layout, re-running
+//! the post-processing. Images come from a CPU *test double* renderer (below), not the
+//! GPU renderer: these tests check the job machinery, not the pixels.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use synosis::dataset::renderer::{ImageRenderer, ImageRequest, RenderedImage, TextureMap};
+use synosis::dataset::seed::splitmix64;
+use synosis::dataset::textures::TextureSource;
+use synosis::dataset::{
+    self, DatasetError, Finish, Job, Label, Prepared, RunOptions, Shard, Split, labels, post,
+};
+use synosis::scene::face_frames;
+
+/// TEST DOUBLE, not a renderer: orthographic z-buffer rasterisation of the labelled
+/// mesh along the view direction, with a "radiance" made from the face, the defect
+/// class and the seed. Deterministic, so the job machinery can be compared bit for bit.
+struct OrthoLabelTestDouble {
+    calls: usize,
+}
+
+impl ImageRenderer for OrthoLabelTestDouble {
+    fn describe(&self) -> String {
+        "ortho-label-test-double".into()
+    }
+
+    fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
+        self.calls += 1;
+        let (w, h) = (req.width as usize, req.height as usize);
+        let mesh = req.mesh;
+        let face: u8 = match req.view.as_bytes()[0] {
+            b'A' => 1,
+            b'B' => 2,
+            _ => 3,
+        };
+        let deg: f32 = req.view[1..].parse().map_err(|_| "bad view".to_string())?;
+        let frame = *face_frames(mesh)
+            .iter()
+            .find(|f| f.face == face)
+            .ok_or("face missing")?;
+        let a = deg.to_radians();
+        let d = (frame.normal * a.cos() + frame.v * a.sin()).normalize();
+        let right = frame.u;
+        let up = d.cross(right).normalize();
+        let px = 30.0 / w as f32; // 30 mm across the image
+        let proj = |p: Vec3| {
+            let q = p - frame.centre;
+            (
+                q.dot(right) / px + w as f32 / 2.0,
+                -q.dot(up) / px + h as f32 / 2.0,
+                q.dot(d),
+            )
+        };
+        let n = w * h;
+        let mut zbuf = vec![f32::NEG_INFINITY; n];
+        let mut out = RenderedImage {
+            width: req.width,
+            height: req.height,
+            radiance: vec![0.0; n],
+            class: vec![0; n],
+            instance: vec![0; n],
+            face: vec![0; n],
+            coverage: vec![0.0; n],
+            object: vec![0; n],
+        };
+        for t in 0..mesh.triangles.len() {
+            if mesh.area_normal(t).dot(d) <= 0.0 {
+                continue;
+            }
+            let [p0, p1, p2] = mesh.corners(t).map(proj);
+            let area = (p1.0 - p0.0) * (p2.1 - p0.1) - (p1.1 - p0.1) * (p2.0 - p0.0);
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let x0 = p0.0.min(p1.0).min(p2.0).floor().max(0.0) as usize;
+            let x1 = (p0.0.max(p1.0).max(p2.0).ceil() as usize).min(w);
+            let y0 = p0.1.min(p1.1).min(p2.1).floor().max(0.0) as usize;
+            let y1 = (p0.1.max(p1.1).max(p2.1).ceil() as usize).min(h);
+            let l = mesh.labels[t];
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+                    let e = |a: (f32, f32, f32), b: (f32, f32, f32)| {
+                        ((b.0 - a.0) * (cy - a.1) - (b.1 - a.1) * (cx - a.0)) / area
+                    };
+                    let (b0, b1, b2) = (e(p1, p2), e(p2, p0), e(p0, p1));
+                    if b0 < 0.0 || b1 < 0.0 || b2 < 0.0 {
+                        continue;
+                    }
+                    let z = b0 * p0.2 + b1 * p1.2 + b2 * p2.2;
+                    let p = y * w + x;
+                    if z > zbuf[p] {
+                        zbuf[p] = z;
+                        out.face[p] = l.face;
+                        out.class[p] = l.class;
+                        out.instance[p] = l.instance;
+                        out.object[p] = 1;
+                        out.coverage[p] = if l.class > 0 { 1.0 } else { 0.0 };
+                        let jitter =
+                            (splitmix64(req.seed ^ p as u64) >> 40) as f32 / (1u64 << 24) as f32;
+                        out.radiance[p] = 0.15
+                            + 0.1 * l.face as f32
+                            + 0.3 * (l.class > 0) as u8 as f32
+                            + 0.05 * jitter
+                            + 0.2 * req.roughness;
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// TEST DOUBLE for the texture module: flat slope maps of the requested size.
+struct FlatTexturesTestDouble {
+    made: usize,
+}
+
+impl TextureSource for FlatTexturesTestDouble {
+    fn make(
+        &mut self,
+        _f: &Finish,
+        _i: u32,
+        _s: u64,
+        size: usize,
+        spacing_um: f64,
+    ) -> Result<TextureMap, String> {
+        self.made += 1;
+        Ok(TextureMap {
+            width: size,
+            height: size,
+            spacing_um,
+            slopes: vec![[0.0, 0.0]; size * size],
+        })
+    }
+}
+
+/// Large defects so they cover pixels at 64 x 48 over 30 mm.
+const DEFECT_SPEC: &str = r#"
+faces = ["A", "B", "C"]
+resolution = 3
+max_tries = 10000
+[[dent]]
+name = "big dent"
+quantity = 3
+diameter_mm = [2.0, 4.0]
+elongation = [1.0, 1.5]
+depth = [0.1, 0.2]
+rotation_deg = [0.0, 180.0]
+rim_height = [0.0, 0.0]
+rim_width = 0.5
+[[scratch]]
+name = "wide scratch"
+quantity = 1
+width_mm = [1.0, 1.5]
+depth = [0.05, 0.1]
+path_length_mm = [6.0, 10.0]
+step_mm = 1.0
+curviness_deg = [0.0, 10.0]
+depth_variation = 0.2
+"#;
+
+const POST: &str = r#"
+[[postprocess]]
+step = "linear"
+by_type = { sandblasted = [0.632, 34.0], parallel = [1.481, 39.0] }
+[[postprocess]]
+step = "defocus"
+[[postprocess]]
+step = "background_noise"
+amplitude = 5.0
+[[postprocess]]
+step = "blooming"
+[[postprocess]]
+step = "dilate_masks"
+[[postprocess]]
+step = "visibility_filter"
+"#;
+
+fn job_text(defective: i64, free: i64) -> String {
+    format!(
+        r#"
+seed = 11
+views = ["A0", "B10", "C20"]
+[render]
+width = 64
+height = 48
+spp = 1
+bounces = 1
+[texture]
+size_px = 80
+spacing_um = 400.0
+cache = 2
+[defects]
+spec = "defects.toml"
+[[finish]]
+name = "sandblasted-2.5bar"
+kind = "sandblasted"
+textures = 2
+exemplar = {{ pressure_bar = 2.5 }}
+[[finish]]
+name = "parallel-d4-ae0.5"
+kind = "milled"
+textures = 2
+params = {{ path = "parallel", head_diameter_mm = 4.0, radial_depth = 0.5 }}
+[[object]]
+name = "body"
+mesh = "testbody-b"
+defective = {defective}
+defect_free = {free}
+{POST}"#
+    )
+}
+
+struct Fixture {
+    _tmp: tempfile::TempDir,
+    root: PathBuf,
+    prep: Prepared,
+}
+
+fn fixture(defective: i64, free: i64) -> Fixture {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().to_path_buf();
+    std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
+    let text = job_text(defective, free);
+    std::fs::write(root.join("job.toml"), &text).unwrap();
+    let prep = dataset::prepare(&root.join("job.toml")).unwrap();
+    Fixture {
+        _tmp: tmp,
+        root,
+        prep,
+    }
+}
+
+fn run_all(
+    f: &Fixture,
+    out: &Path,
+    shard: Shard,
+    fail_after: Option<usize>,
+) -> Result<dataset::RunReport, DatasetError> {
+    dataset::run(
+        &f.prep,
+        out,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+        RunOptions {
+            shard,
+            fail_after,
+            progress: None,
+        },
+    )
+}
+
+/// Manifest lines without the timing fields.
+fn manifest_without_times(dir: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(dir.join("manifest.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+            let o = v.as_object_mut().unwrap();
+            o.remove("finished_unix");
+            o.remove("render_seconds");
+            v
+        })
+        .collect()
+}
+
+/// Every file under images/ and coco/, by relative path, with its bytes.
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut m = BTreeMap::new();
+    for sub in ["images", "coco"] {
+        let mut stack = vec![dir.join(sub)];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).unwrap().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                    m.insert(rel, std::fs::read(&p).unwrap());
+                }
+            }
+        }
+    }
+    m
+}
+
+fn assert_same_dataset(a: &Path, b: &Path) {
+    assert_eq!(manifest_without_times(a), manifest_without_times(b));
+    let (ta, tb) = (tree(a), tree(b));
+    assert_eq!(ta.keys().collect::<Vec<_>>(), tb.keys().collect::<Vec<_>>());
+    for (k, v) in &ta {
+        assert!(v == &tb[k], "{k} differs");
+    }
+}
+
+#[test]
+fn killed_run_resumes_to_the_same_dataset() {
+    let f = fixture(2, 2);
+    let total = f.prep.plan.items.len();
+    assert_eq!(total, 2 * 4 * 3);
+    let full = f.root.join("full");
+    let r = run_all(&f, &full, Shard::ALL, None).unwrap();
+    assert_eq!((r.rendered, r.already_done, r.finished), (total, 0, true));
+
+    let res = f.root.join("resumed");
+    match run_all(&f, &res, Shard::ALL, Some(5)) {
+        Err(DatasetError::Interrupted { done: 5 }) => {}
+        other => panic!("expected an interruption after 5 images, got {other:?}"),
+    }
+    assert!(
+        !res.join("manifest.jsonl").exists(),
+        "an unfinished run must not look finished"
+    );
+    // What a kill leaves: a temp file beside a half-made image, and half a manifest line.
+    std::fs::write(res.join("images/000005/.image.png.tmp-4242"), b"half").unwrap();
+    let m = res.join("manifests/shard-0-of-1.jsonl");
+    let mut text = std::fs::read_to_string(&m).unwrap();
+    assert_eq!(text.lines().count(), 5);
+    text.push_str("{\"index\": 5, \"id\": \"0000");
+    std::fs::write(&m, text).unwrap();
+
+    let r = run_all(&f, &res, Shard::ALL, None).unwrap();
+    assert_eq!((r.already_done, r.rendered), (5, total - 5));
+    assert_eq!(r.stray_temps_removed, 1);
+    assert_same_dataset(&full, &res);
+    // A second run has nothing left to do.
+    let r = run_all(&f, &res, Shard::ALL, None).unwrap();
+    assert_eq!((r.already_done, r.rendered), (total, 0));
+}
+
+#[test]
+fn shards_merged_equal_the_unsharded_run_and_single_images_remake() {
+    let f = fixture(2, 1);
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    let dirs: Vec<PathBuf> = (0..3).map(|i| f.root.join(format!("shard{i}"))).collect();
+    let mut counted = 0;
+    for (i, d) in dirs.iter().enumerate() {
+        let r = run_all(&f, d, Shard { index: i, count: 3 }, None).unwrap();
+        assert!(!r.finished);
+        counted += r.rendered;
+    }
+    assert_eq!(counted, f.prep.plan.items.len());
+    // Merging before all shards are there names what is missing.
+    let err = dataset::merge(&dirs[..1]).unwrap_err().to_string();
+    assert!(err.contains("not finished"), "{err}");
+    let n = dataset::merge(&dirs).unwrap();
+    assert_eq!(n, f.prep.plan.items.len());
+    assert_same_dataset(&full, &dirs[0]);
+
+    // Any single image can be re-made alone, identically.
+    let one = f.root.join("one");
+    let k = 7;
+    let e = dataset::render_one(
+        &f.prep,
+        k,
+        &one,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+    )
+    .unwrap();
+    let id = format!("{k:06}");
+    for name in dataset::runner::IMAGE_FILES {
+        let a = std::fs::read(full.join("images").join(&id).join(name)).unwrap();
+        let b = std::fs::read(one.join("images").join(&id).join(name)).unwrap();
+        assert!(a == b, "{name} of image {k} differs when made alone");
+        assert!(e.files.contains_key(name));
+    }
+}
+
+#[test]
+fn splits_keep_instances_together_with_ratios_and_label_balance() {
+    // The paper's job: 10 finishes x (30 + 30) instances x 9 views.
+    let job = Job::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/paper-dataset.toml"
+    )))
+    .unwrap();
+    let plan = dataset::expand(&job);
+    assert_eq!(plan.items.len(), 5400);
+    assert_eq!(
+        plan.items
+            .iter()
+            .filter(|i| plan.instances[i.instance].label == Label::Defective)
+            .count(),
+        2700
+    );
+    let mut counts: BTreeMap<(usize, Label, Split), usize> = BTreeMap::new();
+    for inst in &plan.instances {
+        *counts
+            .entry((inst.finish, inst.label, inst.split))
+            .or_default() += 1;
+    }
+    for fi in 0..10 {
+        for label in [Label::Defective, Label::DefectFree] {
+            let got: Vec<usize> = Split::ALL
+                .iter()
+                .map(|&s| counts.get(&(fi, label, s)).copied().unwrap_or(0))
+                .collect();
+            assert_eq!(got, vec![21, 3, 6], "finish {fi} {label:?}");
+        }
+    }
+    // A defect geometry is in one split only, whatever the finish.
+    let mut set_split: BTreeMap<usize, BTreeSet<Split>> = BTreeMap::new();
+    for inst in &plan.instances {
+        if let Some(s) = inst.defect_set {
+            set_split.entry(s).or_default().insert(inst.split);
+        }
+    }
+    assert_eq!(set_split.len(), 30);
+    assert!(set_split.values().all(|s| s.len() == 1));
+    // Seeds differ per image and do not depend on the item order.
+    let seeds: BTreeSet<u64> = plan.items.iter().map(|i| i.seed).collect();
+    assert_eq!(seeds.len(), 5400);
+
+    // On a rendered set: all images of one instance in one split.
+    let f = fixture(2, 2);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let mut by_instance: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for v in manifest_without_times(&out) {
+        by_instance
+            .entry(v["instance"].as_str().unwrap().to_string())
+            .or_default()
+            .insert(v["split"].as_str().unwrap().to_string());
+    }
+    assert_eq!(by_instance.len(), 8);
+    assert!(by_instance.values().all(|s| s.len() == 1));
+}
+
+#[test]
+fn bad_job_files_fail_before_rendering_naming_the_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("defects.toml"), DEFECT_SPEC).unwrap();
+    let good = job_text(1, 1);
+    assert!(dataset::prepare_text(&good, "job", tmp.path()).is_ok());
+    let cases: Vec<(String, &str)> = vec![
+        (
+            good.replace(
+                "mesh = \"testbody-b\"",
+                "mesh = \"testbody-b\"\nfinishes = [\"spiral-d8\"]",
+            ),
+            "object[0].finishes[0]",
+        ),
+        (
+            good.replace("defective = 1", "defective = -3"),
+            "object[0].defective",
+        ),
+        (
+            good.replace("defect_free = 1", "defect_free = -1"),
+            "object[0].defect_free",
+        ),
+        (
+            good.replace("mesh = \"testbody-b\"", "mesh = \"nowhere.glb\""),
+            "object[0].mesh",
+        ),
+        (
+            good.replace(
+                "[texture]",
+                "[split]\ntrain = 0.7\nval = 0.2\ntest = 0.2\n[texture]",
+            ),
+            "train + val + test must sum to 1",
+        ),
+        (good.replace("spp = 1", "spp = 0"), "render.spp"),
+        (
+            good.replace("[\"A0\", \"B10\", \"C20\"]", "[\"A0\", \"D10\"]"),
+            "views[1]",
+        ),
+        (
+            good.replace("size_px = 80", "size_px = 40"),
+            "texture.size_px",
+        ),
+        (
+            good.replace("textures = 2\nparams", "textures = 0\nparams"),
+            "finish[1].textures",
+        ),
+        (
+            good.replace("parallel = [1.481, 39.0]", "spiral = [1.526, 33.0]"),
+            "postprocess[0].by_type",
+        ),
+        (
+            good.replace("step = \"defocus\"", "step = \"defocus\"\nradius = 20.0"),
+            "postprocess[1].radius",
+        ),
+        (
+            good.replace("step = \"blooming\"", "step = \"blooming\"\nwidht = 3"),
+            "unknown field `widht`",
+        ),
+        (
+            good.replace("seed = 11", "seed = 11\nspp = 4"),
+            "unknown field `spp`",
+        ),
+        (
+            good.replace("spec = \"defects.toml\"", "spec = \"missing.toml\""),
+            "missing.toml",
+        ),
+    ];
+    for (text, want) in cases {
+        let out = tmp.path().join("never");
+        let err = match dataset::prepare_text(&text, "job", tmp.path()) {
+            Ok(_) => panic!("accepted a job that should fail on {want}"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.contains(want), "error {err:?} does not name {want:?}");
+        assert!(!out.exists());
+    }
+}
+
+#[test]
+fn post_steps_match_hand_computed_cases() {
+    // linear
+    let v = post::linear(&[0.0, 100.0, 200.0], 0.632, 34.0);
+    for (a, b) in v.iter().zip([34.0, 97.2, 160.4]) {
+        assert!((a - b).abs() < 1e-4);
+    }
+    // defocus, radius 1 without alias blur: the 5-pixel plus, 1/5 each. On a 1 x 3 row
+    // [0, 0, 10] with reflect-101 borders: x=2 sees itself three times (up, down,
+    // centre) and x=1 twice -> 6; x=1 sees x=2 once -> 2.
+    let k = post::defocus_kernel(1.0, 0.0);
+    assert_eq!(k.size, 3);
+    assert_eq!(k.weights, vec![0.0, 0.2, 0.0, 0.2, 0.2, 0.2, 0.0, 0.2, 0.0]);
+    let r = post::convolve(&[0.0, 0.0, 10.0], 3, 1, &k);
+    assert!(
+        (r[0] - 0.0).abs() < 1e-6 && (r[1] - 2.0).abs() < 1e-6 && (r[2] - 6.0).abs() < 1e-6,
+        "{r:?}"
+    );
+    // With the 3x3 Gaussian (sigma 0.5: weights 0.106507, 0.786986, 0.106507), the
+    // centre weight is 0.2 * (0.786986^2 + 4 * 0.786986 * 0.106507) = 0.190926.
+    let k = post::defocus_kernel(1.0, 0.5);
+    assert_eq!(k.size, 5);
+    assert!((k.weights[12] - 0.190926).abs() < 1e-5, "{}", k.weights[12]);
+    assert!((k.weights.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+    // background noise: object untouched, background std = sigma
+    let n = 200 * 200;
+    let obj: Vec<u8> = (0..n).map(|i| (i % 2) as u8).collect();
+    let img = vec![50.0f32; n];
+    assert_eq!(post::background_noise(&img, &obj, 0.0, 1), img);
+    let noisy = post::background_noise(&img, &obj, 3.0, 1);
+    let bg: Vec<f32> = noisy
+        .iter()
+        .zip(&obj)
+        .filter(|(_, o)| **o == 0)
+        .map(|(v, _)| v - 50.0)
+        .collect();
+    assert!(noisy.iter().zip(&obj).all(|(v, o)| *o == 0 || *v == 50.0));
+    let sd = (bg.iter().map(|x| x * x).sum::<f32>() / bg.len() as f32).sqrt();
+    assert!((sd - 3.0).abs() < 0.05, "{sd}");
+    // blooming: 4 x 2, column maxima [250, 100, 0, 255]; over 0.95 * 255: [250, 0, 0, 255].
+    // Box 3 (columns x-1..x+1, reflect-101): [250, 250, 255, 255] / 3; x 0.06 ->
+    // [5, 5, 5.1, 5.1] added to each column, clipped at 255.
+    let b = post::blooming(
+        &[250.0, 0.0, 0.0, 0.0, 0.0, 100.0, 0.0, 255.0],
+        4,
+        2,
+        0.95 * 255.0,
+        3,
+        0.06,
+    );
+    let want = [255.0, 5.0, 5.1, 5.1, 5.0, 105.0, 5.1, 255.0];
+    for (a, w) in b.iter().zip(want) {
+        assert!((a - w).abs() < 1e-4, "{b:?}");
+    }
+    // dilation: instance 3 (dent) at (1,1), instance 1 (scratch) at (3,3) in 5 x 5; (2,2)
+    // touches both and takes the smaller id.
+    let mut inst = vec![0u16; 25];
+    let mut class = vec![0u8; 25];
+    inst[6] = 3;
+    class[6] = 1;
+    inst[18] = 1;
+    class[18] = 2;
+    let (c2, i2) = post::dilate_labels(&class, &inst, 5, 5);
+    assert_eq!(i2[12], 1);
+    assert_eq!(c2[12], 2);
+    assert_eq!(i2.iter().filter(|&&i| i == 3).count(), 8); // 3x3 minus (2,2)
+    assert_eq!(i2.iter().filter(|&&i| i == 1).count(), 9); // (2..=4)^2, (2,2) included
+    // visibility: one defect pixel in a flat 7x7 field of 100; ring = 5x5 - 1 = 24 px.
+    let mut img = vec![100.0f32; 49];
+    let mut inst = vec![0u16; 49];
+    inst[24] = 5;
+    img[24] = 100.0 + 0.05 * 255.0 + 0.01;
+    let v = post::visibilities(&img, &inst, 7, 7);
+    assert!((v[&5] - (0.05 + 0.01 / 255.0)).abs() < 1e-6);
+    let frame = |val: f32| {
+        let mut img = vec![100.0f32; 49];
+        img[24] = val;
+        post::Frame {
+            width: 7,
+            height: 7,
+            image: img,
+            class: inst.iter().map(|&i| (i > 0) as u8).collect(),
+            instance: inst.clone(),
+            object: vec![1; 49],
+        }
+    };
+    let steps = [post::PostStep::VisibilityFilter { threshold: 0.05 }];
+    let kept = post::apply(&steps, "x", 0, frame(113.0));
+    assert_eq!(kept.frame.instance[24], 5);
+    assert!(kept.defects[0].kept);
+    let dropped = post::apply(&steps, "x", 0, frame(112.0)); // 12 / 255 = 0.047 < 0.05
+    assert_eq!(dropped.frame.instance[24], 0);
+    assert_eq!(dropped.frame.class[24], 0);
+    assert!(
+        !dropped.defects[0].kept && (dropped.defects[0].visibility - 12.0 / 255.0).abs() < 1e-6
+    );
+    // quantize clamps and rounds
+    assert_eq!(
+        post::quantize(&[-3.0, 0.49, 0.5, 254.6, 300.0, f32::NAN]),
+        vec![0, 0, 1, 255, 255, 0]
+    );
+}
+
+fn blob_masks() -> Vec<(usize, usize, Vec<bool>)> {
+    let mut v = Vec::new();
+    // A pinch (two pixels touching at a corner, joined around), a ring (hole), random blobs.
+    let (w, h) = (6, 5);
+    let mut m = vec![false; w * h];
+    for (x, y) in [(1, 1), (2, 2), (1, 2), (3, 2), (3, 1), (4, 1)] {
+        m[y * w + x] = true;
+    }
+    v.push((w, h, m));
+    let mut s = 99u64;
+    for _ in 0..20 {
+        let (w, h) = (23, 17);
+        let mut m = vec![false; w * h];
+        for _ in 0..4 {
+            s = splitmix64(s);
+            let (cx, cy, r) = (
+                (s % 23) as i64,
+                ((s >> 8) % 17) as i64,
+                1 + ((s >> 16) % 5) as i64,
+            );
+            for y in 0..h as i64 {
+                for x in 0..w as i64 {
+                    if (x - cx).pow(2) + (y - cy).pow(2) <= r * r + ((s >> 24) % 3) as i64 {
+                        m[y as usize * w + x as usize] = true;
+                    }
+                }
+            }
+        }
+        v.push((w, h, m));
+    }
+    v
+}
+
+#[test]
+fn coco_rle_and_labelme_polygons_give_back_the_masks() {
+    for (w, h, m) in blob_masks() {
+        let counts = labels::rle_counts(&m, w, h);
+        let s = labels::rle_encode_string(&counts);
+        let back = labels::rle_decode_string(&s).unwrap();
+        assert_eq!(back, counts);
+        assert_eq!(labels::rle_to_mask(&back, w, h).unwrap(), m);
+
+        // Polygons filled as LabelMe/compare do, at pixel centres: every pixel that
+        // differs must lie within 1 px of the mask boundary (holes fill in).
+        let mut filled = synosis::metrics::Mask::filled(w, h, false);
+        for p in labels::trace_polygons(&m, w, h) {
+            filled.fill_polygon(&p);
+        }
+        for y in 0..h {
+            for x in 0..w {
+                if filled.data[y * w + x] != m[y * w + x] {
+                    let near_boundary = (y.saturating_sub(1)..=(y + 1).min(h - 1)).any(|sy| {
+                        (x.saturating_sub(1)..=(x + 1).min(w - 1))
+                            .any(|sx| m[sy * w + sx] != m[y * w + x])
+                    });
+                    assert!(
+                        near_boundary || !m[y * w + x],
+                        "pixel ({x},{y}) far from the boundary"
+                    );
+                }
+            }
+        }
+        // Pixels inside the mask are never lost (outer boundaries are exact).
+        assert!(m.iter().zip(&filled.data).all(|(a, b)| !*a || *b));
+    }
+}
+
+#[test]
+fn output_is_readable_by_compare_and_standard_label_formats() {
+    let f = fixture(2, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let samples = synosis::metrics::dataset::load_dir(&out).unwrap();
+    assert_eq!(samples.len(), f.prep.plan.items.len());
+    assert_eq!(samples[0].id, "000000");
+    assert_eq!(samples[0].texture(), "sandblasted");
+    let face_labels: Vec<String> = ["A", "B", "C"].iter().map(|s| s.to_string()).collect();
+    let mut defect_images = 0;
+    for s in &samples {
+        let face = (s.viewpoint.as_bytes()[0] - b'A') as usize;
+        let masks = s.face_masks(&face_labels, &[face]).unwrap();
+        assert!(
+            masks[0].count() > 100,
+            "{}: observed face covers {} px",
+            s.id,
+            masks[0].count()
+        );
+
+        let dir = out.join("images").join(&s.id);
+        let mask = image::open(dir.join("mask.png")).unwrap().into_luma8();
+        let inst = image::open(dir.join("instances.png"))
+            .unwrap()
+            .into_luma16();
+        let (w, h) = (mask.width() as usize, mask.height() as usize);
+        // COCO fragment: each annotation decodes to its instance's pixels.
+        let coco: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("coco.json")).unwrap()).unwrap();
+        for a in coco["annotations"].as_array().unwrap() {
+            let id = a["instance"].as_u64().unwrap() as u16;
+            let counts =
+                labels::rle_decode_string(a["segmentation"]["counts"].as_str().unwrap()).unwrap();
+            let m = labels::rle_to_mask(&counts, w, h).unwrap();
+            let want: Vec<bool> = inst.as_raw().iter().map(|&i| i == id).collect();
+            assert_eq!(m, want);
+            assert_eq!(
+                a["area"].as_u64().unwrap() as usize,
+                want.iter().filter(|b| **b).count()
+            );
+        }
+        // LabelMe: the dent polygons fill back to the dent mask (within 1 px at borders).
+        let lm = synosis::metrics::labelme::LabelMe::load(&dir.join("labelme.json")).unwrap();
+        let dents: Vec<bool> = mask.as_raw().iter().map(|&c| c == 1).collect();
+        if dents.iter().any(|b| *b) {
+            defect_images += 1;
+            let filled = lm.face_mask(&dir.join("labelme.json"), "dent").unwrap();
+            let differing = filled
+                .data
+                .iter()
+                .zip(&dents)
+                .filter(|(a, b)| a != b)
+                .count();
+            assert!(
+                differing * 10 <= dents.iter().filter(|b| **b).count(),
+                "{}: {differing} px differ",
+                s.id
+            );
+        }
+        let face_poly = lm
+            .face_mask(&dir.join("labelme.json"), &face_labels[face])
+            .unwrap();
+        assert!(face_poly.count() >= masks[0].count());
+    }
+    assert!(defect_images > 0, "the test set should show some dents");
+    // Dataset-level COCO per split, ids unique.
+    let mut images = 0;
+    for split in ["train", "val", "test"] {
+        let v: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("coco").join(format!("{split}.json"))).unwrap(),
+        )
+        .unwrap();
+        images += v["images"].as_array().unwrap().len();
+        let ids: BTreeSet<u64> = v["annotations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|a| a["id"].as_u64().unwrap())
+            .collect();
+        assert_eq!(ids.len(), v["annotations"].as_array().unwrap().len());
+    }
+    assert_eq!(images, samples.len());
+}
+
+#[test]
+fn postprocess_reruns_from_raw_files() {
+    let f = fixture(1, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let before = tree(&out);
+    let n = dataset::postprocess_dir(&out, None).unwrap();
+    assert_eq!(n, f.prep.plan.items.len());
+    assert_eq!(
+        before,
+        tree(&out),
+        "re-running the same steps must give the same files"
+    );
+
+    // Without post-processing steps, image.png is the plain sensor image.
+    let plain = job_text(1, 1)
+        .split("[[postprocess]]")
+        .next()
+        .unwrap()
+        .to_string();
+    let pj = f.root.join("plain.toml");
+    std::fs::write(&pj, &plain).unwrap();
+    dataset::postprocess_dir(&out, Some(&pj)).unwrap();
+    let entries = manifest_without_times(&out);
+    let e = &entries[0];
+    let img = image::open(out.join(e["image"].as_str().unwrap()))
+        .unwrap()
+        .into_luma8();
+    let (_, _, rad) =
+        synosis::image_io::read_exr_f32(&out.join("images/000000/radiance.exr")).unwrap();
+    for (p, l) in img.as_raw().iter().zip(&rad) {
+        assert_eq!(*p, (255.0 * l).clamp(0.0, 255.0).round() as u8);
+    }
+    assert_eq!(
+        e["files"]["image.png"].as_str().unwrap(),
+        dataset::files::content_hash(&std::fs::read(out.join("images/000000/image.png")).unwrap())
+    );
+    // A job differing in more than its post-processing is refused.
+    std::fs::write(&pj, plain.replace("seed = 11", "seed = 12")).unwrap();
+    assert!(dataset::postprocess_dir(&out, Some(&pj)).is_err());
+}
+
+#[test]
+fn texture_cache_is_bounded() {
+    let mut cache = dataset::TextureCache::new(2);
+    let mut src = FlatTexturesTestDouble { made: 0 };
+    let job = Job::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/smoke-dataset.toml"
+    )))
+    .unwrap();
+    for round in 0..3 {
+        for key in [(0usize, 0u32), (0, 1), (1, 0)] {
+            let m = cache
+                .get(key, || {
+                    Ok(src.make(&job.finishes[key.0], key.1, 0, 8, 1.0).unwrap())
+                })
+                .unwrap();
+            assert_eq!(m.width, 8);
+            assert!(cache.len() <= 2, "round {round}");
+        }
+    }
+    // LRU with 3 keys cycling through 2 slots misses every time.
+    assert_eq!(src.made, 9);
+    let mut cache = dataset::TextureCache::new(3);
+    for _ in 0..3 {
+        for k in 0..3u32 {
+            cache
+                .get((0, k), || {
+                    Ok(src.make(&job.finishes[0], k, 0, 8, 1.0).unwrap())
+                })
+                .unwrap();
+        }
+    }
+    assert_eq!(cache.made, 3);
+}
