@@ -499,6 +499,21 @@ fn steep_slope_map_has_no_black_fringes() {
             100.0 * gmin / fmin
         );
         assert!(fmin > 0.0, "the flat face must be lit everywhere");
+        // Extremes: the steepest allowed slope (85 degrees) at a grazing view: finite and
+        // non-negative everywhere (too few lit pixels for assert_sane's coverage check).
+        let steep = "[texture]\nkind = \"test-grooves\"\nspacing_um = 50.0\ngroove_period_mm = 2.0\ngroove_max_slope_deg = 85.0\n";
+        for view in ["A80", "B85"] {
+            let (img, _) = render_faces(&small_cfg(steep).tap_view(view), backend);
+            let bad = img
+                .data
+                .iter()
+                .filter(|v| !v.is_finite() || **v < 0.0)
+                .count();
+            assert_eq!(
+                bad, 0,
+                "{view}, 85-degree slopes: {bad} NaN/Inf/negative pixels"
+            );
+        }
         assert!(
             gmin > 0.05 * fmin,
             "{}: a grooved pixel at {gmin} (flat min {fmin})",
