@@ -49,10 +49,21 @@ struct FaceMapHeader {
     vec4 origin;    // xyz map centre (world, mm), w texels per mm
     vec4 axis_x;    // xyz map x axis (world)
     vec4 axis_up;   // xyz map up axis (-y, world)
-    uvec4 dims;     // width, height, first texel, present
+    uvec4 dims;     // width, height, first texel (0: one buffer per face), present
 };
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 6) readonly buffer FaceMaps { FaceMapHeader face_maps[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 7) readonly buffer Slopes { vec2 slopes[]; };
+// Texels of faces A, B, C, one buffer each: two f16 slopes [dh/dx, dh/dy] per uint.
+layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 7) readonly buffer SlopesA { uint slopes_a[]; };
+layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 8) readonly buffer SlopesB { uint slopes_b[]; };
+layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 9) readonly buffer SlopesC { uint slopes_c[]; };
+
+vec2 slope_texel(uint face, uint i) {
+    uint w;
+    if (face == 1u) w = slopes_a[i];
+    else if (face == 2u) w = slopes_b[i];
+    else w = slopes_c[i];
+    return unpackHalf2x16(w);
+}
 
 layout(push_constant) uniform Push {
     uint sample_start; uint sample_count; uint tiles_x; uint mult;
@@ -149,8 +160,8 @@ vec2 map_slopes(uint face, vec3 p) {
     uint x1 = min(x0 + 1u, m.dims.x - 1u), y1 = min(y0 + 1u, m.dims.y - 1u);
     float tx = fx - float(x0), ty = fy - float(y0);
     uint b = m.dims.z;
-    vec2 a = mix(slopes[b + y0 * m.dims.x + x0], slopes[b + y0 * m.dims.x + x1], tx);
-    vec2 c = mix(slopes[b + y1 * m.dims.x + x0], slopes[b + y1 * m.dims.x + x1], tx);
+    vec2 a = mix(slope_texel(face, b + y0 * m.dims.x + x0), slope_texel(face, b + y0 * m.dims.x + x1), tx);
+    vec2 c = mix(slope_texel(face, b + y1 * m.dims.x + x0), slope_texel(face, b + y1 * m.dims.x + x1), tx);
     return mix(a, c, ty);
 }
 

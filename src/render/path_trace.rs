@@ -333,7 +333,7 @@ pub fn render_frame(
         ctx,
         "path_trace",
         backend,
-        8,
+        10,
         std::mem::size_of::<Push>() as u32,
         [8, 8, 1],
     )?;
@@ -392,10 +392,19 @@ pub fn render_frame(
         .zip(&scene.mesh.labels)
         .map(|(&m, l)| m | (l.face as u32) << 8)
         .collect();
-    let (map_headers, map_texels) = super::slope::pack(&scene.face_maps, &scene.face_frames)?;
+    let (map_headers, map_texels) = super::slope::pack(
+        &scene.face_maps,
+        &scene.face_frames,
+        ctx.info.max_storage_buffer_range as u64,
+    )?;
     let mat_buf = Buffer::from_slice(ctx, "materials", &mat_words, storage)?;
     let map_head_buf = Buffer::from_slice(ctx, "slope map headers", &map_headers, storage)?;
-    let map_buf = Buffer::from_slice(ctx, "slope maps", &map_texels, storage)?;
+    let mut map_bufs = Vec::with_capacity(3);
+    for (texels, name) in map_texels.iter().zip(["slopes A", "slopes B", "slopes C"]) {
+        // A binding may not be empty; a face without a map never reads it.
+        let data: &[u32] = if texels.is_empty() { &[0] } else { texels };
+        map_bufs.push(Buffer::from_slice(ctx, name, data, storage)?);
+    }
     let light_buf = Buffer::from_slice(ctx, "lights", &light_words, storage)?;
     let energy_buf = Buffer::from_slice(ctx, "energy tables", &tables.packed(), storage)?;
     let param_buf = Buffer::from_slice(ctx, "path params", &[params], storage)?;
@@ -429,7 +438,9 @@ pub fn render_frame(
         let pr = g.import(&param_buf);
         let mut acc = g.import(&accum);
         let mh = g.import(&map_head_buf);
-        let mt = g.import(&map_buf);
+        let ma = g.import(&map_bufs[0]);
+        let mb = g.import(&map_bufs[1]);
+        let mc = g.import(&map_bufs[2]);
         if done == 0 {
             g.fill("clear radiance", &mut acc, 0);
             if let Some((pass, targets)) = &annotation {
@@ -453,7 +464,9 @@ pub fn render_frame(
             .read(off + 4, &pr)
             .read_write(off + 5, &mut acc)
             .read(off + 6, &mh)
-            .read(off + 7, &mt)
+            .read(off + 7, &ma)
+            .read(off + 8, &mb)
+            .read(off + 9, &mc)
             .push(&push)
             .submit();
         for t in g.execute(profiler)? {

@@ -71,7 +71,7 @@ pub struct FaceMap {
 
 /// One face's placement as the shader reads it (4 x vec4, std430).
 #[repr(C)]
-#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct FaceMapGpu {
     /// xyz: map centre (world, mm); w: texels per mm.
     pub origin: [f32; 4],
@@ -93,14 +93,18 @@ pub enum SlopeError {
     Invalid { face: &'static str, message: String },
 }
 
-/// Headers (one per face id) and all texels concatenated. Maps on faces that the mesh
-/// does not have are refused, so a typo in a face id cannot silently render flat.
+/// Headers (one per face id) and, per inspected face A, B, C, its texels as two f16
+/// slopes in one u32 (`unpackHalf2x16` in the shader): 4 bytes a texel, and one buffer
+/// per face, so each face may use the whole storage-buffer range (128 MiB on lavapipe:
+/// 33.5 M texels, e.g. 5792 x 5792). Maps on faces that the mesh does not have are
+/// refused, so a typo in a face id cannot silently render flat.
 pub fn pack(
     maps: &[FaceMap],
     frames: &[FaceFrame],
-) -> Result<(Vec<FaceMapGpu>, Vec<[f32; 2]>), SlopeError> {
+    max_bytes: u64,
+) -> Result<(Vec<FaceMapGpu>, [Vec<u32>; 3]), SlopeError> {
     let mut headers = vec![FaceMapGpu::default(); FACE_SLOTS];
-    let mut texels: Vec<[f32; 2]> = Vec::new();
+    let mut texels: [Vec<u32>; 3] = Default::default();
     for m in maps {
         let name = crate::scene::mesh::face_name(m.face);
         let bad = |message: String| SlopeError::Invalid {
@@ -118,6 +122,15 @@ pub fn pack(
                 s.width,
                 s.height,
                 s.data.len()
+            )));
+        }
+        if s.data.len() as u64 * 4 > max_bytes {
+            return Err(bad(format!(
+                "{} x {} texels need {} MiB, more than one storage buffer allows ({} MiB)",
+                s.width,
+                s.height,
+                (s.data.len() as u64 * 4) >> 20,
+                max_bytes >> 20
             )));
         }
         if !(s.spacing_um.is_finite() && s.spacing_um > 0.0) {
@@ -139,24 +152,62 @@ pub fn pack(
         let ax = frame.u * cos + frame.v * sin;
         let up = frame.v * cos - frame.u * sin;
         let centre = frame.centre + frame.u * m.offset_mm[0] + frame.v * m.offset_mm[1];
-        let first = texels.len() as u32;
-        texels.extend_from_slice(&s.data);
+        texels[m.face as usize - 1] = s
+            .data
+            .iter()
+            .map(|v| f16_bits(v[0]) as u32 | (f16_bits(v[1]) as u32) << 16)
+            .collect();
         headers[m.face as usize] = FaceMapGpu {
             origin: centre.extend(1000.0 / s.spacing_um as f32).into(),
             axis_x: ax.extend(0.0).into(),
             axis_up: up.extend(0.0).into(),
-            dims: [s.width as u32, s.height as u32, first, 1],
+            dims: [s.width as u32, s.height as u32, 0, 1],
         };
-    }
-    if texels.is_empty() {
-        texels.push([0.0; 2]); // a binding may not be empty; no header points at it
     }
     Ok((headers, texels))
 }
 
+/// f32 to IEEE half bits, rounding to nearest even; beyond the half range it saturates at
+/// +-65504 (slopes that steep are clamped to 85 degrees by the shader anyway).
+pub fn f16_bits(x: f32) -> u16 {
+    let b = x.to_bits();
+    let sign = ((b >> 16) & 0x8000) as u16;
+    let a = b & 0x7fff_ffff;
+    if a >= 0x477f_f000 {
+        return sign | 0x7bff;
+    }
+    if a < 0x3880_0000 {
+        // Below 2^-14: a subnormal half (or zero below 2^-25).
+        if a < 0x3300_0000 {
+            return sign;
+        }
+        let m = (a & 0x7f_ffff) | 0x80_0000;
+        let shift = 126 - (a >> 23);
+        let q = m >> shift;
+        let rem = m & ((1 << shift) - 1);
+        let mid = 1 << (shift - 1);
+        let r = q + (rem > mid || (rem == mid && q & 1 == 1)) as u32;
+        return sign | r as u16;
+    }
+    let a = a - 0x3800_0000;
+    sign | ((a + 0x0fff + ((a >> 13) & 1)) >> 13) as u16
+}
+
+/// IEEE half bits to f32 (what `unpackHalf2x16` gives).
+pub fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let e = ((h >> 10) & 0x1f) as i32;
+    let m = (h & 0x3ff) as f32;
+    sign * match e {
+        0 => m * 2f32.powi(-24),
+        31 => f32::INFINITY,
+        _ => (1.0 + m / 1024.0) * 2f32.powi(e - 15),
+    }
+}
+
 /// The shading normal the shader computes at `p` on a face with outward normal `n`
 /// (CPU mirror for tests and docs): bilinear slopes, perturbed normal in the map axes.
-pub fn shading_normal(h: &FaceMapGpu, texels: &[[f32; 2]], p: Vec3, n: Vec3) -> Vec3 {
+pub fn shading_normal(h: &FaceMapGpu, texels: &[u32], p: Vec3, n: Vec3) -> Vec3 {
     let s = lookup(h, texels, p);
     let ax = Vec3::from_slice(&h.axis_x[..3]);
     let up = Vec3::from_slice(&h.axis_up[..3]);
@@ -165,7 +216,7 @@ pub fn shading_normal(h: &FaceMapGpu, texels: &[[f32; 2]], p: Vec3, n: Vec3) -> 
 }
 
 /// Bilinear slopes at `p` (zero outside the map), as the shader computes them.
-pub fn lookup(h: &FaceMapGpu, texels: &[[f32; 2]], p: Vec3) -> [f32; 2] {
+pub fn lookup(h: &FaceMapGpu, texels: &[u32], p: Vec3) -> [f32; 2] {
     if h.dims[3] == 0 {
         return [0.0; 2];
     }
@@ -182,7 +233,10 @@ pub fn lookup(h: &FaceMapGpu, texels: &[[f32; 2]], p: Vec3) -> [f32; 2] {
     let (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
     let (x1, y1) = ((x0 + 1).min(h.dims[0] - 1), (y0 + 1).min(h.dims[1] - 1));
     let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
-    let at = |x: u32, y: u32| texels[(h.dims[2] + y * h.dims[0] + x) as usize];
+    let at = |x: u32, y: u32| {
+        let w = texels[(h.dims[2] + y * h.dims[0] + x) as usize];
+        [f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16)]
+    };
     let mut out = [0.0; 2];
     for (c, o) in out.iter_mut().enumerate() {
         let a = at(x0, y0)[c] + (at(x1, y0)[c] - at(x0, y0)[c]) * tx;
@@ -220,14 +274,15 @@ mod tests {
             rotation_deg,
             offset_mm,
         };
-        let (h, t) = pack(&[place(90.0, [5.0, 0.0])], &[frame]).expect("pack");
+        let (h, t) = pack(&[place(90.0, [5.0, 0.0])], &[frame], 1 << 27).expect("pack");
         let h = h[frame.face as usize];
+        let t = &t[frame.face as usize - 1];
         // Rotated 90 degrees: map x = v (+y), map up = -u; centre at (6, 2, 3).
         let centre = Vec3::new(6.0, 2.0, 3.0);
         // 1.5 mm along map x from the centre, 0.5 mm down: texel row 2 (dh/dx = 1), so
         // the normal leans against map x, i.e. towards -y.
         let p = centre + Vec3::Y * 1.5 + Vec3::X * 0.5;
-        let n = shading_normal(&h, &t, p, Vec3::Z);
+        let n = shading_normal(&h, t, p, Vec3::Z);
         assert!(
             (n - Vec3::new(0.0, -1.0, 1.0).normalize()).length() < 1e-5,
             "{n}"
@@ -235,14 +290,40 @@ mod tests {
         // Top row (1.5 mm along map up = -x): dh/dy = 1 with y down, so the height
         // falls towards map up and the normal leans that way: towards -x.
         let p = centre + Vec3::Y * 0.5 - Vec3::X * 1.5;
-        let n = shading_normal(&h, &t, p, Vec3::Z);
+        let n = shading_normal(&h, t, p, Vec3::Z);
         assert!(
             (n - Vec3::new(-1.0, 0.0, 1.0).normalize()).length() < 1e-5,
             "{n}"
         );
         // Outside the 4 mm map: flat.
-        assert_eq!(lookup(&h, &t, centre + Vec3::Y * 2.5), [0.0, 0.0]);
-        assert!(pack(&[place(0.0, [0.0; 2]), place(0.0, [0.0; 2])], &[frame]).is_err());
+        assert_eq!(lookup(&h, t, centre + Vec3::Y * 2.5), [0.0, 0.0]);
+        assert!(
+            pack(
+                &[place(0.0, [0.0; 2]), place(0.0, [0.0; 2])],
+                &[frame],
+                1 << 27
+            )
+            .is_err()
+        );
+        let e = pack(&[place(0.0, [0.0; 2])], &[frame], 32)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("storage buffer"), "{e}");
+    }
+
+    #[test]
+    fn half_conversion_rounds_to_nearest() {
+        for x in [
+            0.0f32, 1.0, -1.0, 0.5, 1.7320508, 11.43, 1e-3, -6.1e-5, 3.0e-7, 65504.0,
+        ] {
+            let y = f16_to_f32(f16_bits(x));
+            // Half precision: 11 significant bits (relative 2^-11), subnormals 2^-25 absolute.
+            assert!((y - x).abs() <= x.abs() * 4.9e-4 + 3.0e-8, "{x} -> {y}");
+        }
+        assert_eq!(f16_bits(1.0), 0x3c00);
+        assert_eq!(f16_bits(-2.0), 0xc000);
+        assert_eq!(f16_bits(1e9), 0x7bff);
+        assert_eq!(f16_bits(0.0), 0);
     }
 
     #[test]
