@@ -133,7 +133,7 @@ impl TextureSource for FlatTexturesTestDouble {
             width: size,
             height: size,
             spacing_um,
-            slopes: vec![[0.0, 0.0]; size * size],
+            data: vec![[0.0, 0.0]; size * size],
         })
     }
 }

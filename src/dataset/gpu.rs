@@ -11,6 +11,7 @@ use super::renderer::{ImageRenderer, ImageRequest, RenderedImage};
 use crate::render::annotate::DEFAULT_COVERAGE_GRID;
 use crate::render::energy::EnergyTables;
 use crate::render::path_trace::{FrameOptions, RenderScene, render_frame};
+use crate::render::slope::FaceMap;
 use crate::scene::config::SceneConfig;
 use crate::scene::mesh::FACE_OTHER;
 use crate::trace::{AccelChoice, Backend, resolve};
@@ -49,10 +50,7 @@ impl GpuRenderer {
 
 impl ImageRenderer for GpuRenderer {
     fn describe(&self) -> String {
-        format!(
-            "gpu-path-tracer/{} (face textures not applied)",
-            self.backend.name()
-        )
+        format!("gpu-path-tracer/{}", self.backend.name())
     }
 
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
@@ -72,7 +70,19 @@ impl ImageRenderer for GpuRenderer {
                 l.face = FACE_OBJECT_OTHER;
             }
         }
-        let scene = RenderScene::assemble(&object, &cfg).map_err(|e| e.to_string())?;
+        let mut scene = RenderScene::assemble(&object, &cfg).map_err(|e| e.to_string())?;
+        // Each inspected face's texture: planar projection in the face frame, rotated,
+        // shifted by whole texture pixels along the face's (u, v) axes.
+        scene.face_maps = req
+            .face_textures
+            .iter()
+            .map(|t| FaceMap {
+                face: t.face,
+                slopes: t.map.clone(),
+                rotation_deg: t.rotation_rad.to_degrees(),
+                offset_mm: t.offset_px.map(|p| p * (t.map.spacing_um * 1e-3) as f32),
+            })
+            .collect();
         let opts = FrameOptions {
             annotate_grid: Some(DEFAULT_COVERAGE_GRID),
             profiler: None,

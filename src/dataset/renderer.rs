@@ -6,22 +6,10 @@ use std::sync::Arc;
 
 use crate::scene::Mesh;
 
-/// A slope map as the renderer needs it: row 0 at the top, `[dh/dx, dh/dy]` (unitless)
-/// per texture pixel of `spacing_um`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TextureMap {
-    pub width: usize,
-    pub height: usize,
-    pub spacing_um: f64,
-    pub slopes: Vec<[f32; 2]>,
-}
-
-impl TextureMap {
-    /// Bytes held, for the cache's accounting.
-    pub fn bytes(&self) -> usize {
-        self.slopes.len() * std::mem::size_of::<[f32; 2]>()
-    }
-}
+/// A slope map as the renderer takes it: the texture module's `SlopeMap` (row 0 at the
+/// top, `[dh/dx, dh/dy]` unitless per texel of `spacing_um`), shared by `Arc` between the
+/// cache and the renderer without copying.
+pub type TextureMap = crate::texture::SlopeMap;
 
 /// The texture on one inspected face: a planar projection in the face's frame
 /// (`scene::face_frames`), rotated by `rotation_rad` and shifted by `offset_px` texture

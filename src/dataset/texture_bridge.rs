@@ -106,12 +106,6 @@ impl TextureSource for ModuleTextures {
                     .map_err(|e| e.to_string())?
             }
         };
-        let s = height.slopes();
-        Ok(TextureMap {
-            width: s.width,
-            height: s.height,
-            spacing_um: s.spacing_um,
-            slopes: s.data,
-        })
+        Ok(height.slopes())
     }
 }
