@@ -264,6 +264,7 @@ fn manifest_without_times(dir: &Path) -> Vec<serde_json::Value> {
             let o = v.as_object_mut().unwrap();
             o.remove("finished_unix");
             o.remove("render_seconds");
+            o.remove("stage_seconds");
             v
         })
         .collect()

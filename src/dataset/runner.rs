@@ -202,7 +202,13 @@ pub struct ManifestEntry {
     pub files: BTreeMap<String, String>,
     /// Timing: the only fields that differ between identical runs.
     pub finished_unix: u64,
+    /// Wall time of the whole image (mesh, textures, render, post-processing, writing).
     pub render_seconds: f64,
+    /// Wall time per stage: "defects" (imprinting the object instance's mesh, once per
+    /// instance), "textures" (cache misses only), "render" (acceleration structure,
+    /// path tracing, annotation, readback), "write" (raw files, post-processing, writing).
+    #[serde(default)]
+    pub stage_seconds: BTreeMap<String, f64>,
 }
 
 /// Files under `images/<id>/`.
@@ -412,7 +418,14 @@ impl<'p> Ctx<'p> {
         let inst: &InstancePlan = &self.prep.plan.instances[item.instance];
         let finish = &job.finishes[inst.finish];
         let params = plan::instance_params(job, inst);
+        let mut stages = BTreeMap::new();
+        let mut lap = Instant::now();
+        let mut stage = |name: &str, stages: &mut BTreeMap<String, f64>| {
+            stages.insert(name.to_string(), lap.elapsed().as_secs_f64());
+            lap = Instant::now();
+        };
         let mesh = self.mesh(item.instance)?;
+        stage("defects", &mut stages);
         let present: BTreeSet<u8> = mesh.labels.iter().map(|l| l.face).collect();
         let mut face_textures = Vec::new();
         for fc in params.faces.iter().filter(|f| present.contains(&f.face)) {
@@ -436,6 +449,7 @@ impl<'p> Ctx<'p> {
                 offset_px: [fc.offset_px[0] as f32, fc.offset_px[1] as f32],
             });
         }
+        stage("textures", &mut stages);
         let view = &job.views[item.view];
         let req = ImageRequest {
             mesh: &mesh,
@@ -459,6 +473,7 @@ impl<'p> Ctx<'p> {
         };
         let img = renderer.render(&req).map_err(fail)?;
         img.check(&req).map_err(fail)?;
+        stage("render", &mut stages);
         let dir = out.join("images").join(item.id());
         std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
         let mut hashes = write_raw(&dir, &img)?;
@@ -466,6 +481,7 @@ impl<'p> Ctx<'p> {
         let (post_hashes, defects, noise_sigma) =
             write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
         hashes.extend(post_hashes);
+        stage("write", &mut stages);
         let rel = |f: &str| format!("images/{}/{f}", item.id());
         Ok(ManifestEntry {
             index: item.index,
@@ -496,6 +512,7 @@ impl<'p> Ctx<'p> {
                 .map(|d| d.as_secs())
                 .unwrap_or(0),
             render_seconds: t0.elapsed().as_secs_f64(),
+            stage_seconds: stages,
         })
     }
 }
