@@ -84,3 +84,82 @@ fn validation_layer_catches_a_planted_error() {
         "the validation layer reported nothing"
     );
 }
+
+#[test]
+fn image_round_trip_through_transfers_is_exact_and_clean() {
+    use synosis::vk::Image;
+    let ctx = common::gpu();
+    let (w, h) = (37u32, 23u32);
+    let data: Vec<f32> = (0..w * h).map(|i| i as f32 * 0.25 - 7.0).collect();
+    let usage = vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+    let src = Buffer::from_slice(&ctx, "image src", &data, usage).unwrap();
+    let dst = Buffer::new(
+        &ctx,
+        "image dst",
+        (w * h * 4) as u64,
+        usage,
+        MemoryKind::Readback,
+    )
+    .unwrap();
+    let img = Image::new_2d(
+        &ctx,
+        "round trip",
+        w,
+        h,
+        vk::Format::R32_SFLOAT,
+        vk::ImageUsageFlags::TRANSFER_SRC
+            | vk::ImageUsageFlags::TRANSFER_DST
+            | vk::ImageUsageFlags::STORAGE,
+    )
+    .unwrap();
+    let t = vk::PipelineStageFlags::TRANSFER;
+    ctx.submit_and_wait(|cb| {
+        img.transition(
+            cb,
+            (
+                vk::ImageLayout::UNDEFINED,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::AccessFlags::empty(),
+            ),
+            (
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                t,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+        );
+        img.copy_from_buffer(cb, &src);
+        img.transition(
+            cb,
+            (
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                t,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                t,
+                vk::AccessFlags::TRANSFER_READ,
+            ),
+        );
+        img.copy_to_buffer(cb, &dst);
+        let host = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ);
+        unsafe {
+            ctx.device.cmd_pipeline_barrier(
+                cb,
+                t,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[host],
+                &[],
+                &[],
+            )
+        };
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(dst.read::<f32>().unwrap(), data);
+    drop(img);
+    common::assert_clean(&ctx);
+}

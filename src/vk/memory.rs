@@ -169,3 +169,194 @@ impl Drop for Buffer {
         }
     }
 }
+
+/// A 2D image with its memory and a full view. Dropping it frees all three.
+pub struct Image {
+    ctx: Arc<Context>,
+    pub raw: vk::Image,
+    pub view: vk::ImageView,
+    pub format: vk::Format,
+    pub extent: vk::Extent2D,
+    allocation: Option<Allocation>,
+}
+
+impl Image {
+    /// A device-local, optimally tiled 2D image (one mip level, one layer), in layout
+    /// UNDEFINED; [`Image::transition`] moves it to the layout a pass needs.
+    pub fn new_2d(
+        ctx: &Arc<Context>,
+        name: &str,
+        width: u32,
+        height: u32,
+        format: vk::Format,
+        usage: vk::ImageUsageFlags,
+    ) -> Result<Image, VkError> {
+        let extent = vk::Extent2D { width, height };
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(format)
+            .extent(vk::Extent3D {
+                width,
+                height,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(1)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        let raw = unsafe { ctx.device.create_image(&info, None) }?;
+        let req = unsafe { ctx.device.get_image_memory_requirements(raw) };
+        let alloc = ctx
+            .allocator
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements: req,
+                location: MemoryLocation::GpuOnly,
+                linear: false,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
+        let alloc = match alloc {
+            Ok(a) => a,
+            Err(e) => {
+                unsafe { ctx.device.destroy_image(raw, None) };
+                return Err(e.into());
+            }
+        };
+        let free = |alloc, raw| {
+            unsafe { ctx.device.destroy_image(raw, None) };
+            let _ = ctx
+                .allocator
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .free(alloc);
+        };
+        if let Err(e) = unsafe {
+            ctx.device
+                .bind_image_memory(raw, alloc.memory(), alloc.offset())
+        } {
+            free(alloc, raw);
+            return Err(e.into());
+        }
+        let view_info = vk::ImageViewCreateInfo::default()
+            .image(raw)
+            .view_type(vk::ImageViewType::TYPE_2D)
+            .format(format)
+            .subresource_range(Self::full_range());
+        let view = match unsafe { ctx.device.create_image_view(&view_info, None) } {
+            Ok(v) => v,
+            Err(e) => {
+                free(alloc, raw);
+                return Err(e.into());
+            }
+        };
+        ctx.set_name(raw, name);
+        Ok(Image {
+            ctx: ctx.clone(),
+            raw,
+            view,
+            format,
+            extent,
+            allocation: Some(alloc),
+        })
+    }
+
+    fn full_range() -> vk::ImageSubresourceRange {
+        vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .level_count(1)
+            .layer_count(1)
+    }
+
+    /// Records a layout transition with a full barrier between the given stages.
+    pub fn transition(
+        &self,
+        cb: vk::CommandBuffer,
+        from: (vk::ImageLayout, vk::PipelineStageFlags, vk::AccessFlags),
+        to: (vk::ImageLayout, vk::PipelineStageFlags, vk::AccessFlags),
+    ) {
+        let barrier = vk::ImageMemoryBarrier::default()
+            .old_layout(from.0)
+            .new_layout(to.0)
+            .src_access_mask(from.2)
+            .dst_access_mask(to.2)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(self.raw)
+            .subresource_range(Self::full_range());
+        unsafe {
+            self.ctx.device.cmd_pipeline_barrier(
+                cb,
+                from.1,
+                to.1,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[barrier],
+            )
+        };
+    }
+
+    /// Records a copy of the whole image (in TRANSFER_SRC_OPTIMAL) into `dst`.
+    pub fn copy_to_buffer(&self, cb: vk::CommandBuffer, dst: &Buffer) {
+        let region = [self.buffer_region()];
+        unsafe {
+            self.ctx.device.cmd_copy_image_to_buffer(
+                cb,
+                self.raw,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                dst.raw,
+                &region,
+            )
+        };
+    }
+
+    /// Records a copy of `src` into the whole image (in TRANSFER_DST_OPTIMAL).
+    pub fn copy_from_buffer(&self, cb: vk::CommandBuffer, src: &Buffer) {
+        let region = [self.buffer_region()];
+        unsafe {
+            self.ctx.device.cmd_copy_buffer_to_image(
+                cb,
+                src.raw,
+                self.raw,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &region,
+            )
+        };
+    }
+
+    fn buffer_region(&self) -> vk::BufferImageCopy {
+        vk::BufferImageCopy::default()
+            .image_subresource(
+                vk::ImageSubresourceLayers::default()
+                    .aspect_mask(vk::ImageAspectFlags::COLOR)
+                    .layer_count(1),
+            )
+            .image_extent(vk::Extent3D {
+                width: self.extent.width,
+                height: self.extent.height,
+                depth: 1,
+            })
+    }
+}
+
+impl Drop for Image {
+    fn drop(&mut self) {
+        unsafe {
+            self.ctx.device.destroy_image_view(self.view, None);
+            self.ctx.device.destroy_image(self.raw, None);
+        }
+        if let Some(a) = self.allocation.take() {
+            let _ = self
+                .ctx
+                .allocator
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .free(a);
+        }
+    }
+}

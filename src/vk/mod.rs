@@ -10,7 +10,7 @@ pub mod profiler;
 
 pub use accel::{AccelStructure, TriangleAccel};
 pub use context::{Context, ContextOptions, DeviceInfo, ValidationLog};
-pub use memory::{Buffer, MemoryKind};
+pub use memory::{Buffer, Image, MemoryKind};
 pub use pipeline::{BindingKind, ComputePipeline};
 pub use profiler::{Profiler, Span};
 
