@@ -38,6 +38,23 @@ fn smoke(accel: AccelChoice, name: &str) {
     let entries = dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
     for e in entries {
         assert!(e.renderer.starts_with("gpu-path-tracer"));
+        for stage in [
+            "defects",
+            "textures",
+            "render",
+            "write",
+            "render.acceleration",
+            "render.path_trace_gpu",
+            "render.annotate_gpu",
+        ] {
+            let s = e.stage_seconds.get(stage).copied();
+            assert!(
+                s.is_some_and(|s| s.is_finite() && s >= 0.0),
+                "{}: stage {stage} = {s:?}",
+                e.id
+            );
+        }
+        assert!(e.stage_seconds["render.path_trace_gpu"] > 0.0);
         let dir = out.join("images").join(&e.id);
         let faces = image::open(dir.join("faces.png")).unwrap().into_luma8();
         let face = e.viewpoint.as_bytes()[0] - b'A' + 1;

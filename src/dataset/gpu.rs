@@ -15,7 +15,7 @@ use crate::render::slope::FaceMap;
 use crate::scene::config::SceneConfig;
 use crate::scene::mesh::FACE_OTHER;
 use crate::trace::{AccelChoice, Backend, resolve};
-use crate::vk::{Context, ContextOptions};
+use crate::vk::{Context, ContextOptions, Profiler};
 
 /// Face id given to the object's non-inspected triangles for the annotation pass only,
 /// so "object" and "table or nothing" (both face 0 in faces.png) can be told apart.
@@ -28,6 +28,7 @@ pub struct GpuRenderer {
     backend: Backend,
     tables: EnergyTables,
     base: SceneConfig,
+    stages: Vec<(String, f64)>,
 }
 
 impl GpuRenderer {
@@ -44,6 +45,7 @@ impl GpuRenderer {
             backend,
             tables: EnergyTables::compute(),
             base: SceneConfig::default(),
+            stages: Vec::new(),
         })
     }
 }
@@ -51,6 +53,10 @@ impl GpuRenderer {
 impl ImageRenderer for GpuRenderer {
     fn describe(&self) -> String {
         format!("gpu-path-tracer/{}", self.backend.name())
+    }
+
+    fn last_stages(&self) -> Vec<(String, f64)> {
+        self.stages.clone()
     }
 
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
@@ -83,9 +89,10 @@ impl ImageRenderer for GpuRenderer {
                 offset_mm: t.offset_px.map(|p| p * (t.map.spacing_um * 1e-3) as f32),
             })
             .collect();
+        let profiler = Profiler::new();
         let opts = FrameOptions {
             annotate_grid: Some(DEFAULT_COVERAGE_GRID),
-            profiler: None,
+            profiler: Some(&profiler),
         };
         let frame = render_frame(
             &self.ctx,
@@ -97,6 +104,21 @@ impl ImageRenderer for GpuRenderer {
             |_| {},
         )
         .map_err(|e| e.to_string())?;
+        // CPU phases of the acceleration structure, GPU time of the two passes.
+        let secs = |names: &[&str]| names.iter().map(|n| profiler.total_ms(n)).sum::<f64>() / 1e3;
+        self.stages = vec![
+            (
+                "render.acceleration".into(),
+                secs(&[
+                    "upload geometry",
+                    "BVH build (obvhs)",
+                    "upload BVH",
+                    "AS build (BLAS+TLAS)",
+                ]),
+            ),
+            ("render.path_trace_gpu".into(), secs(&["path trace"])),
+            ("render.annotate_gpu".into(), secs(&["annotate"])),
+        ];
         let errors = self.ctx.validation_errors();
         if let Some(first) = errors.first() {
             return Err(format!(

@@ -113,4 +113,9 @@ pub trait ImageRenderer {
     /// A short description for the manifest (backend, device).
     fn describe(&self) -> String;
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String>;
+    /// Seconds spent in parts of the last `render` call, for the manifest's
+    /// `stage_seconds` (names like "render.path_trace"); none by default.
+    fn last_stages(&self) -> Vec<(String, f64)> {
+        Vec::new()
+    }
 }

@@ -206,7 +206,9 @@ pub struct ManifestEntry {
     pub render_seconds: f64,
     /// Wall time per stage: "defects" (imprinting the object instance's mesh, once per
     /// instance), "textures" (cache misses only), "render" (acceleration structure,
-    /// path tracing, annotation, readback), "write" (raw files, post-processing, writing).
+    /// path tracing, annotation, readback; the GPU renderer adds its parts as
+    /// "render.acceleration", "render.path_trace_gpu", "render.annotate_gpu"), "write"
+    /// (raw files, post-processing, writing).
     #[serde(default)]
     pub stage_seconds: BTreeMap<String, f64>,
 }
@@ -474,6 +476,7 @@ impl<'p> Ctx<'p> {
         let img = renderer.render(&req).map_err(fail)?;
         img.check(&req).map_err(fail)?;
         stage("render", &mut stages);
+        stages.extend(renderer.last_stages());
         let dir = out.join("images").join(item.id());
         std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
         let mut hashes = write_raw(&dir, &img)?;
