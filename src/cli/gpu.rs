@@ -106,13 +106,7 @@ pub fn raycast_cmd(a: RaycastArgs) -> anyhow::Result<()> {
     let scene = TraceScene::build(&ctx, &mesh, backend, Some(&profiler))?;
     let cam = PinholeCamera::framing(&mesh, a.width as f32 / a.height as f32);
     let img = raycast(&ctx, &scene, &cam, a.width, a.height, Some(&profiler))?;
-    let errors = ctx.validation_errors();
-    anyhow::ensure!(
-        errors.is_empty(),
-        "Vulkan validation reported {} error(s); first: {}",
-        errors.len(),
-        errors[0]
-    );
+    ctx.check_validation()?;
 
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;

@@ -88,13 +88,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let img = frame.radiance;
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
-    let errors = ctx.validation_errors();
-    anyhow::ensure!(
-        errors.is_empty(),
-        "Vulkan validation reported {} error(s); first: {}",
-        errors.len(),
-        errors[0]
-    );
+    ctx.check_validation()?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let (w, h) = (img.width, img.height);

@@ -119,13 +119,7 @@ impl ImageRenderer for GpuRenderer {
             ("render.path_trace_gpu".into(), secs(&["path trace"])),
             ("render.annotate_gpu".into(), secs(&["annotate"])),
         ];
-        let errors = self.ctx.validation_errors();
-        if let Some(first) = errors.first() {
-            return Err(format!(
-                "Vulkan validation: {} error(s), first: {first}",
-                errors.len()
-            ));
-        }
+        self.ctx.check_validation().map_err(|e| e.to_string())?;
         let ann = frame
             .annotation
             .ok_or("the annotation pass returned nothing")?;

@@ -60,24 +60,13 @@ impl Mask {
 
     /// Any grayscale PNG; a pixel is inside where its value is non-zero.
     pub fn load(path: &Path) -> Result<Self, MetricsError> {
-        let img = super::gray::open(path)?;
-        let (width, height) = (img.width() as usize, img.height() as usize);
-        let data = match img {
-            DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(|v| v != 0).collect(),
-            DynamicImage::ImageLumaA8(b) => b.pixels().map(|p| p.0[0] != 0).collect(),
-            DynamicImage::ImageLuma16(b) => b.into_raw().into_iter().map(|v| v != 0).collect(),
-            DynamicImage::ImageLumaA16(b) => b.pixels().map(|p| p.0[0] != 0).collect(),
-            other => {
-                return Err(MetricsError::NotGrayscale {
-                    path: path.to_path_buf(),
-                    color: format!("{:?}", other.color()),
-                });
-            }
-        };
+        // The same decoding as images (8/16-bit, alpha ignored, others refused); 16-bit
+        // values are scaled by 1/257, which keeps every non-zero value non-zero.
+        let img = super::gray::GrayImage::load(path)?;
         Ok(Self {
-            width,
-            height,
-            data,
+            width: img.width,
+            height: img.height,
+            data: img.data.iter().map(|&v| v != 0.0).collect(),
         })
     }
 

@@ -221,9 +221,6 @@ pub fn annotate(
             name: "annotate".into(),
             gpu_ms: f64::NAN,
         });
-    let ann = match profiler {
-        Some(p) => p.cpu("readback", || targets.read()),
-        None => targets.read(),
-    }?;
+    let ann = crate::vk::timed(profiler, "readback", || targets.read())?;
     Ok((ann, timing))
 }

@@ -87,10 +87,7 @@ pub fn trace_rays(
         .push(&push)
         .submit();
     let timings = g.execute(profiler)?;
-    let raw: Vec<[f32; 4]> = match profiler {
-        Some(p) => p.cpu("readback", || hit_buf.read()),
-        None => hit_buf.read(),
-    }?;
+    let raw: Vec<[f32; 4]> = crate::vk::timed(profiler, "readback", || hit_buf.read())?;
     let hits = raw
         .iter()
         .map(|v| HitOut {
@@ -240,10 +237,7 @@ pub fn raycast(
     let timings = g.execute(profiler)?;
     let read =
         || -> Result<_, VkError> { Ok((depth_buf.read::<f32>()?, normal_buf.read::<u32>()?)) };
-    let (depth, normals) = match profiler {
-        Some(p) => p.cpu("readback", read),
-        None => read(),
-    }?;
+    let (depth, normals) = crate::vk::timed(profiler, "readback", read)?;
     let timing = timings.into_iter().next().unwrap_or(PassTiming {
         name: "raycast".into(),
         gpu_ms: f64::NAN,

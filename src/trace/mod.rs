@@ -12,7 +12,9 @@ use ash::vk;
 
 use crate::graph::{AccelRef, BufferRef, DispatchBuilder, Graph};
 use crate::scene::Mesh;
-use crate::vk::{BindingKind, Buffer, ComputePipeline, Context, Profiler, TriangleAccel, VkError};
+use crate::vk::{
+    BindingKind, Buffer, ComputePipeline, Context, Profiler, TriangleAccel, VkError, timed,
+};
 
 /// What `--accel` asks for.
 #[derive(
@@ -132,15 +134,9 @@ impl TraceScene {
         backend: Backend,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
-        let timed = |name: &str, f: &mut dyn FnMut()| match profiler {
-            Some(p) => p.cpu(name, f),
-            None => f(),
-        };
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        let mut shade = Vec::new();
-        timed("upload geometry", &mut || {
-            shade = mesh
-                .triangles
+        let shade: Vec<ShadeTri> = timed(profiler, "upload geometry", || {
+            mesh.triangles
                 .iter()
                 .map(|t| {
                     let p = t.map(|i| mesh.positions[i as usize]);
@@ -150,39 +146,29 @@ impl TraceScene {
                         c: p[2].extend(0.0).into(),
                     }
                 })
-                .collect();
+                .collect()
         });
         let shade_tris = Buffer::from_slice(ctx, "shade triangles", &shade, storage)?;
         let start = std::time::Instant::now();
         let data = match backend {
             Backend::RayQuery => {
                 let pos: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
-                let mut r = None;
-                timed("AS build (BLAS+TLAS)", &mut || {
-                    r = Some(TriangleAccel::build(ctx, &pos, &mesh.triangles))
-                });
-                Data::RayQuery(r.expect("closure ran")?)
+                let accel = timed(profiler, "AS build (BLAS+TLAS)", || {
+                    TriangleAccel::build(ctx, &pos, &mesh.triangles)
+                })?;
+                Data::RayQuery(accel)
             }
             Backend::Software => {
                 let tris = software_bvh::obvhs_triangles(&mesh.positions, &mesh.triangles);
-                let mut flat = None;
-                timed("BVH build (obvhs)", &mut || {
-                    let bvh = software_bvh::build_bvh(&tris);
-                    flat = Some(software_bvh::flatten(&bvh, &tris));
+                let (nodes, gtris) = timed(profiler, "BVH build (obvhs)", || {
+                    software_bvh::flatten(&software_bvh::build_bvh(&tris), &tris)
                 });
-                let (nodes, gtris) = flat.expect("closure ran");
-                let mut up = None;
-                timed("upload BVH", &mut || {
-                    up = Some((
-                        Buffer::from_slice(ctx, "bvh nodes", &nodes, storage),
-                        Buffer::from_slice(ctx, "bvh triangles", &gtris, storage),
-                    ))
-                });
-                let (n, t) = up.expect("closure ran");
-                Data::Software {
-                    nodes: n?,
-                    tris: t?,
-                }
+                timed(profiler, "upload BVH", || -> Result<Data, VkError> {
+                    Ok(Data::Software {
+                        nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, storage)?,
+                        tris: Buffer::from_slice(ctx, "bvh triangles", &gtris, storage)?,
+                    })
+                })?
             }
         };
         Ok(TraceScene {

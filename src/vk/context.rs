@@ -407,6 +407,19 @@ impl Context {
     pub fn validation_errors(&self) -> Vec<String> {
         self.validation.errors()
     }
+
+    /// An error naming the first validation error, if the layer reported any: callers
+    /// refuse to write output made by invalid Vulkan usage.
+    pub fn check_validation(&self) -> Result<(), VkError> {
+        let errors = self.validation_errors();
+        match errors.first() {
+            None => Ok(()),
+            Some(first) => Err(VkError::Validation {
+                count: errors.len(),
+                first: first.clone(),
+            }),
+        }
+    }
 }
 
 impl Drop for Context {

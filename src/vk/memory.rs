@@ -29,6 +29,44 @@ impl MemoryKind {
     }
 }
 
+/// Allocates memory for a resource and binds it with `bind`; on a bind failure the
+/// memory is freed again (the caller destroys the resource).
+fn allocate_bound(
+    ctx: &Context,
+    name: &str,
+    requirements: vk::MemoryRequirements,
+    location: MemoryLocation,
+    linear: bool,
+    bind: impl FnOnce(&Allocation) -> ash::prelude::VkResult<()>,
+) -> Result<Allocation, VkError> {
+    let alloc = ctx
+        .allocator
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .allocate(&AllocationCreateDesc {
+            name,
+            requirements,
+            location,
+            linear,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        })?;
+    if let Err(e) = bind(&alloc) {
+        free_allocation(ctx, alloc);
+        return Err(e.into());
+    }
+    Ok(alloc)
+}
+
+/// Returns an allocation to the allocator (a failure there leaks at worst, so it is not
+/// reported from drops and error paths).
+fn free_allocation(ctx: &Context, alloc: Allocation) {
+    let _ = ctx
+        .allocator
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .free(alloc);
+}
+
 /// A Vulkan buffer and its memory. Dropping it frees both.
 pub struct Buffer {
     ctx: Arc<Context>,
@@ -70,36 +108,11 @@ impl Buffer {
         let raw = unsafe { ctx.device.create_buffer(&info, None) }?;
         let mut req = unsafe { ctx.device.get_buffer_memory_requirements(raw) };
         req.alignment = req.alignment.max(alignment);
-        let alloc = ctx
-            .allocator
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements: req,
-                location: kind.location(),
-                linear: true,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            });
-        let alloc = match alloc {
-            Ok(a) => a,
-            Err(e) => {
-                unsafe { ctx.device.destroy_buffer(raw, None) };
-                return Err(e.into());
-            }
-        };
-        if let Err(e) = unsafe {
+        let alloc = allocate_bound(ctx, name, req, kind.location(), true, |alloc| unsafe {
             ctx.device
                 .bind_buffer_memory(raw, alloc.memory(), alloc.offset())
-        } {
-            unsafe { ctx.device.destroy_buffer(raw, None) };
-            let _ = ctx
-                .allocator
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .free(alloc);
-            return Err(e.into());
-        }
+        })
+        .inspect_err(|_| unsafe { ctx.device.destroy_buffer(raw, None) })?;
         ctx.set_name(raw, name);
         Ok(Buffer {
             ctx: ctx.clone(),
@@ -160,12 +173,7 @@ impl Drop for Buffer {
     fn drop(&mut self) {
         unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.allocation.take() {
-            let _ = self
-                .ctx
-                .allocator
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .free(a);
+            free_allocation(&self.ctx, a);
         }
     }
 }
@@ -209,39 +217,18 @@ impl Image {
             .initial_layout(vk::ImageLayout::UNDEFINED);
         let raw = unsafe { ctx.device.create_image(&info, None) }?;
         let req = unsafe { ctx.device.get_image_memory_requirements(raw) };
-        let alloc = ctx
-            .allocator
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements: req,
-                location: MemoryLocation::GpuOnly,
-                linear: false,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            });
-        let alloc = match alloc {
-            Ok(a) => a,
-            Err(e) => {
-                unsafe { ctx.device.destroy_image(raw, None) };
-                return Err(e.into());
-            }
-        };
-        let free = |alloc, raw| {
-            unsafe { ctx.device.destroy_image(raw, None) };
-            let _ = ctx
-                .allocator
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .free(alloc);
-        };
-        if let Err(e) = unsafe {
-            ctx.device
-                .bind_image_memory(raw, alloc.memory(), alloc.offset())
-        } {
-            free(alloc, raw);
-            return Err(e.into());
-        }
+        let alloc = allocate_bound(
+            ctx,
+            name,
+            req,
+            MemoryLocation::GpuOnly,
+            false,
+            |alloc| unsafe {
+                ctx.device
+                    .bind_image_memory(raw, alloc.memory(), alloc.offset())
+            },
+        )
+        .inspect_err(|_| unsafe { ctx.device.destroy_image(raw, None) })?;
         let view_info = vk::ImageViewCreateInfo::default()
             .image(raw)
             .view_type(vk::ImageViewType::TYPE_2D)
@@ -250,7 +237,8 @@ impl Image {
         let view = match unsafe { ctx.device.create_image_view(&view_info, None) } {
             Ok(v) => v,
             Err(e) => {
-                free(alloc, raw);
+                unsafe { ctx.device.destroy_image(raw, None) };
+                free_allocation(ctx, alloc);
                 return Err(e.into());
             }
         };
@@ -351,12 +339,7 @@ impl Drop for Image {
             self.ctx.device.destroy_image(self.raw, None);
         }
         if let Some(a) = self.allocation.take() {
-            let _ = self
-                .ctx
-                .allocator
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .free(a);
+            free_allocation(&self.ctx, a);
         }
     }
 }

@@ -12,7 +12,7 @@ pub use accel::{AccelStructure, TriangleAccel};
 pub use context::{Context, ContextOptions, DeviceInfo, ValidationLog};
 pub use memory::{Buffer, Image, MemoryKind};
 pub use pipeline::{BindingKind, ComputePipeline};
-pub use profiler::{Profiler, Span};
+pub use profiler::{Profiler, Span, timed};
 
 #[derive(Debug, thiserror::Error)]
 pub enum VkError {
@@ -36,6 +36,8 @@ pub enum VkError {
     Vk(#[from] ash::vk::Result),
     #[error("GPU memory allocation failed: {0}")]
     Alloc(#[from] gpu_allocator::AllocationError),
+    #[error("Vulkan validation reported {count} error(s); first: {first}")]
+    Validation { count: usize, first: String },
     #[error("{0}")]
     Other(String),
 }

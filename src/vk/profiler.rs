@@ -30,6 +30,14 @@ impl Default for Profiler {
     }
 }
 
+/// Runs `f`, timed as CPU phase `name` when a profiler is given.
+pub fn timed<R>(profiler: Option<&Profiler>, name: &str, f: impl FnOnce() -> R) -> R {
+    match profiler {
+        Some(p) => p.cpu(name, f),
+        None => f(),
+    }
+}
+
 impl Profiler {
     pub fn new() -> Self {
         Self::default()
