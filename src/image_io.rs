@@ -18,7 +18,12 @@ pub fn write_exr_f32(
     let layer = Layer::new(
         (width, height),
         LayerAttributes::named(""),
-        Encoding::FAST_LOSSLESS,
+        // A fixed chunk order: the parallel compressor otherwise writes chunks in the
+        // order they finish, and the same image gives different bytes (and hashes).
+        Encoding {
+            line_order: LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        },
         AnyChannels::sort(SmallVec::from_vec(vec![ch])),
     );
     let result = Image::from_layer(layer)

@@ -49,6 +49,11 @@ pub enum DatasetError {
     },
     #[error("{dir}: {message}")]
     Layout { dir: PathBuf, message: String },
+    /// Another process writes into the folder (its OS file lock is held).
+    #[error(
+        "{dir}: in use by another synosis process ({holder}); wait for it to end, or use another folder"
+    )]
+    Locked { dir: PathBuf, holder: String },
     /// The run stopped on purpose (an injected failure for tests) after this many images.
     #[error("stopped after {done} image(s) (injected failure)")]
     Interrupted { done: usize },

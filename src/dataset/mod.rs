@@ -9,6 +9,7 @@ pub mod files;
 pub mod gpu;
 pub mod job;
 pub mod labels;
+pub mod lock;
 pub mod plan;
 pub mod post;
 pub mod renderer;

@@ -15,6 +15,7 @@ use super::error::{DatasetError, Result};
 use super::files;
 use super::job::{Job, builtin_variant};
 use super::labels;
+use super::lock;
 use super::plan::{self, FaceChoice, InstancePlan, ItemPlan, Label, Plan, Split};
 use super::post::{self, DefectVisibility, Frame};
 use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
@@ -200,6 +201,9 @@ pub struct ManifestEntry {
     pub defects: Vec<DefectVisibility>,
     /// File name -> content hash.
     pub files: BTreeMap<String, String>,
+    /// File name -> size in bytes (resume and merge check it before the hash).
+    #[serde(default)]
+    pub sizes: BTreeMap<String, u64>,
     /// Timing: the only fields that differ between identical runs.
     pub finished_unix: u64,
     /// Wall time of the whole image (mesh, textures, render, post-processing, writing).
@@ -258,13 +262,16 @@ pub struct RunReport {
 }
 
 /// Renders this shard's unfinished images into `out`; with a single shard, finishes the
-/// dataset too. Safe to kill at any moment and run again.
+/// dataset too. Safe to kill at any moment and run again. An image counts as done when
+/// any shard manifest in `out` lists it and its files still have the listed sizes and
+/// hashes, whatever shard layout wrote it. A run that fails before its first image
+/// leaves `out` as it found it.
 pub fn run(
     prep: &Prepared,
     out: &Path,
     renderer: &mut dyn ImageRenderer,
     textures: &mut dyn TextureSource,
-    mut opts: RunOptions,
+    opts: RunOptions,
 ) -> Result<RunReport> {
     if opts.shard.count == 0 || opts.shard.index >= opts.shard.count {
         return Err(DatasetError::layout(
@@ -272,54 +279,290 @@ pub fn run(
             format!("bad shard {}/{}", opts.shard.index, opts.shard.count),
         ));
     }
+    let before = Before::look(out);
+    let mut rendered = 0;
+    let mut created = Vec::new();
+    let result = run_locked(
+        prep,
+        out,
+        renderer,
+        textures,
+        opts,
+        &mut rendered,
+        &mut created,
+    );
+    if let Err(e) = &result
+        && rendered == 0
+        && !matches!(
+            e,
+            DatasetError::Interrupted { .. } | DatasetError::Locked { .. }
+        )
+    {
+        before.restore(out, &created);
+    }
+    result
+}
+
+/// What `out` held before a run, to undo a run that fails before its first image.
+struct Before {
+    out: bool,
+    job: bool,
+    manifests: bool,
+    images: bool,
+    image_dirs: BTreeSet<std::ffi::OsString>,
+}
+
+impl Before {
+    fn look(out: &Path) -> Before {
+        let image_dirs = std::fs::read_dir(out.join("images"))
+            .map(|rd| rd.flatten().map(|e| e.file_name()).collect())
+            .unwrap_or_default();
+        Before {
+            out: out.exists(),
+            job: out.join("job.toml").exists(),
+            manifests: out.join("manifests").exists(),
+            images: out.join("images").exists(),
+            image_dirs,
+        }
+    }
+
+    /// Best effort: removes what the run added (nothing else).
+    fn restore(&self, out: &Path, shard_manifest_and_locks: &[PathBuf]) {
+        if !self.out {
+            let _ = std::fs::remove_dir_all(out);
+            return;
+        }
+        for p in shard_manifest_and_locks {
+            let _ = std::fs::remove_file(p);
+        }
+        if !self.job {
+            let _ = std::fs::remove_file(out.join("job.toml"));
+        }
+        if let Ok(rd) = std::fs::read_dir(out.join("images")) {
+            for e in rd.flatten() {
+                if !self.image_dirs.contains(&e.file_name()) {
+                    let _ = std::fs::remove_dir_all(e.path());
+                }
+            }
+        }
+        if !self.images {
+            let _ = std::fs::remove_dir(out.join("images"));
+        }
+        if !self.manifests {
+            let _ = std::fs::remove_dir(out.join("manifests"));
+        }
+    }
+}
+
+fn run_locked(
+    prep: &Prepared,
+    out: &Path,
+    renderer: &mut dyn ImageRenderer,
+    textures: &mut dyn TextureSource,
+    mut opts: RunOptions,
+    rendered: &mut usize,
+    created: &mut Vec<PathBuf>,
+) -> Result<RunReport> {
+    let exclusive = opts.shard.count == 1;
     std::fs::create_dir_all(out.join("manifests")).map_err(|e| DatasetError::io(out, e))?;
+    let access = if exclusive {
+        lock::Access::Exclusive
+    } else {
+        lock::Access::Shard(opts.shard.index, opts.shard.count)
+    };
+    let _lock = lock::lock(out, access)?;
+    created.extend(_lock.created.iter().cloned());
     claim_dir(out, &prep.job_text)?;
     let manifest_path = out.join("manifests").join(opts.shard.file_name());
-    let done: BTreeSet<usize> = read_manifest(&manifest_path, true)?
-        .into_iter()
-        .map(|e| e.index)
-        .collect();
+    if !manifest_path.exists() {
+        created.push(manifest_path.clone());
+    }
     let mine: Vec<&ItemPlan> = prep
         .plan
         .items
         .iter()
         .filter(|i| opts.shard.owns(i))
         .collect();
-    let mut stray =
-        files::remove_stray_temps(out)? + files::remove_stray_temps(&out.join("manifests"))?;
-    for item in &mine {
-        stray += files::remove_stray_temps(&out.join("images").join(item.id()))?;
+    let wanted: BTreeSet<usize> = mine.iter().map(|i| i.index).collect();
+    let done = verified_entries(out, &prep.plan, &wanted, Some(&manifest_path))?;
+    let mut stray = 0;
+    if exclusive {
+        stray += sweep_temps(out, None)?;
+    } else {
+        stray += sweep_temps(out, Some(&wanted))?;
     }
-    let todo: Vec<&&ItemPlan> = mine.iter().filter(|i| !done.contains(&i.index)).collect();
+    let todo: Vec<&&ItemPlan> = mine
+        .iter()
+        .filter(|i| !done.contains_key(&i.index))
+        .collect();
     let mut ctx = Ctx::new(prep);
-    let mut rendered = 0;
     let already = mine.len() - todo.len();
     for item in todo {
-        if opts.fail_after == Some(rendered) {
+        if opts.fail_after == Some(*rendered) {
             // Simulate a kill in the middle of an image: one file in place, no line.
             let dir = out.join("images").join(item.id());
             std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
             files::write_gray8(&dir.join("faces.png"), 1, 1, &[0])?;
-            return Err(DatasetError::Interrupted { done: rendered });
+            return Err(DatasetError::Interrupted { done: *rendered });
         }
         let entry = ctx.render_item(item, out, renderer, textures)?;
         append_line(&manifest_path, &entry)?;
-        rendered += 1;
+        *rendered += 1;
         if let Some(p) = opts.progress.as_deref_mut() {
-            p(already + rendered, mine.len());
+            p(already + *rendered, mine.len());
         }
     }
-    let finished = opts.shard.count == 1;
-    if finished {
-        finish(out)?;
+    if exclusive {
+        finish_locked(out)?;
     }
     Ok(RunReport {
         shard_items: mine.len(),
         already_done: already,
-        rendered,
+        rendered: *rendered,
         stray_temps_removed: stray,
-        finished,
+        finished: exclusive,
     })
+}
+
+/// Checks an entry's files against the sizes and hashes it lists: `Err(reason)` when a
+/// file is missing or differs.
+pub fn verify_entry(dir: &Path, e: &ManifestEntry) -> std::result::Result<(), String> {
+    if e.id != format!("{:06}", e.index) {
+        return Err(format!("id {:?} is not image {}'s", e.id, e.index));
+    }
+    if e.files.is_empty() {
+        return Err("lists no files".into());
+    }
+    let idir = dir.join("images").join(&e.id);
+    for (name, hash) in &e.files {
+        if name.contains(['/', '\\']) || name.starts_with('.') {
+            return Err(format!("file name {name:?} is not a plain file name"));
+        }
+        let p = idir.join(name);
+        if let Some(&size) = e.sizes.get(name) {
+            match std::fs::metadata(&p) {
+                Ok(m) if m.len() == size => {}
+                Ok(m) => {
+                    return Err(format!(
+                        "{} is {} bytes, the manifest says {size}",
+                        p.display(),
+                        m.len()
+                    ));
+                }
+                Err(err) => return Err(format!("{}: {err}", p.display())),
+            }
+        }
+        let bytes = std::fs::read(&p).map_err(|err| format!("{}: {err}", p.display()))?;
+        if files::content_hash(&bytes) != *hash {
+            return Err(format!("{} differs from its hash in the manifest", p.display()));
+        }
+    }
+    Ok(())
+}
+
+/// The entries of every shard manifest in `dir` whose files verify, one per image index
+/// in `wanted` (the first that verifies, in file name order). `own`, this run's manifest,
+/// is repaired (half last line) and rewritten without the entries that fail.
+fn verified_entries(
+    dir: &Path,
+    plan: &Plan,
+    wanted: &BTreeSet<usize>,
+    own: Option<&Path>,
+) -> Result<BTreeMap<usize, ManifestEntry>> {
+    use rayon::prelude::*;
+    let mut candidates: Vec<(usize, ManifestEntry)> = Vec::new();
+    let mut manifests = shard_manifests(dir)?;
+    if let Some(o) = own
+        && !manifests.iter().any(|m| m == o)
+    {
+        manifests.push(o.to_path_buf());
+    }
+    for (mi, m) in manifests.iter().enumerate() {
+        let mode = if Some(m.as_path()) == own {
+            ReadMode::Repair
+        } else {
+            ReadMode::DropPartial
+        };
+        for e in read_manifest_mode(m, mode)? {
+            if e.index >= plan.items.len() {
+                return Err(DatasetError::Manifest {
+                    path: m.clone(),
+                    line: 0,
+                    message: format!(
+                        "image {} is not in the job ({} images)",
+                        e.index,
+                        plan.items.len()
+                    ),
+                });
+            }
+            if wanted.contains(&e.index) {
+                candidates.push((mi, e));
+            }
+        }
+    }
+    let ok: Vec<bool> = candidates
+        .par_iter()
+        .map(|(_, e)| verify_entry(dir, e).is_ok())
+        .collect();
+    let mut out = BTreeMap::new();
+    let mut own_bad = false;
+    for ((mi, e), ok) in candidates.iter().zip(&ok) {
+        if *ok {
+            out.entry(e.index).or_insert_with(|| e.clone());
+        } else if Some(manifests[*mi].as_path()) == own {
+            own_bad = true;
+        }
+    }
+    if own_bad && let Some(o) = own {
+        let oi = manifests.iter().position(|m| m == o).unwrap_or(usize::MAX);
+        let keep: Vec<ManifestEntry> = candidates
+            .iter()
+            .zip(&ok)
+            .filter(|((mi, _), ok)| *mi == oi && **ok)
+            .map(|((_, e), _)| e.clone())
+            .collect();
+        // Entries outside `wanted` are kept as they are.
+        let mut all = read_manifest_mode(o, ReadMode::Strict)?;
+        all.retain(|e| !wanted.contains(&e.index));
+        all.extend(keep);
+        all.sort_by_key(|e| e.index);
+        write_manifest(o, &all)?;
+    }
+    Ok(out)
+}
+
+/// Removes temporary files a killed run left: with `only`, in those images' folders;
+/// else everywhere in the dataset folder (only with the exclusive lock held).
+fn sweep_temps(out: &Path, only: Option<&BTreeSet<usize>>) -> Result<usize> {
+    let mut n = 0;
+    match only {
+        Some(items) => {
+            for i in items {
+                n += files::remove_stray_temps(&out.join("images").join(format!("{i:06}")))?;
+            }
+        }
+        None => {
+            for sub in ["", "manifests", "coco"] {
+                n += files::remove_stray_temps(&out.join(sub))?;
+            }
+            if let Ok(rd) = std::fs::read_dir(out.join("images")) {
+                for e in rd.flatten() {
+                    if files::is_temp_name(&e.file_name().to_string_lossy()) {
+                        // A folder being moved into place by a merge that was killed.
+                        let p = e.path();
+                        if p.is_dir() {
+                            std::fs::remove_dir_all(&p).map_err(|err| DatasetError::io(&p, err))?;
+                            n += 1;
+                            continue;
+                        }
+                    }
+                    n += files::remove_stray_temps(&e.path())?;
+                }
+                n += files::remove_stray_temps(&out.join("images"))?;
+            }
+        }
+    }
+    Ok(n)
 }
 
 /// Re-makes image `index` alone into `out/images/<id>/`; returns its manifest entry
@@ -484,6 +727,7 @@ impl<'p> Ctx<'p> {
         let (post_hashes, defects, noise_sigma) =
             write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
         hashes.extend(post_hashes);
+        let sizes = file_sizes(&dir, &hashes)?;
         stage("write", &mut stages);
         let rel = |f: &str| format!("images/{}/{f}", item.id());
         Ok(ManifestEntry {
@@ -510,6 +754,7 @@ impl<'p> Ctx<'p> {
             noise_sigma,
             defects,
             files: hashes,
+            sizes,
             finished_unix: std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_secs())
@@ -518,6 +763,18 @@ impl<'p> Ctx<'p> {
             stage_seconds: stages,
         })
     }
+}
+
+/// The sizes of the listed files of an image folder.
+fn file_sizes(dir: &Path, hashes: &BTreeMap<String, String>) -> Result<BTreeMap<String, u64>> {
+    hashes
+        .keys()
+        .map(|name| {
+            let p = dir.join(name);
+            let m = std::fs::metadata(&p).map_err(|e| DatasetError::io(&p, e))?;
+            Ok((name.clone(), m.len()))
+        })
+        .collect()
 }
 
 /// The renderer's outputs, kept raw so post-processing can be re-run without rendering.
@@ -715,6 +972,28 @@ fn append_line(path: &Path, entry: &ManifestEntry) -> Result<()> {
 /// Reads a manifest. A kill during an append can leave a last line without its newline:
 /// with `repair`, that line is dropped (its image is redone) and the file rewritten.
 pub fn read_manifest(path: &Path, repair: bool) -> Result<Vec<ManifestEntry>> {
+    read_manifest_mode(
+        path,
+        if repair {
+            ReadMode::Repair
+        } else {
+            ReadMode::Strict
+        },
+    )
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ReadMode {
+    /// A half last line is an error.
+    Strict,
+    /// A half last line is dropped and the file rewritten (this process owns the file).
+    Repair,
+    /// A half last line is ignored, the file left alone (another process may be
+    /// appending to it).
+    DropPartial,
+}
+
+fn read_manifest_mode(path: &Path, mode: ReadMode) -> Result<Vec<ManifestEntry>> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
@@ -725,15 +1004,19 @@ pub fn read_manifest(path: &Path, repair: bool) -> Result<Vec<ManifestEntry>> {
         None => "",
     };
     if complete.len() != text.len() {
-        if !repair {
-            return Err(DatasetError::Manifest {
-                path: path.into(),
-                line: complete.lines().count() + 1,
-                message: "incomplete last line (an interrupted run); run the shard again".into(),
-            });
+        match mode {
+            ReadMode::Strict => {
+                return Err(DatasetError::Manifest {
+                    path: path.into(),
+                    line: complete.lines().count() + 1,
+                    message: "incomplete last line (an interrupted run); run the shard again"
+                        .into(),
+                });
+            }
+            ReadMode::Repair => crate::util::write_atomic(path, complete.as_bytes())
+                .map_err(|e| DatasetError::io(path, e))?,
+            ReadMode::DropPartial => {}
         }
-        crate::util::write_atomic(path, complete.as_bytes())
-            .map_err(|e| DatasetError::io(path, e))?;
     }
     let mut out = Vec::new();
     for (n, line) in complete.lines().enumerate() {
@@ -787,31 +1070,25 @@ fn stored_job(dir: &Path) -> Result<(String, Job)> {
 }
 
 /// Joins the shard manifests of `dir` into `manifest.jsonl` (by index) and writes
-/// `coco/<split>.json`. Errors if any image of the job is missing.
+/// `coco/<split>.json`. Only images whose files match their manifest line count. Errors
+/// naming the missing shards if any image of the job is missing.
 pub fn finish(dir: &Path) -> Result<usize> {
+    let _lock = lock::lock(dir, lock::Access::Exclusive)?;
+    finish_locked(dir)
+}
+
+fn finish_locked(dir: &Path) -> Result<usize> {
     let (_, job) = stored_job(dir)?;
     let plan = plan::expand(&job);
-    let mut by_index: BTreeMap<usize, ManifestEntry> = BTreeMap::new();
-    for m in shard_manifests(dir)? {
-        for e in read_manifest(&m, false)? {
-            by_index.entry(e.index).or_insert(e);
-        }
-    }
+    let all: BTreeSet<usize> = (0..plan.items.len()).collect();
+    let by_index = verified_entries(dir, &plan, &all, None)?;
     let missing: Vec<usize> = (0..plan.items.len())
         .filter(|i| !by_index.contains_key(i))
         .collect();
     if !missing.is_empty() {
-        let first: Vec<String> = missing.iter().take(5).map(|i| i.to_string()).collect();
-        return Err(DatasetError::layout(
-            dir,
-            format!(
-                "{} of {} images not finished (e.g. {}); run the missing shards (or resume) first",
-                missing.len(),
-                plan.items.len(),
-                first.join(", ")
-            ),
-        ));
+        return Err(missing_error(dir, &plan, &missing)?);
     }
+    sweep_temps(dir, None)?;
     let entries: Vec<ManifestEntry> = by_index.into_values().collect();
     std::fs::create_dir_all(dir.join("coco")).map_err(|e| DatasetError::io(dir, e))?;
     for split in Split::ALL {
@@ -820,6 +1097,56 @@ pub fn finish(dir: &Path) -> Result<usize> {
     }
     write_manifest(&dir.join("manifest.jsonl"), &entries)?;
     Ok(entries.len())
+}
+
+/// "k of n images not finished", naming the shards that own them (by the layout of the
+/// folder's shard manifests) and the command that finishes them.
+fn missing_error(dir: &Path, plan: &Plan, missing: &[usize]) -> Result<DatasetError> {
+    let mut counts: BTreeMap<usize, usize> = BTreeMap::new();
+    for m in shard_manifests(dir)? {
+        let name = m.file_name().unwrap_or_default().to_string_lossy().into_owned();
+        if let Some(n) = name
+            .strip_suffix(".jsonl")
+            .and_then(|n| n.split_once("-of-"))
+            .and_then(|(_, n)| n.parse::<usize>().ok())
+        {
+            *counts.entry(n).or_default() += 1;
+        }
+    }
+    // The layout most manifests were written with (ties: the larger count).
+    let n = counts
+        .iter()
+        .max_by_key(|(n, k)| (**k, **n))
+        .map(|(n, _)| *n)
+        .unwrap_or(1);
+    let shards: BTreeSet<usize> = missing
+        .iter()
+        .map(|&i| plan.items[i].instance % n)
+        .collect();
+    let first: Vec<String> = missing.iter().take(5).map(|i| i.to_string()).collect();
+    let how = if n == 1 {
+        format!(
+            "run the job again: `synosis dataset run JOB --out {}` renders only what is missing",
+            dir.display()
+        )
+    } else {
+        let list: Vec<String> = shards.iter().map(|s| format!("{s}/{n}")).collect();
+        format!(
+            "missing from shard(s) {}: run `synosis dataset run JOB --out DIR --shard {}` for each (into the folder that shard wrote, then merge), or run the whole job into {} (it renders only what is missing)",
+            list.join(", "),
+            list.join(" / --shard "),
+            dir.display()
+        )
+    };
+    Ok(DatasetError::layout(
+        dir,
+        format!(
+            "{} of {} images not finished (e.g. {}); {how}",
+            missing.len(),
+            plan.items.len(),
+            first.join(", ")
+        ),
+    ))
 }
 
 fn coco_split(dir: &Path, entries: &[ManifestEntry], split: Split) -> Result<serde_json::Value> {
@@ -855,13 +1182,16 @@ fn coco_split(dir: &Path, entries: &[ManifestEntry], split: Split) -> Result<ser
     }))
 }
 
-/// Merges shard outputs: the first folder is the target; shard manifests and image
-/// folders of the others are moved into it; then the dataset is finished.
+/// Merges shard outputs: the first folder is the target; the image folders and manifest
+/// lines of the others whose files match their manifest are moved into it (replacing a
+/// target image that is missing or differs); then the dataset is finished.
 pub fn merge(dirs: &[PathBuf]) -> Result<usize> {
     let Some((target, others)) = dirs.split_first() else {
         return Err(DatasetError::layout(".", "merge needs at least one folder"));
     };
     let (text, _) = stored_job(target)?;
+    let _lock = lock::lock(target, lock::Access::Exclusive)?;
+    let mut locks = Vec::new();
     for src in others {
         let (t2, _) = stored_job(src)?;
         if t2 != text {
@@ -870,35 +1200,40 @@ pub fn merge(dirs: &[PathBuf]) -> Result<usize> {
                 format!("holds a different job than {}", target.display()),
             ));
         }
+        locks.push(lock::lock(src, lock::Access::Exclusive)?);
+    }
+    for src in others {
         for m in shard_manifests(src)? {
             let entries = read_manifest(&m, false)?;
-            for e in &entries {
+            let mut moved = Vec::new();
+            for e in entries {
+                if verify_entry(src, &e).is_err() {
+                    continue; // missing or changed in the source: not merged
+                }
                 let from = src.join("images").join(&e.id);
                 let to = target.join("images").join(&e.id);
-                if from.is_dir() && !to.exists() {
+                if to.exists() && verify_entry(target, &e).is_err() {
+                    std::fs::remove_dir_all(&to).map_err(|err| DatasetError::io(&to, err))?;
+                }
+                if !to.exists() {
                     move_dir(&from, &to)?;
                 }
+                moved.push(e);
             }
             let dest = target
                 .join("manifests")
                 .join(m.file_name().unwrap_or_default());
-            if dest.exists() {
-                let a = std::fs::read(&dest).map_err(|e| DatasetError::io(&dest, e))?;
-                let b = std::fs::read(&m).map_err(|e| DatasetError::io(&m, e))?;
-                if a != b {
-                    return Err(DatasetError::layout(
-                        &dest,
-                        format!("exists with other content than {}", m.display()),
-                    ));
-                }
-            } else {
-                std::fs::create_dir_all(target.join("manifests"))
-                    .map_err(|e| DatasetError::io(target, e))?;
-                std::fs::copy(&m, &dest).map_err(|e| DatasetError::io(&dest, e))?;
-            }
+            std::fs::create_dir_all(target.join("manifests"))
+                .map_err(|e| DatasetError::io(target, e))?;
+            let mut lines = read_manifest(&dest, false)?;
+            let have: BTreeSet<usize> = lines.iter().map(|e| e.index).collect();
+            lines.extend(moved.into_iter().filter(|e| !have.contains(&e.index)));
+            lines.sort_by_key(|e| e.index);
+            write_manifest(&dest, &lines)?;
         }
     }
-    finish(target)
+    drop(locks);
+    finish_locked(target)
 }
 
 fn move_dir(from: &Path, to: &Path) -> Result<()> {
@@ -928,6 +1263,7 @@ fn move_dir(from: &Path, to: &Path) -> Result<()> {
 pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
     use rayon::prelude::*;
     let (_, mut job) = stored_job(dir)?;
+    let _lock = lock::lock(dir, lock::Access::Exclusive)?;
     if let Some(p) = new_job {
         let text = std::fs::read_to_string(p).map_err(|e| DatasetError::io(p, e))?;
         let other = Job::parse_stored(&text, &p.display().to_string())?;
@@ -955,6 +1291,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
                 let (hashes, defects, noise) =
                     write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
                 e.files.extend(hashes);
+                e.sizes = file_sizes(&idir, &e.files)?;
                 e.defects = defects;
                 e.noise_sigma = noise;
                 Ok(e)
@@ -964,7 +1301,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
         write_manifest(&m, &updated)?;
     }
     if dir.join("manifest.jsonl").exists() {
-        finish(dir)?;
+        finish_locked(dir)?;
     }
     Ok(n)
 }

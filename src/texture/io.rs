@@ -19,7 +19,11 @@ pub fn write_exr_height(map: &HeightMap, path: &Path) -> Result<()> {
     let mut layer = Layer::new(
         (map.width, map.height),
         LayerAttributes::named("height_um"),
-        Encoding::FAST_LOSSLESS,
+        // Fixed chunk order: same map, same bytes.
+        Encoding {
+            line_order: LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        },
         channels,
     );
     layer.attributes.other.insert(
