@@ -317,8 +317,12 @@ fn killed_run_resumes_to_the_same_dataset() {
         !res.join("manifest.jsonl").exists(),
         "an unfinished run must not look finished"
     );
-    // What a kill leaves: a temp file beside a half-made image, and half a manifest line.
+    // What a kill leaves: a temp file beside a half-made image, temporary COCO and
+    // manifest files, and half a manifest line.
     std::fs::write(res.join("images/000005/.image.png.tmp-4242"), b"half").unwrap();
+    std::fs::create_dir_all(res.join("coco")).unwrap();
+    std::fs::write(res.join("coco/.train.json.tmp-4242"), b"{").unwrap();
+    std::fs::write(res.join("manifests/.shard-0-of-1.jsonl.tmp-4242"), b"{").unwrap();
     let m = res.join("manifests/shard-0-of-1.jsonl");
     let mut text = std::fs::read_to_string(&m).unwrap();
     assert_eq!(text.lines().count(), 5);
@@ -327,8 +331,10 @@ fn killed_run_resumes_to_the_same_dataset() {
 
     let r = run_all(&f, &res, Shard::ALL, None).unwrap();
     assert_eq!((r.already_done, r.rendered), (5, total - 5));
-    assert_eq!(r.stray_temps_removed, 1);
+    assert_eq!(r.stray_temps_removed, 3);
     assert_same_dataset(&full, &res);
+    // Nothing else is left behind: the folder holds exactly what a clean run's holds.
+    assert_eq!(listing(&full), listing(&res));
     // A second run has nothing left to do.
     let r = run_all(&f, &res, Shard::ALL, None).unwrap();
     assert_eq!((r.already_done, r.rendered), (total, 0));
@@ -441,6 +447,12 @@ fn bad_job_files_fail_before_rendering_naming_the_field() {
     let good = job_text(1, 1);
     assert!(dataset::prepare_text(&good, "job", tmp.path()).is_ok());
     let cases: Vec<(String, &str)> = vec![
+        // What the renderer would refuse at the first image is refused by the check.
+        (
+            good.replace("bounces = 1", "bounces = 0"),
+            "render.bounces",
+        ),
+        (good.replace("width = 64", "width = 1"), "render.width"),
         (
             good.replace(
                 "mesh = \"testbody-b\"",
@@ -501,14 +513,15 @@ fn bad_job_files_fail_before_rendering_naming_the_field() {
             "missing.toml",
         ),
     ];
+    let before = listing(tmp.path());
     for (text, want) in cases {
-        let out = tmp.path().join("never");
         let err = match dataset::prepare_text(&text, "job", tmp.path()) {
             Ok(_) => panic!("accepted a job that should fail on {want}"),
             Err(e) => e.to_string(),
         };
         assert!(err.contains(want), "error {err:?} does not name {want:?}");
-        assert!(!out.exists());
+        // Checking writes nothing.
+        assert_eq!(listing(tmp.path()), before);
     }
 }
 
@@ -842,4 +855,189 @@ fn texture_cache_is_bounded() {
         }
     }
     assert_eq!(cache.made, 3);
+}
+
+/// Every path under `dir` (hidden files included), relative, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            v.push(p.strip_prefix(dir).unwrap().to_string_lossy().into_owned());
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+    v.sort();
+    v
+}
+
+#[test]
+fn resume_and_merge_verify_files_and_redo_what_differs() {
+    let f = fixture(2, 1);
+    let total = f.prep.plan.items.len();
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    let res = f.root.join("res");
+    run_all(&f, &res, Shard::ALL, None).unwrap();
+    // One file deleted, one changed in place (same size), one truncated.
+    std::fs::remove_file(res.join("images/000003/image.png")).unwrap();
+    let p = res.join("images/000007/mask.png");
+    let mut b = std::fs::read(&p).unwrap();
+    let last = b.len() - 20;
+    b[last] ^= 0x55;
+    std::fs::write(&p, &b).unwrap();
+    let p = res.join("images/000011/radiance.exr");
+    let b = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &b[..b.len() / 2]).unwrap();
+    let r = run_all(&f, &res, Shard::ALL, None).unwrap();
+    assert_eq!((r.already_done, r.rendered), (total - 3, 3));
+    assert_same_dataset(&full, &res);
+    assert_eq!(listing(&full), listing(&res));
+    // The manifest holds one line per image (bad lines dropped, not duplicated).
+    let m = dataset::read_manifest(&res.join("manifests/shard-0-of-1.jsonl"), false).unwrap();
+    assert_eq!(m.len(), total);
+
+    // merge: a shard folder with a deleted file does not pass it on, and the error names
+    // the shard that must run again; running that shard into the target finishes it.
+    let dirs: Vec<PathBuf> = (0..3).map(|i| f.root.join(format!("s{i}"))).collect();
+    for (i, d) in dirs.iter().enumerate() {
+        run_all(&f, d, Shard { index: i, count: 3 }, None).unwrap();
+    }
+    let victim = f
+        .prep
+        .plan
+        .items
+        .iter()
+        .find(|it| it.instance % 3 == 1)
+        .unwrap()
+        .id();
+    std::fs::remove_file(dirs[1].join("images").join(&victim).join("coco.json")).unwrap();
+    let err = dataset::merge(&dirs).unwrap_err().to_string();
+    assert!(err.contains("1 of") && err.contains("--shard 1/3"), "{err}");
+    let r = run_all(&f, &dirs[0], Shard { index: 1, count: 3 }, None).unwrap();
+    assert_eq!(r.rendered, 1);
+    dataset::merge(&dirs[..1]).unwrap();
+    assert_same_dataset(&full, &dirs[0]);
+}
+
+#[test]
+fn a_resubmitted_array_task_renders_only_what_is_missing() {
+    // Slurm array of 4 into one folder; task 2 dies after one image; resubmitted alone
+    // (`sbatch --array=2`), it sees a one-task array, i.e. the whole job.
+    let f = fixture(2, 2);
+    let total = f.prep.plan.items.len();
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    let out = f.root.join("shared");
+    let mut per_shard = 0;
+    for i in [0, 1, 3] {
+        per_shard = run_all(&f, &out, Shard { index: i, count: 4 }, None)
+            .unwrap()
+            .rendered;
+    }
+    assert!(matches!(
+        run_all(&f, &out, Shard { index: 2, count: 4 }, Some(1)),
+        Err(DatasetError::Interrupted { done: 1 })
+    ));
+    let r = run_all(&f, &out, Shard::ALL, None).unwrap();
+    assert_eq!((r.already_done, r.rendered), (total - per_shard + 1, per_shard - 1));
+    assert!(r.finished);
+    assert_same_dataset(&full, &out);
+}
+
+#[test]
+fn a_second_writer_is_refused_naming_the_holder() {
+    use synosis::dataset::lock::{Access, lock};
+    let f = fixture(1, 0);
+    let out = f.root.join("out");
+    std::fs::create_dir_all(out.join("manifests")).unwrap();
+    let pid = std::process::id().to_string();
+    {
+        let _held = lock(&out, Access::Exclusive).unwrap();
+        let err = run_all(&f, &out, Shard::ALL, None).unwrap_err();
+        assert!(matches!(err, DatasetError::Locked { .. }), "{err}");
+        assert!(err.to_string().contains(&format!("pid {pid}")), "{err}");
+        let err = run_all(&f, &out, Shard { index: 1, count: 2 }, None).unwrap_err();
+        assert!(matches!(err, DatasetError::Locked { .. }), "{err}");
+    }
+    {
+        // Shards of one layout run side by side; the same shard twice does not, nor a
+        // whole-job run or a merge beside a shard.
+        let _held = lock(&out, Access::Shard(0, 2)).unwrap();
+        run_all(&f, &out, Shard { index: 1, count: 2 }, None).unwrap();
+        let err = run_all(&f, &out, Shard { index: 0, count: 2 }, None).unwrap_err();
+        assert!(err.to_string().contains(&format!("pid {pid}")), "{err}");
+        assert!(matches!(
+            run_all(&f, &out, Shard::ALL, None),
+            Err(DatasetError::Locked { .. })
+        ));
+        assert!(matches!(
+            dataset::merge(std::slice::from_ref(&out)),
+            Err(DatasetError::Locked { .. })
+        ));
+    }
+    // Another process holding the lock, then killed (-9): the OS releases it.
+    // (-o: the lock is held by flock itself, not by the `sleep` it runs.)
+    let mut child = std::process::Command::new("flock")
+        .arg("-o")
+        .arg(out.join(synosis::dataset::lock::DIR_LOCK))
+        .args(["sleep", "30"])
+        .spawn()
+        .expect("flock(1) from util-linux");
+    let t0 = std::time::Instant::now();
+    loop {
+        match run_all(&f, &out, Shard::ALL, None) {
+            Err(DatasetError::Locked { .. }) => break,
+            other => {
+                assert!(t0.elapsed().as_secs() < 10, "never locked: {other:?}");
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+        }
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let r = run_all(&f, &out, Shard::ALL, None).unwrap();
+    assert!(r.finished);
+}
+
+/// TEST DOUBLE: a renderer that always fails.
+struct FailingRenderer;
+
+impl ImageRenderer for FailingRenderer {
+    fn describe(&self) -> String {
+        "failing-test-double".into()
+    }
+    fn render(&mut self, _req: &ImageRequest) -> Result<RenderedImage, String> {
+        Err("device lost (test double)".into())
+    }
+}
+
+#[test]
+fn a_run_failing_before_its_first_image_leaves_the_folder_as_found() {
+    let f = fixture(1, 0);
+    let run_failing = |out: &Path| {
+        dataset::run(
+            &f.prep,
+            out,
+            &mut FailingRenderer,
+            &mut FlatTexturesTestDouble { made: 0 },
+            RunOptions::default(),
+        )
+    };
+    // A new folder: gone again.
+    let new = f.root.join("new");
+    let err = run_failing(&new).unwrap_err().to_string();
+    assert!(err.contains("device lost"), "{err}");
+    assert!(!new.exists());
+    // An existing folder with a file of the user's: as it was.
+    let old = f.root.join("old");
+    std::fs::create_dir_all(&old).unwrap();
+    std::fs::write(old.join("notes.txt"), "mine").unwrap();
+    run_failing(&old).unwrap_err();
+    assert_eq!(listing(&old), vec!["notes.txt".to_string()]);
+    // And the next run is not refused.
+    run_all(&f, &old, Shard::ALL, None).unwrap();
 }

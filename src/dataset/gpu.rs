@@ -60,16 +60,16 @@ impl ImageRenderer for GpuRenderer {
     }
 
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
-        let mut cfg = self.base.clone();
-        cfg.camera.view = req.view.to_string();
-        cfg.set_resolution(req.width, req.height)
-            .map_err(|e| e.to_string())?;
-        cfg.render.spp = req.spp;
-        cfg.render.max_bounces = req.bounces;
-        // The shader takes a 32-bit seed: fold the 64-bit one.
-        cfg.render.seed = (req.seed ^ (req.seed >> 32)) as u32;
-        cfg.material.alpha = req.roughness;
-        cfg.validate().map_err(|e| e.to_string())?;
+        let cfg = super::renderer::render_config(
+            &self.base,
+            req.view,
+            req.width,
+            req.height,
+            req.spp,
+            req.bounces,
+            req.seed,
+            req.roughness,
+        )?;
         let mut object = req.mesh.clone();
         for l in &mut object.labels {
             if l.face == FACE_OTHER {

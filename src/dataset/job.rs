@@ -331,7 +331,7 @@ impl Job {
         self.int("render.width", r.width, 1, MAX_SIZE)?;
         self.int("render.height", r.height, 1, MAX_SIZE)?;
         self.int("render.spp", r.spp, 1, 1 << 16)?;
-        self.int("render.bounces", r.bounces, 0, 64)?;
+        self.int("render.bounces", r.bounces, 1, 64)?;
         if self.views.is_empty() {
             return Err(self.field("views", "[]", "at least one view, e.g. \"A20\""));
         }

@@ -5,6 +5,43 @@
 use std::sync::Arc;
 
 use crate::scene::Mesh;
+use crate::scene::config::SceneConfig;
+
+/// The scene configuration the GPU renderer renders one image with, validated: `base`
+/// with the request's view, size, samples, bounces, seed and roughness. `dataset check`
+/// and `dataset run` (before the first image) run it for every instance and view, so a job
+/// that passes the check does not fail on these settings later. Errors name the job's
+/// field (`render.bounces`, not the scene file's `render.max_bounces`).
+#[allow(clippy::too_many_arguments)]
+pub fn render_config(
+    base: &SceneConfig,
+    view: &str,
+    width: u32,
+    height: u32,
+    spp: u32,
+    bounces: u32,
+    seed: u64,
+    roughness: f32,
+) -> Result<SceneConfig, String> {
+    let job_names = |e: crate::scene::config::ConfigError| {
+        e.to_string()
+            .replace("render.max_bounces", "render.bounces")
+            .replace("--width", "render.width")
+            .replace("--height", "render.height")
+            .replace("camera.view", "views")
+            .replace("material.alpha", "material.roughness")
+    };
+    let mut cfg = base.clone();
+    cfg.camera.view = view.to_string();
+    cfg.set_resolution(width, height).map_err(job_names)?;
+    cfg.render.spp = spp;
+    cfg.render.max_bounces = bounces;
+    // The shader takes a 32-bit seed: fold the 64-bit one.
+    cfg.render.seed = (seed ^ (seed >> 32)) as u32;
+    cfg.material.alpha = roughness;
+    cfg.validate().map_err(job_names)?;
+    Ok(cfg)
+}
 
 /// A slope map as the renderer takes it: the texture module's `SlopeMap` (row 0 at the
 /// top, `[dh/dx, dh/dy]` unitless per texel of `spacing_um`), shared by `Arc` between the

@@ -95,6 +95,7 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
         }
     }
     let plan = plan::expand(&job);
+    check_render_settings(&job, &plan)?;
     Ok(Prepared {
         job,
         job_text: text.to_string(),
@@ -102,6 +103,39 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
         meshes,
         defect_sets,
     })
+}
+
+/// The renderer's own checks of each image's settings, run for every view and every
+/// instance's roughness now, so `check` finds what the first image would fail on.
+fn check_render_settings(job: &Job, plan: &Plan) -> Result<()> {
+    let base = crate::scene::config::SceneConfig::default();
+    let r = &job.render;
+    let mut cases: Vec<(&str, f64)> = Vec::new();
+    for (k, inst) in plan.instances.iter().enumerate() {
+        let rough = plan::instance_params(job, inst).roughness;
+        if k == 0 {
+            cases.extend(job.views.iter().map(|v| (v.as_str(), rough)));
+        } else {
+            cases.push((job.views[0].as_str(), rough));
+        }
+    }
+    for (view, rough) in cases {
+        super::renderer::render_config(
+            &base,
+            view,
+            r.width as u32,
+            r.height as u32,
+            r.spp as u32,
+            r.bounces as u32,
+            0,
+            rough as f32,
+        )
+        .map_err(|message| DatasetError::Parse {
+            file: job.origin.clone(),
+            message: format!("{message} (the renderer's limit)"),
+        })?;
+    }
+    Ok(())
 }
 
 /// The textures must cover each face whatever its rotation and translation.
@@ -1126,14 +1160,15 @@ fn missing_error(dir: &Path, plan: &Plan, missing: &[usize]) -> Result<DatasetEr
     let first: Vec<String> = missing.iter().take(5).map(|i| i.to_string()).collect();
     let how = if n == 1 {
         format!(
-            "run the job again: `synosis dataset run JOB --out {}` renders only what is missing",
+            "run `synosis dataset run JOB --out {}` (it renders only what is missing)",
             dir.display()
         )
     } else {
         let list: Vec<String> = shards.iter().map(|s| format!("{s}/{n}")).collect();
         format!(
-            "missing from shard(s) {}: run `synosis dataset run JOB --out DIR --shard {}` for each (into the folder that shard wrote, then merge), or run the whole job into {} (it renders only what is missing)",
+            "they belong to shard(s) {}: run `synosis dataset run JOB --out {} --shard {}` (it renders only the missing images), then `synosis dataset merge {}`",
             list.join(", "),
+            dir.display(),
             list.join(" / --shard "),
             dir.display()
         )

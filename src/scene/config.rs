@@ -568,7 +568,20 @@ impl SceneConfig {
     pub fn set_resolution(&mut self, width: u32, height: u32) -> Result<(), ConfigError> {
         range_u("--width", width, 1, 16384, "[1, 16384]")?;
         range_u("--height", height, 1, 16384, "[1, 16384]")?;
-        self.camera.pixel_um *= self.camera.width as f32 / width as f32;
+        // The sensor keeps its size, so the pixel pitch follows the width; the pitch's
+        // own limit (1000 µm) is reported as a limit on the width the user gave.
+        let sensor_um = self.camera.pixel_um * self.camera.width as f32;
+        let min_width = (sensor_um / 1000.0).ceil().max(1.0) as u32;
+        if width < min_width {
+            return Err(ConfigError::Invalid {
+                field: "--width",
+                message: format!(
+                    "{width}: the sensor ({:.1} mm wide) would need pixels over 1000 µm; allowed [{min_width}, 16384]",
+                    sensor_um / 1000.0
+                ),
+            });
+        }
+        self.camera.pixel_um = sensor_um / width as f32;
         self.camera.width = width;
         self.camera.height = height;
         Ok(())
