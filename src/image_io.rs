@@ -37,16 +37,25 @@ pub fn write_exr_f32(
     result
 }
 
-/// Reads the first channel of a one-layer f32/f16 EXR: (width, height, data).
+/// Reads channel `Y` of a one-layer f32/f16 EXR: (width, height, data). The header is
+/// checked against `limits::MAX_IMAGE_SIDE` before any pixel is read.
 pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
+    let (_, _, names) = crate::limits::exr_header(path)?;
+    if !names.iter().any(|n| n == "Y") {
+        return Err(std::io::Error::other(format!(
+            "no channel named Y (channels: {})",
+            names.join(", ")
+        )));
+    }
     let img = read_first_flat_layer_from_file(path).map_err(std::io::Error::other)?;
     let size = img.layer_data.size;
     let ch = img
         .layer_data
         .channel_data
         .list
-        .first()
-        .ok_or_else(|| std::io::Error::other("EXR has no channel"))?;
+        .iter()
+        .find(|c| c.name.to_string() == "Y")
+        .ok_or_else(|| std::io::Error::other("EXR has no channel Y"))?;
     let data: Vec<f32> = ch.sample_data.values_as_f32().collect();
     Ok((size.0, size.1, data))
 }

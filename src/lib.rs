@@ -9,6 +9,7 @@ pub mod dataset;
 pub mod defect;
 pub mod graph;
 pub mod image_io;
+pub mod limits;
 pub mod metrics;
 pub mod render;
 pub mod scene;

@@ -143,7 +143,7 @@ pub fn run(a: TextureArgs) -> Result<()> {
     let a = *a.opts;
     let mut file = match &a.params {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
+            let text = synosis::limits::read_text(p)
                 .with_context(|| format!("reading parameter file {}", p.display()))?;
             toml::from_str::<ParamsFile>(&text)
                 .with_context(|| format!("parsing parameter file {}", p.display()))?

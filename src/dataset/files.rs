@@ -60,7 +60,7 @@ pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
 }
 
 fn open(path: &Path) -> Result<image::DynamicImage> {
-    image::open(path).map_err(|e| DatasetError::io(path, std::io::Error::other(e)))
+    crate::limits::open_image(path).map_err(|e| DatasetError::io(path, std::io::Error::other(e)))
 }
 
 pub fn read_gray8(path: &Path) -> Result<(usize, usize, Vec<u8>)> {

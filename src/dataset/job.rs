@@ -254,7 +254,7 @@ const MAX_SIZE: i64 = 16_384;
 impl Job {
     /// Reads and validates a job file; relative paths become relative to its folder.
     pub fn load(path: &Path) -> Result<Job> {
-        let text = std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))?;
+        let text = crate::limits::read_text(path).map_err(|e| DatasetError::io(path, e))?;
         let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         Job::parse(&text, &path.display().to_string(), &base)
     }

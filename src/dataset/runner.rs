@@ -36,7 +36,7 @@ pub struct Prepared {
 
 /// Loads and checks a job file; nothing is rendered or written.
 pub fn prepare(job_path: &Path) -> Result<Prepared> {
-    let text = std::fs::read_to_string(job_path).map_err(|e| DatasetError::io(job_path, e))?;
+    let text = crate::limits::read_text(job_path).map_err(|e| DatasetError::io(job_path, e))?;
     let base = job_path.parent().unwrap_or(Path::new(".")).to_path_buf();
     prepare_text(&text, &job_path.display().to_string(), &base)
 }
@@ -1098,7 +1098,7 @@ fn shard_manifests(dir: &Path) -> Result<Vec<PathBuf>> {
 /// The job stored in a dataset folder (its relative mesh paths are not re-checked).
 fn stored_job(dir: &Path) -> Result<(String, Job)> {
     let path = dir.join("job.toml");
-    let text = std::fs::read_to_string(&path).map_err(|e| DatasetError::io(&path, e))?;
+    let text = crate::limits::read_text(&path).map_err(|e| DatasetError::io(&path, e))?;
     let job = Job::parse_stored(&text, &path.display().to_string())?;
     Ok((text, job))
 }
@@ -1300,7 +1300,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
     let (_, mut job) = stored_job(dir)?;
     let _lock = lock::lock(dir, lock::Access::Exclusive)?;
     if let Some(p) = new_job {
-        let text = std::fs::read_to_string(p).map_err(|e| DatasetError::io(p, e))?;
+        let text = crate::limits::read_text(p).map_err(|e| DatasetError::io(p, e))?;
         let other = Job::parse_stored(&text, &p.display().to_string())?;
         if !job.same_except_postprocess(&other) {
             return Err(DatasetError::layout(

@@ -205,7 +205,7 @@ impl DefectSpec {
 
     /// Reads and validates a TOML file.
     pub fn load(path: &Path) -> Result<Self, DefectError> {
-        let text = std::fs::read_to_string(path).map_err(|source| DefectError::Io {
+        let text = crate::limits::read_text(path).map_err(|source| DefectError::Io {
             path: path.to_path_buf(),
             source,
         })?;

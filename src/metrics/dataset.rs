@@ -195,7 +195,7 @@ fn load_real(dir: &Path, index: &Path) -> Result<Vec<Sample>, MetricsError> {
 }
 
 fn read(path: &Path) -> Result<String, MetricsError> {
-    std::fs::read_to_string(path).map_err(|source| MetricsError::Io {
+    crate::limits::read_text_limited(path, 1 << 30, "a manifest or table").map_err(|source| MetricsError::Io {
         path: path.to_path_buf(),
         source,
     })

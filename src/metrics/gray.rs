@@ -87,7 +87,25 @@ pub(crate) fn open(path: &Path) -> Result<DynamicImage, MetricsError> {
             source,
         });
     }
-    image::open(path).map_err(|source| MetricsError::Decode {
+    let decode = |source| MetricsError::Decode {
+        path: path.to_path_buf(),
+        source,
+    };
+    let (w, h) = crate::limits::image_dimensions(path).map_err(decode)?;
+    let px = w as u64 * h as u64;
+    if px > crate::limits::MAX_METRICS_PIXELS {
+        return Err(MetricsError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "{w} x {h} pixels: over the limit for metrics ({} Mpixel, e.g. 8192 x 8192); crop or scale the image first",
+                    crate::limits::MAX_METRICS_PIXELS >> 20
+                ),
+            ),
+        });
+    }
+    crate::limits::open_image(path).map_err(|source| MetricsError::Decode {
         path: path.to_path_buf(),
         source,
     })

@@ -30,7 +30,7 @@ pub struct Shape {
 
 impl LabelMe {
     pub fn load(path: &Path) -> Result<Self, MetricsError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MetricsError::Io {
+        let text = crate::limits::read_text(path).map_err(|source| MetricsError::Io {
             path: path.to_path_buf(),
             source,
         })?;

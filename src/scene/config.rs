@@ -347,7 +347,7 @@ fn range_u(
 impl SceneConfig {
     /// Reads and validates a scene file; a relative glTF path becomes relative to it.
     pub fn load(path: &Path) -> Result<SceneConfig, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        let text = crate::limits::read_text(path).map_err(|source| ConfigError::Io {
             path: path.to_path_buf(),
             source,
         })?;

@@ -86,7 +86,23 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
             path: path.to_path_buf(),
         });
     }
+    let len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    let limit = crate::limits::MAX_MESH_BYTES;
+    if len > limit {
+        return Err(malformed(format!(
+            "{len} bytes: over the limit for mesh files ({limit} bytes)"
+        )));
+    }
     let gltf = gltf::Gltf::open(path).map_err(|e| malformed(e.to_string()))?;
+    for b in gltf.document.buffers() {
+        if b.length() as u64 > limit {
+            return Err(malformed(format!(
+                "buffer {} declares {} bytes: over the limit for mesh buffers ({limit} bytes)",
+                b.index(),
+                b.length()
+            )));
+        }
+    }
     let buffers = gltf::import_buffers(&gltf.document, path.parent(), gltf.blob.clone())
         .map_err(|e| malformed(e.to_string()))?;
     let mut mesh = Mesh::default();

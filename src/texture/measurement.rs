@@ -119,8 +119,9 @@ fn grid_from_points(path: &Path, pts: &[[f64; 3]]) -> Result<HeightMap> {
     })
 }
 
-/// Non-finite samples (invalid measurement points) become the mean of the valid ones.
-fn fill_invalid(data: &mut [f32]) {
+/// Non-finite samples (invalid measurement points) become the mean of the valid ones;
+/// false when there is no finite sample at all.
+fn fill_invalid(data: &mut [f32]) -> bool {
     let (s, n) = data
         .iter()
         .filter(|v| v.is_finite())
@@ -129,10 +130,12 @@ fn fill_invalid(data: &mut [f32]) {
     for v in data.iter_mut().filter(|v| !v.is_finite()) {
         *v = mean;
     }
+    n > 0
 }
 
-/// Reads a one-channel float EXR height map (micrometres) with the given spacing. With
-/// several channels, `Y` is used if present, else the first.
+/// Reads a float EXR height map (micrometres, channel `Y`) with the given spacing. The
+/// header is checked against `limits::MAX_IMAGE_SIDE` before any pixel is read; a file
+/// without a `Y` channel, or without a single finite sample, is refused.
 pub fn read_exr(path: &Path, spacing_um: f64) -> Result<HeightMap> {
     check(
         spacing_um > 0.0,
@@ -144,6 +147,13 @@ pub fn read_exr(path: &Path, spacing_um: f64) -> Result<HeightMap> {
         path: path.to_owned(),
         message,
     };
+    let (_, _, names) = crate::limits::exr_header(path).map_err(|e| err(e.to_string()))?;
+    if !names.iter().any(|n| n == "Y") {
+        return Err(err(format!(
+            "no channel named Y (channels: {}); write the height map (µm) as channel Y",
+            names.join(", ")
+        )));
+    }
     let img =
         exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
     let layer = &img.layer_data;
@@ -152,13 +162,16 @@ pub fn read_exr(path: &Path, spacing_um: f64) -> Result<HeightMap> {
     let ch = chans
         .iter()
         .find(|c| c.name.to_string() == "Y")
-        .or_else(|| chans.first())
-        .ok_or_else(|| err("no channels".into()))?;
+        .ok_or_else(|| err("no channel named Y".into()))?;
     let mut data: Vec<f32> = ch.sample_data.values_as_f32().collect();
     if data.len() != w * h {
         return Err(err(format!("{} samples for {w} x {h} pixels", data.len())));
     }
-    fill_invalid(&mut data);
+    if !fill_invalid(&mut data) {
+        return Err(err(
+            "no finite sample (all NaN or infinite): refused rather than rendered flat".into(),
+        ));
+    }
     Ok(HeightMap {
         width: w,
         height: h,
