@@ -1041,3 +1041,78 @@ fn a_run_failing_before_its_first_image_leaves_the_folder_as_found() {
     // And the next run is not refused.
     run_all(&f, &old, Shard::ALL, None).unwrap();
 }
+
+#[test]
+fn shard_settings_from_the_environment_are_resolved_or_refused() {
+    use synosis::dataset::shard_env::{ShardSource, resolve_shard};
+    let env = |vars: &'static [(&'static str, &'static str)]| {
+        move |n: &str| {
+            vars.iter()
+                .find(|(k, _)| *k == n)
+                .map(|(_, v)| v.to_string())
+        }
+    };
+    let ok = |shard: Option<&str>, count: Option<usize>, vars: &'static [(&str, &str)]| {
+        resolve_shard(shard, count, &env(vars)).map(|(s, src)| (s.index, s.count, src))
+    };
+    // A stepped array, --array=0-6:2: tasks 0, 2, 4, 6 are shards 0..4.
+    let stepped: &[(&str, &str)] = &[
+        ("SLURM_ARRAY_TASK_ID", "4"),
+        ("SLURM_ARRAY_TASK_MIN", "0"),
+        ("SLURM_ARRAY_TASK_STEP", "2"),
+        ("SLURM_ARRAY_TASK_COUNT", "4"),
+    ];
+    assert_eq!(ok(None, None, stepped), Ok((2, 4, ShardSource::Slurm)));
+    // 1-based.
+    let one_based: &[(&str, &str)] = &[
+        ("SLURM_ARRAY_TASK_ID", "4"),
+        ("SLURM_ARRAY_TASK_MIN", "1"),
+        ("SLURM_ARRAY_TASK_COUNT", "4"),
+    ];
+    assert_eq!(ok(None, None, one_based), Ok((3, 4, ShardSource::Slurm)));
+    assert_eq!(
+        ok(None, Some(3), &[("JOB_COMPLETION_INDEX", "2")]),
+        Ok((2, 3, ShardSource::Kubernetes))
+    );
+    assert_eq!(ok(Some("1/5"), None, stepped), Ok((1, 5, ShardSource::Flag)));
+    assert_eq!(ok(None, None, &[]), Ok((0, 1, ShardSource::Whole)));
+    // Refused, each naming what to do.
+    let refused: Vec<(Option<usize>, &'static [(&str, &str)], &str)> = vec![
+        // A list array (--array=1,3,7): not evenly spaced.
+        (
+            None,
+            &[
+                ("SLURM_ARRAY_TASK_ID", "7"),
+                ("SLURM_ARRAY_TASK_MIN", "1"),
+                ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ],
+            "--array=0-2",
+        ),
+        // Both Slurm and Kubernetes.
+        (
+            None,
+            &[
+                ("SLURM_ARRAY_TASK_ID", "1"),
+                ("SLURM_ARRAY_TASK_COUNT", "4"),
+                ("JOB_COMPLETION_INDEX", "1"),
+            ],
+            "ambiguous",
+        ),
+        // --shard-count without an index.
+        (Some(4), &[], "without JOB_COMPLETION_INDEX"),
+        (None, &[("SYNOSIS_SHARD_COUNT", "4")], "without JOB_COMPLETION_INDEX"),
+        // --shard-count on a Slurm task.
+        (
+            Some(4),
+            &[("SLURM_ARRAY_TASK_ID", "1"), ("SLURM_ARRAY_TASK_COUNT", "4")],
+            "Slurm array task",
+        ),
+        (None, &[("JOB_COMPLETION_INDEX", "1")], "--shard-count"),
+        (None, &[("SLURM_ARRAY_TASK_ID", "x")], "not a non-negative integer"),
+    ];
+    for (count, vars, want) in refused {
+        let e = ok(None, count, vars).unwrap_err();
+        assert!(e.contains(want), "{vars:?}: {e:?} does not say {want:?}");
+    }
+    assert!(ok(Some("1/4"), Some(4), &[]).unwrap_err().contains("together"));
+}

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use synosis::dataset::{self, RunOptions, Shard, gpu::GpuRenderer, texture_bridge::ModuleTextures};
 
@@ -20,11 +20,13 @@ enum Cmd {
     Run(RunArgs),
     /// Join shard outputs (the first folder is the target) into one manifest and COCO files.
     Merge {
+        /// Dataset folders of one job; the first is the target (it may hold shards too).
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
     },
     /// Re-run post-processing from the stored raw radiance and labels (no rendering).
     Postprocess {
+        /// A dataset folder (with job.toml and the raw files of its images).
         dir: PathBuf,
         /// A job whose [[postprocess]] steps replace the stored ones (the rest must match).
         #[arg(long)]
@@ -32,23 +34,31 @@ enum Cmd {
     },
     /// Re-make image K of a job alone.
     RenderOne {
+        /// The job file (TOML, docs/dataset.md).
         job: PathBuf,
+        /// Image number K (0-based, as in images/<K as 6 digits>/).
         #[arg(long)]
         index: usize,
+        /// Folder to write images/<K>/ and one-<K>.json into (created if missing).
         #[arg(long)]
         out: PathBuf,
     },
     /// Validate a job (meshes, defect sets included) and print its size; renders nothing.
-    Check { job: PathBuf },
+    Check {
+        /// The job file (TOML, docs/dataset.md).
+        job: PathBuf,
+    },
 }
 
 #[derive(Args)]
 struct RunArgs {
+    /// The job file (TOML, docs/dataset.md).
     job: PathBuf,
+    /// Dataset folder (created if missing; a folder holding another job is refused).
     #[arg(long)]
     out: PathBuf,
     /// "i/n": this process renders shard i of n. Default: from SLURM_ARRAY_TASK_ID /
-    /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX with --shard-count (or
+    /// SLURM_ARRAY_TASK_COUNT (and _MIN, _STEP), or JOB_COMPLETION_INDEX with --shard-count (or
     /// SYNOSIS_SHARD_COUNT); else the whole job.
     #[arg(long)]
     shard: Option<String>,
@@ -60,53 +70,31 @@ struct RunArgs {
     quiet: bool,
 }
 
-fn env_usize(name: &str) -> Result<Option<usize>> {
-    match std::env::var(name) {
-        Ok(v) => Ok(Some(v.trim().parse().with_context(|| {
-            format!("{name}={v:?} is not a non-negative integer")
-        })?)),
-        Err(_) => Ok(None),
-    }
-}
-
 fn resolve_shard(a: &RunArgs) -> Result<Shard> {
-    if let Some(s) = &a.shard {
-        return Shard::parse(s)
-            .with_context(|| format!("--shard {s:?}: expected i/n with 0 <= i < n"));
+    use synosis::dataset::shard_env::{self, ShardSource};
+    let (shard, source) = shard_env::resolve_shard(a.shard.as_deref(), a.shard_count, &|n| {
+        std::env::var(n).ok()
+    })
+    .map_err(anyhow::Error::msg)?;
+    if source == ShardSource::Slurm
+        && shard == Shard::ALL
+        && let Some(s) = shard_env::single_shard_in(&a.out)
+    {
+        eprintln!(
+            "{} holds only shard {}/{}'s work and this is a one-task array (a resubmitted task?): resuming shard {}/{}",
+            a.out.display(),
+            s.index,
+            s.count,
+            s.index,
+            s.count
+        );
+        return Ok(s);
     }
-    if let (Some(id), Some(count)) = (
-        env_usize("SLURM_ARRAY_TASK_ID")?,
-        env_usize("SLURM_ARRAY_TASK_COUNT")?,
-    ) {
-        let min = env_usize("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
-        let index = id
-            .checked_sub(min)
-            .context("SLURM_ARRAY_TASK_ID below SLURM_ARRAY_TASK_MIN")?;
-        if count == 0 || index >= count {
-            bail!("SLURM array task {id} (min {min}) is not in 0..{count}");
-        }
-        return Ok(Shard { index, count });
-    }
-    if let Some(index) = env_usize("JOB_COMPLETION_INDEX")? {
-        let count = match a.shard_count {
-            Some(c) => c,
-            None => env_usize("SYNOSIS_SHARD_COUNT")?
-                .context("JOB_COMPLETION_INDEX is set: give the shard count with --shard-count or SYNOSIS_SHARD_COUNT")?,
-        };
-        if count == 0 || index >= count {
-            bail!("JOB_COMPLETION_INDEX={index} is not in 0..{count}");
-        }
-        return Ok(Shard { index, count });
-    }
-    Ok(Shard::ALL)
+    Ok(shard)
 }
 
 fn gpu_renderer() -> Result<GpuRenderer> {
-    let accel = match std::env::var("SYNOSIS_ACCEL").as_deref() {
-        Ok("software") => synosis::trace::AccelChoice::Software,
-        Ok("ray-query") => synosis::trace::AccelChoice::RayQuery,
-        _ => synosis::trace::AccelChoice::Auto,
-    };
+    let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     GpuRenderer::new(accel, false)
         .map_err(anyhow::Error::msg)
         .context("starting the GPU renderer")
@@ -129,6 +117,8 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             Ok(())
         }
         Cmd::RenderOne { job, index, out } => {
+            synosis::util::check_writable_dir(&out)
+                .with_context(|| format!("--out {}", out.display()))?;
             let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
             let mut renderer = gpu_renderer()?;
             let e = dataset::render_one(
@@ -164,7 +154,10 @@ pub fn run(a: DatasetArgs) -> Result<()> {
 fn run_job(a: RunArgs) -> Result<()> {
     let shard = resolve_shard(&a)?;
     // Everything is checked before the renderer starts or a file is written.
+    synosis::util::check_writable_dir(&a.out)
+        .with_context(|| format!("--out {}", a.out.display()))?;
     let prep = dataset::prepare(&a.job).with_context(|| format!("job {}", a.job.display()))?;
+    super::accel_from_env()?;
     let mut renderer = gpu_renderer()?;
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()

@@ -67,10 +67,13 @@ pub struct RaycastArgs {
     /// Output directory (created if missing): depth.exr and normals.png.
     #[arg(long)]
     out: PathBuf,
+    /// Trace backend.
     #[arg(long, value_enum, default_value_t = AccelChoice::Auto)]
     accel: AccelChoice,
+    /// Image width in pixels.
     #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=16384))]
     width: u32,
+    /// Image height in pixels.
     #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(1..=16384))]
     height: u32,
     /// Remove zero-area triangles instead of refusing the mesh.

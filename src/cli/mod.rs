@@ -43,6 +43,40 @@ pub enum Command {
     Dataset(dataset::DatasetArgs),
 }
 
+/// The error and its causes on one line, each once: a library error that already shows
+/// its cause (`path: No such file or directory`) is not followed by the cause again.
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let s = cause.to_string();
+        if text.contains(&s) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&s);
+    }
+    text
+}
+
+/// `SYNOSIS_ACCEL` (`auto`, `software`, `ray-query`), if set; another value is an error.
+pub fn accel_from_env() -> anyhow::Result<Option<synosis::trace::AccelChoice>> {
+    use synosis::trace::AccelChoice;
+    match std::env::var("SYNOSIS_ACCEL") {
+        Err(_) => Ok(None),
+        Ok(v) => match v.trim() {
+            "" => Ok(None),
+            "auto" => Ok(Some(AccelChoice::Auto)),
+            "software" => Ok(Some(AccelChoice::Software)),
+            "ray-query" => Ok(Some(AccelChoice::RayQuery)),
+            other => anyhow::bail!(
+                "SYNOSIS_ACCEL={other:?}: allowed \"auto\", \"software\" or \"ray-query\""
+            ),
+        },
+    }
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => gpu::info(a),

@@ -27,9 +27,10 @@ pub struct RenderArgs {
     /// Image width; keeps the sensor size, so the pixel pitch scales (overrides camera.width).
     #[arg(long, requires = "height")]
     width: Option<u32>,
+    /// Image height (with --width).
     #[arg(long, requires = "width")]
     height: Option<u32>,
-    /// Trace backend (overrides render.accel).
+    /// Trace backend (overrides SYNOSIS_ACCEL, which overrides render.accel).
     #[arg(long, value_enum)]
     accel: Option<AccelChoice>,
     /// Viewpoint, e.g. A20 (overrides camera.view).
@@ -44,6 +45,14 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    // Before any work: the output folder must be writable.
+    synosis::util::check_writable_dir(&a.out).with_context(|| format!("--out {}", a.out.display()))?;
+    if let Some(p) = &a.profile
+        && let Some(dir) = p.parent()
+    {
+        synosis::util::check_writable_dir(dir)
+            .with_context(|| format!("--profile {}", p.display()))?;
+    }
     let profiler = Profiler::new();
     let mut cfg = SceneConfig::load(&a.scene)?;
     if let Some(s) = a.spp {
@@ -51,6 +60,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     if let (Some(w), Some(h)) = (a.width, a.height) {
         cfg.set_resolution(w, h)?;
+    }
+    if let Some(acc) = super::accel_from_env()? {
+        cfg.render.accel = acc;
     }
     if let Some(acc) = a.accel {
         cfg.render.accel = acc;

@@ -52,6 +52,7 @@ pub struct TextureOpts {
     /// Pixel spacing in micrometres.
     #[arg(long, default_value_t = 6.1)]
     pub spacing_um: f64,
+    /// Random seed (same seed, same texture).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Output EXR (heights in um); FILE.normal.png and FILE.preview.png go beside it.
@@ -141,6 +142,17 @@ impl Progress for Bar {
 
 pub fn run(a: TextureArgs) -> Result<()> {
     let a = *a.opts;
+    // Before any work: the output name and folder.
+    if !a
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("--out must end in .exr, got {}", a.out.display());
+    }
+    let dir = a.out.parent().unwrap_or(Path::new("."));
+    synosis::util::check_writable_dir(dir).with_context(|| format!("--out {}", a.out.display()))?;
     let mut file = match &a.params {
         Some(p) => {
             let text = synosis::limits::read_text(p)
@@ -259,13 +271,20 @@ fn write_all(map: &HeightMap, out: &Path, preview_size: usize) -> Result<()> {
             f.with_file_name(format!("{tmp}.{ext}"))
         })
         .collect();
+    // Errors name the user's path, not the temporary one.
+    let user = |i: usize, e: synosis::texture::TextureError| {
+        anyhow::anyhow!(
+            "{}",
+            e.to_string()
+                .replace(&temps[i].display().to_string(), &finals[i].display().to_string())
+        )
+    };
     let result = (|| -> Result<()> {
-        write_exr_height(map, &temps[0])?;
-        write_normal_png16(map, &temps[1])?;
-        write_preview_png(map, &temps[2], preview_size)?;
+        write_exr_height(map, &temps[0]).map_err(|e| user(0, e))?;
+        write_normal_png16(map, &temps[1]).map_err(|e| user(1, e))?;
+        write_preview_png(map, &temps[2], preview_size).map_err(|e| user(2, e))?;
         for (t, f) in temps.iter().zip(&finals) {
-            std::fs::rename(t, f)
-                .with_context(|| format!("renaming {} to {}", t.display(), f.display()))?;
+            std::fs::rename(t, f).with_context(|| format!("writing {}", f.display()))?;
         }
         Ok(())
     })();
@@ -275,7 +294,7 @@ fn write_all(map: &HeightMap, out: &Path, preview_size: usize) -> Result<()> {
         }
     }
     result?;
-    eprintln!(
+    println!(
         "wrote {} ({} x {} at {} um), Sq {:.3} um",
         finals[0].display(),
         map.width,

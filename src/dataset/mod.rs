@@ -15,6 +15,7 @@ pub mod post;
 pub mod renderer;
 pub mod runner;
 pub mod seed;
+pub mod shard_env;
 pub mod texture_bridge;
 pub mod textures;
 

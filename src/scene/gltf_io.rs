@@ -23,7 +23,7 @@ pub enum MeshError {
     Empty { path: PathBuf },
     #[error(
         "{path}: {count} degenerate (zero-area) triangle(s), first at triangle {first}; \
-         fix the mesh or pass --drop-degenerate to remove them"
+         fix the mesh (`synosis defects` and `synosis raycast` can drop them with --drop-degenerate)"
     )]
     Degenerate {
         path: PathBuf,

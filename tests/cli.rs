@@ -1,0 +1,165 @@
+//! End-to-end tests of the `synosis` binary: exit codes, files written, and messages
+//! (results on stdout, diagnostics on stderr, each error once, naming the user's input).
+//! The GPU cases run on lavapipe with validation, at tiny sizes.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn synosis(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args(args)
+        .current_dir(dir)
+        .env("SYNOSIS_VALIDATION", "1")
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .env_remove("SYNOSIS_SHARD_COUNT")
+        .env_remove("SYNOSIS_ACCEL")
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Exit code 1, nothing on stdout, one `error:` line on stderr that contains each of `want`.
+fn assert_fails(o: &Output, want: &[&str]) -> String {
+    let (out, err) = (text(&o.stdout), text(&o.stderr));
+    assert_eq!(o.status.code(), Some(1), "stdout {out}\nstderr {err}");
+    assert!(out.is_empty(), "stdout must stay empty on failure: {out}");
+    assert_eq!(err.matches("error:").count(), 1, "{err}");
+    for w in want {
+        assert!(err.contains(w), "stderr {err:?} does not contain {w:?}");
+    }
+    err
+}
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+
+/// The smoke job cut to one 32 x 24 image at 1 spp.
+fn tiny_job(dir: &Path) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(Path::new(ROOT).join("scenes/smoke-dataset.toml"))
+        .unwrap()
+        .replace("views = [\"A0\", \"C20\"]", "views = [\"A0\"]")
+        .replace("width = 64", "width = 32")
+        .replace("height = 48", "height = 24")
+        .replace("spp = 4", "spp = 1")
+        .replace("defective = 2", "defective = 1")
+        .replace("defect_free = 2", "defect_free = 0")
+        .replace("sets = 2", "sets = 1");
+    // One finish only: cut the second [[finish]] table.
+    let a = text.find("[[finish]]\nname = \"parallel").unwrap();
+    let b = text[a..].find("# Post-processing").unwrap();
+    let text = format!("{}{}", &text[..a], &text[a + b..]);
+    let p = dir.join("tiny.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn bad_input_fails_before_any_work_naming_the_input() {
+    let d = tempfile::tempdir().unwrap();
+    let dp = d.path();
+    let job = tiny_job(dp);
+    let job = job.to_str().unwrap();
+    // check and run agree: bounces = 0 is refused by both, naming the job's field.
+    let bad = dp.join("bad.toml");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(job).unwrap().replace("bounces = 2", "bounces = 0"),
+    )
+    .unwrap();
+    let bad = bad.to_str().unwrap();
+    assert_fails(&synosis(&["dataset", "check", bad], dp), &["render.bounces"]);
+    assert_fails(
+        &synosis(&["dataset", "run", bad, "--out", "o"], dp),
+        &["render.bounces"],
+    );
+    assert!(!dp.join("o").exists(), "a refused job leaves no folder");
+    // A missing job file: the OS error once.
+    let e = assert_fails(
+        &synosis(&["dataset", "run", "missing.toml", "--out", "o"], dp),
+        &["missing.toml"],
+    );
+    assert_eq!(e.matches("No such file").count(), 1, "{e}");
+    // --out under a file: refused before the renderer starts.
+    std::fs::write(dp.join("afile"), "x").unwrap();
+    assert_fails(
+        &synosis(&["dataset", "run", job, "--out", "afile/sub"], dp),
+        &["--out afile/sub", "afile"],
+    );
+    assert_fails(
+        &synosis(&["render", &format!("{ROOT}/scenes/demo.toml"), "--out", "afile/r"], dp),
+        &["--out afile/r"],
+    );
+    // Shard settings that would silently render the wrong part.
+    let o = Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args(["dataset", "run", job, "--out", "o", "--shard-count", "4"])
+        .current_dir(dp)
+        .env_remove("JOB_COMPLETION_INDEX")
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .output()
+        .unwrap();
+    assert_fails(&o, &["without JOB_COMPLETION_INDEX"]);
+    // A bad SYNOSIS_ACCEL is an error, not a silent default.
+    let o = Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args(["dataset", "run", job, "--out", "o"])
+        .current_dir(dp)
+        .env("SYNOSIS_ACCEL", "sw")
+        .output()
+        .unwrap();
+    assert_fails(&o, &["SYNOSIS_ACCEL=\"sw\""]);
+    // render --width 1 names --width, not a field the user never set.
+    let e = assert_fails(
+        &synosis(
+            &["render", &format!("{ROOT}/scenes/demo.toml"), "--out", "r", "--width", "1", "--height", "1"],
+            dp,
+        ),
+        &["--width"],
+    );
+    assert!(!e.contains("pixel_um"), "{e}");
+    assert!(!dp.join("o").exists() && !dp.join("r").exists());
+}
+
+#[test]
+fn render_and_dataset_run_write_their_files_and_report_on_stdout() {
+    let d = tempfile::tempdir().unwrap();
+    let dp = d.path();
+    let o = synosis(
+        &[
+            "render",
+            &format!("{ROOT}/scenes/demo.toml"),
+            "--out",
+            "r",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--spp",
+            "1",
+        ],
+        dp,
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    for f in ["radiance.exr", "image.png", "mask.png", "instances.png", "faces.png", "coverage.png"] {
+        assert!(dp.join("r").join(f).is_file(), "render wrote no {f}");
+    }
+    assert!(text(&o.stdout).contains("32x24"), "{}", text(&o.stdout));
+
+    let job = tiny_job(dp);
+    let job = job.to_str().unwrap();
+    let o = synosis(&["dataset", "run", job, "--out", "ds", "--quiet"], dp);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("1 images (0 already done, 1 rendered); dataset finished"),
+        "{}",
+        text(&o.stdout)
+    );
+    for f in ["job.toml", "manifest.jsonl", "coco/train.json", "images/000000/image.png"] {
+        assert!(dp.join("ds").join(f).is_file(), "dataset run wrote no {f}");
+    }
+    // Again: nothing left to do, nothing rendered.
+    let o = synosis(&["dataset", "run", job, "--out", "ds", "--quiet"], dp);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("(1 already done, 0 rendered)"), "{}", text(&o.stdout));
+}
