@@ -46,7 +46,11 @@ fn tiny_job(dir: &Path) -> std::path::PathBuf {
         .replace("spp = 4", "spp = 1")
         .replace("defective = 2", "defective = 1")
         .replace("defect_free = 2", "defect_free = 0")
-        .replace("sets = 2", "sets = 1");
+        .replace("sets = 2", "sets = 1")
+        .replace(
+            "spec = \"defects-smoke.toml\"",
+            &format!("spec = \"{ROOT}/scenes/defects-smoke.toml\""),
+        );
     // One finish only: cut the second [[finish]] table.
     let a = text.find("[[finish]]\nname = \"parallel").unwrap();
     let b = text[a..].find("# Post-processing").unwrap();

@@ -17,7 +17,8 @@ fn smoke(accel: AccelChoice, name: &str) {
     .replace("width = 64", "width = 32")
     .replace("height = 48", "height = 24")
     .replace("spp = 4", "spp = 1");
-    let prep = dataset::prepare_text(&text, "smoke", tmp.path()).unwrap();
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
     // Both backends are required: tools/setup installs lavapipe with ray query.
     let mut r = GpuRenderer::new(accel, true).unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
     let out = tmp.path().join(name);
@@ -36,6 +37,29 @@ fn smoke(accel: AccelChoice, name: &str) {
     .unwrap();
     assert_eq!(rep.rendered, 4);
     let entries = dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
+    // The smoke job keeps defects through the visibility filter, so its labels are not
+    // empty and the tests comparing them prove something.
+    let kept: Vec<(String, u16)> = entries
+        .iter()
+        .flat_map(|e| {
+            e.defects
+                .iter()
+                .filter(|d| d.kept)
+                .map(move |d| (e.id.clone(), d.instance))
+        })
+        .collect();
+    assert!(!kept.is_empty(), "the visibility filter removed every defect");
+    for (id, inst) in &kept {
+        let lab = image::open(out.join("images").join(id).join("instances.png"))
+            .unwrap()
+            .into_luma16();
+        assert!(
+            lab.as_raw().contains(inst),
+            "{id}: kept defect {inst} is not in instances.png"
+        );
+        let coco = std::fs::read_to_string(out.join("images").join(id).join("coco.json")).unwrap();
+        assert!(coco.contains(&format!("\"instance\": {inst}")), "{id}: {coco}");
+    }
     for e in entries {
         assert!(e.renderer.starts_with("gpu-path-tracer"));
         for stage in [

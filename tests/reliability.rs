@@ -241,6 +241,12 @@ fn every_reader_survives_fuzzed_input() {
     });
     // Job, scene and defect-spec TOML.
     let job = std::fs::read(root.join("scenes/smoke-dataset.toml")).unwrap();
+    std::fs::copy(
+        root.join("scenes/defects-smoke.toml"),
+        d.path().join("defects-smoke.toml"),
+    )
+    .unwrap();
+    assert!(synosis::dataset::Job::load(&root.join("scenes/smoke-dataset.toml")).is_ok());
     fuzz("job", &job, d.path(), "toml", &|p| {
         synosis::dataset::Job::load(p).is_ok()
     });
