@@ -37,16 +37,21 @@ pub fn write_exr_f32(
     result
 }
 
-/// Reads channel `Y` of a one-layer f32/f16 EXR: (width, height, data). The header is
-/// checked against `limits::MAX_IMAGE_SIDE` before any pixel is read.
+/// Reads channel `Y` (or the only channel, e.g. `Z` of a depth map) of a one-layer
+/// f32/f16 EXR: (width, height, data). Several channels without `Y` are refused. The
+/// header is checked against `limits::MAX_IMAGE_SIDE` before any pixel is read.
 pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
     let (_, _, names) = crate::limits::exr_header(path)?;
-    if !names.iter().any(|n| n == "Y") {
+    let want = if names.iter().any(|n| n == "Y") {
+        "Y".to_string()
+    } else if names.len() == 1 {
+        names[0].clone()
+    } else {
         return Err(std::io::Error::other(format!(
-            "no channel named Y (channels: {})",
+            "no channel named Y among several (channels: {})",
             names.join(", ")
         )));
-    }
+    };
     let img = read_first_flat_layer_from_file(path).map_err(std::io::Error::other)?;
     let size = img.layer_data.size;
     let ch = img
@@ -54,8 +59,8 @@ pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
         .channel_data
         .list
         .iter()
-        .find(|c| c.name.to_string() == "Y")
-        .ok_or_else(|| std::io::Error::other("EXR has no channel Y"))?;
+        .find(|c| c.name.to_string() == want)
+        .ok_or_else(|| std::io::Error::other(format!("EXR has no channel {want}")))?;
     let data: Vec<f32> = ch.sample_data.values_as_f32().collect();
     Ok((size.0, size.1, data))
 }
