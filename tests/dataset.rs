@@ -637,6 +637,17 @@ fn blob_masks() -> Vec<(usize, usize, Vec<bool>)> {
         m[y * w + x] = true;
     }
     v.push((w, h, m));
+    // Parts one pixel wide: a lone pixel, a line, an L, a diagonal staircase (pinches).
+    let (w, h) = (9, 7);
+    let mut m = vec![false; w * h];
+    for (x, y) in [(1, 1), (3, 1), (4, 1), (5, 1), (7, 1), (7, 2), (7, 3), (6, 3)] {
+        m[y * w + x] = true;
+    }
+    for k in 0..3 {
+        m[(4 + k) * w + 1 + k] = true;
+        m[(4 + k) * w + 2 + k] = true;
+    }
+    v.push((w, h, m));
     let mut s = 99u64;
     for _ in 0..20 {
         let (w, h) = (23, 17);
@@ -661,6 +672,116 @@ fn blob_masks() -> Vec<(usize, usize, Vec<bool>)> {
     v
 }
 
+/// LabelMe's `shape_to_mask` for a polygon: Pillow's `ImageDraw.polygon(xy, fill=1,
+/// outline=1)`, which rounds the vertices to integers (`floor(v + 0.5)`), fills the
+/// pixels whose centres are inside and draws the outline through the pixels on the
+/// edges. Re-implemented here for rectilinear polygons (edges along x or y), the only
+/// kind `trace_polygons` writes; a diagonal edge fails the test.
+fn labelme_shape_to_mask(points: &[[f64; 2]], w: usize, h: usize, out: &mut [bool]) {
+    let p: Vec<(i64, i64)> = points
+        .iter()
+        .map(|q| ((q[0] + 0.5).floor() as i64, (q[1] + 0.5).floor() as i64))
+        .collect();
+    let n = p.len();
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            let mut on_edge = false;
+            let mut inside = false;
+            for i in 0..n {
+                let (a, b) = (p[i], p[(i + 1) % n]);
+                assert!(a.0 == b.0 || a.1 == b.1, "diagonal edge {a:?} -> {b:?}");
+                if (a.0.min(b.0)..=a.0.max(b.0)).contains(&x)
+                    && (a.1.min(b.1)..=a.1.max(b.1)).contains(&y)
+                {
+                    on_edge = true;
+                }
+                // Even-odd crossing of the ray to +x at the pixel centre (half-open in y).
+                if (a.1 > y) != (b.1 > y) && a.0 > x {
+                    inside = !inside;
+                }
+            }
+            if on_edge || inside {
+                out[y as usize * w + x as usize] = true;
+            }
+        }
+    }
+}
+
+/// The mask with its holes filled: background not 4-connected to the border (a
+/// background pixel that reaches the outside only through a corner is a hole of the
+/// polygon, which runs through that corner).
+fn fill_holes(m: &[bool], w: usize, h: usize) -> Vec<bool> {
+    let mut outside = vec![false; w * h];
+    let mut stack: Vec<(i64, i64)> = Vec::new();
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            if (x == 0 || y == 0 || x == w as i64 - 1 || y == h as i64 - 1)
+                && !m[y as usize * w + x as usize]
+            {
+                stack.push((x, y));
+            }
+        }
+    }
+    while let Some((x, y)) = stack.pop() {
+        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+            continue;
+        }
+        let i = y as usize * w + x as usize;
+        if m[i] || outside[i] {
+            continue;
+        }
+        outside[i] = true;
+        for (dx, dy) in [(-1, 0), (1, 0), (0, -1), (0, 1)] {
+            stack.push((x + dx, y + dy));
+        }
+    }
+    outside.iter().map(|o| !o).collect()
+}
+
+/// The union over the 4-connected parts of `m` of each part with its holes filled
+/// (what one polygon per part can describe).
+fn components_with_holes_filled(m: &[bool], w: usize, h: usize) -> Vec<bool> {
+    let mut seen = vec![false; w * h];
+    let mut out = vec![false; w * h];
+    for s in 0..w * h {
+        if !m[s] || seen[s] {
+            continue;
+        }
+        let mut part = vec![false; w * h];
+        let mut stack = vec![s];
+        while let Some(i) = stack.pop() {
+            if !m[i] || seen[i] {
+                continue;
+            }
+            seen[i] = true;
+            part[i] = true;
+            let (x, y) = (i % w, i / w);
+            if x > 0 {
+                stack.push(i - 1);
+            }
+            if x + 1 < w {
+                stack.push(i + 1);
+            }
+            if y > 0 {
+                stack.push(i - w);
+            }
+            if y + 1 < h {
+                stack.push(i + w);
+            }
+        }
+        for (o, f) in out.iter_mut().zip(fill_holes(&part, w, h)) {
+            *o |= f;
+        }
+    }
+    out
+}
+
+fn show(m: &[bool], w: usize) -> Vec<String> {
+    m.chunks(w)
+        .map(|r| r.iter().map(|&b| if b { '#' } else { '.' }).collect())
+        .collect()
+}
+
 #[test]
 fn coco_rle_and_labelme_polygons_give_back_the_masks() {
     for (w, h, m) in blob_masks() {
@@ -670,28 +791,18 @@ fn coco_rle_and_labelme_polygons_give_back_the_masks() {
         assert_eq!(back, counts);
         assert_eq!(labels::rle_to_mask(&back, w, h).unwrap(), m);
 
-        // Polygons filled as LabelMe/compare do, at pixel centres: every pixel that
-        // differs must lie within 1 px of the mask boundary (holes fill in).
+        // LabelMe's shape_to_mask gives back each part exactly (holes filled), and so
+        // does `synosis compare`'s reading of the polygons.
+        let want = components_with_holes_filled(&m, w, h);
+        let mut lm = vec![false; w * h];
         let mut filled = synosis::metrics::Mask::filled(w, h, false);
         for p in labels::trace_polygons(&m, w, h) {
+            assert!(p.len() >= 3, "LabelMe needs 3 points or more");
+            labelme_shape_to_mask(&p, w, h, &mut lm);
             filled.fill_polygon(&p);
         }
-        for y in 0..h {
-            for x in 0..w {
-                if filled.data[y * w + x] != m[y * w + x] {
-                    let near_boundary = (y.saturating_sub(1)..=(y + 1).min(h - 1)).any(|sy| {
-                        (x.saturating_sub(1)..=(x + 1).min(w - 1))
-                            .any(|sx| m[sy * w + sx] != m[y * w + x])
-                    });
-                    assert!(
-                        near_boundary || !m[y * w + x],
-                        "pixel ({x},{y}) far from the boundary"
-                    );
-                }
-            }
-        }
-        // Pixels inside the mask are never lost (outer boundaries are exact).
-        assert!(m.iter().zip(&filled.data).all(|(a, b)| !*a || *b));
+        assert_eq!(show(&lm, w), show(&want, w), "LabelMe's rasterisation");
+        assert_eq!(show(&filled.data, w), show(&want, w), "compare's rasterisation");
     }
 }
 

@@ -114,9 +114,12 @@ pub fn bbox(mask: &[bool], width: usize) -> Option<[usize; 4]> {
 }
 
 /// Outer boundary polygons of the 4-connected components of `mask`, one per component,
-/// in LabelMe's convention (pixel (x, y) has its centre at (x, y), so the traced pixel
-/// edges lie on half-integers). Filling a polygon at pixel centres gives back exactly
-/// its component, holes included as filled (LabelMe polygons have no holes).
+/// in LabelMe's convention (pixel (x, y) has its centre at (x, y)). The polygon runs
+/// through the centres of the component's boundary pixels (integer vertices; a part one
+/// pixel wide becomes a line there), so LabelMe's own `shape_to_mask` (Pillow: vertices
+/// rounded to integers, polygon filled and its 1-pixel outline drawn, i.e. every pixel
+/// whose centre lies inside or on the polygon) gives back exactly the component, holes
+/// included as filled (LabelMe polygons have no holes).
 pub fn trace_polygons(mask: &[bool], width: usize, height: usize) -> Vec<Vec<[f64; 2]>> {
     let inside = |x: i64, y: i64| {
         x >= 0
@@ -216,15 +219,33 @@ pub fn trace_polygons(mask: &[bool], width: usize, height: usize) -> Vec<Vec<[f6
             a.abs()
         };
         if let Some(outer) = loops.into_iter().max_by_key(area) {
-            polys.push(
-                simplify(&outer)
-                    .into_iter()
-                    .map(|(x, y)| [x as f64 - 0.5, y as f64 - 0.5])
-                    .collect(),
-            );
+            polys.push(inset_half_pixel(&simplify(&outer)));
         }
     }
     polys
+}
+
+/// Moves each corner of a pixel-edge loop (clockwise on screen, the component on the
+/// right; corner (X, Y) is the point (X - 0.5, Y - 0.5)) half a pixel inwards along both
+/// edges: the loop through the boundary pixels' centres, with integer vertices.
+fn inset_half_pixel(l: &[(i64, i64)]) -> Vec<[f64; 2]> {
+    let n = l.len();
+    let mut out: Vec<[f64; 2]> = Vec::with_capacity(n);
+    for i in 0..n {
+        let (a, b, c) = (l[(i + n - 1) % n], l[i], l[(i + 1) % n]);
+        let d1 = ((b.0 - a.0).signum(), (b.1 - a.1).signum());
+        let d2 = ((c.0 - b.0).signum(), (c.1 - b.1).signum());
+        // The component's side of a step d is (-d.y, d.x) on screen (y down).
+        let (n1, n2) = ((-d1.1, d1.0), (-d2.1, d2.0));
+        let p = [
+            b.0 as f64 - 0.5 + 0.5 * (n1.0 + n2.0) as f64,
+            b.1 as f64 - 0.5 + 0.5 * (n1.1 + n2.1) as f64,
+        ];
+        // Repeated points are kept: LabelMe wants at least 3 points, and a one-pixel
+        // part (4 equal points) is drawn by the outline.
+        out.push(p);
+    }
+    out
 }
 
 /// Drops vertices on a straight line between their neighbours.

@@ -119,11 +119,31 @@ impl Mask {
     }
 
     /// Fills a polygon (even-odd rule) into the mask. Pixel centres sit at integer
-    /// coordinates, as in LabelMe's own rasterisation (PIL); pixels exactly on the
-    /// boundary may differ from PIL's by one, which the meta-mask intersection absorbs.
+    /// coordinates, as in LabelMe's own rasterisation (PIL); pixels whose centres lie
+    /// exactly on an edge are filled too (PIL draws the outline), so a polygon through
+    /// pixel centres (as `synosis dataset` writes them) gives back its pixels exactly. For
+    /// other polygons, pixels near the boundary may differ from PIL's by one (PIL's
+    /// outline of a slanted edge), which the meta-mask intersection absorbs.
     pub fn fill_polygon(&mut self, points: &[[f64; 2]]) {
         if points.len() < 3 {
             return;
+        }
+        // Pixel centres on an edge.
+        for (i, a) in points.iter().enumerate() {
+            let b = points[(i + 1) % points.len()];
+            let (x0, x1) = (a[0].min(b[0]), a[0].max(b[0]));
+            let (y0, y1) = (a[1].min(b[1]), a[1].max(b[1]));
+            let ys = (y0.ceil().max(0.0) as i64)..=(y1.floor().min(self.height as f64 - 1.0) as i64);
+            for y in ys {
+                let xs = (x0.ceil().max(0.0) as i64)..=(x1.floor().min(self.width as f64 - 1.0) as i64);
+                for x in xs {
+                    let (px, py) = (x as f64 - a[0], y as f64 - a[1]);
+                    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                    if (dx * py - dy * px).abs() <= 1e-9 * (dx.abs() + dy.abs()).max(1.0) {
+                        self.data[y as usize * self.width + x as usize] = true;
+                    }
+                }
+            }
         }
         let mut xs: Vec<f64> = Vec::new();
         for y in 0..self.height {
