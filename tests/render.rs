@@ -234,8 +234,11 @@ fn backends_agree() {
         a.data.len()
     );
     // Same seed, same sample numbers: only rays whose hits differ between the backends
-    // (grazing edges) change a path. Measured: see docs/rendering.md.
-    assert!(diff < 0.01 * m, "backends differ by {diff} (mean {m})");
+    // (grazing edges) change a path. Measured on lavapipe: mean |diff| 2.9e-9 (7.5e-8 of
+    // the mean), no pixel off by more than 1e-4 relative (docs/rendering.md). The bounds
+    // are about 13 times that, and 3 pixels of 3072.
+    assert!(diff < 1e-6 * m, "backends differ by {diff} (mean {m})");
+    assert!(differing <= 3, "{differing} pixels differ by more than 1e-4");
 }
 
 #[test]
@@ -252,13 +255,79 @@ fn hard_cases_are_finite_and_positive() {
             |_| {},
         );
         assert_sane("10 m from the origin", &far);
-        // Self-intersection would darken (or speckle) the far image.
+        // Self-intersection would darken (or speckle) the far image: per pixel too.
         let (mb, mf) = (mean(&base.data), mean(&far.data));
+        let worst = base
+            .data
+            .iter()
+            .zip(&far.data)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .fold(0.0, f64::max);
+        let off = base
+            .data
+            .iter()
+            .zip(&far.data)
+            .filter(|(a, b)| (*a - *b).abs() > 0.02 * (a.abs() + 0.01 * mb as f32))
+            .count();
         println!(
-            "{}: mean at origin {mb:.5}, at 10 m {mf:.5}",
+            "{}: mean at origin {mb:.5}, at 10 m {mf:.5}; worst pixel |diff| {worst:.2e}, {off} pixels off by > 2 %",
             backend.name()
         );
-        assert!((mf - mb).abs() < 0.05 * mb, "10 m: {mf} vs {mb}");
+        assert!((mf - mb).abs() < 0.005 * mb, "10 m: {mf} vs {mb}");
+        // Measured: no pixel off by more than 2 % on either backend (worst 1.4e-3 abs).
+        assert!(off <= 3, "10 m: {off} pixels differ by more than 2 %");
+        // The roughest material the scene allows.
+        let rough = render(&small_cfg("[material]\nalpha = 1.0\n"), backend, |_| {});
+        assert_sane("alpha 1.0", &rough);
+    }
+}
+
+/// The paper's smallest dent (20 µm) on the GPU path: its tiny triangles render without
+/// NaNs or self-intersection, and change no pixel beyond the one or two it lies in.
+#[test]
+fn a_20_um_dent_renders_cleanly() {
+    use synosis::defect::{DefectSpec, imprint, sample_defects};
+    let spec = DefectSpec::from_toml_str(
+        r#"
+faces = ["A"]
+resolution = 8
+max_tries = 1000
+[[dent]]
+name = "smallest"
+quantity = 1
+diameter_mm = 0.02
+elongation = 1.0
+depth = 0.2
+rotation_deg = 0.0
+rim_height = 0.0
+rim_width = 0.5
+"#,
+        "test",
+    )
+    .unwrap();
+    let cfg = small_cfg("");
+    let body = load_object(&cfg).unwrap();
+    let set = sample_defects(&body, &spec, 5).unwrap();
+    let dented = imprint(&body, &set).unwrap();
+    assert!(dented.triangles.len() > body.triangles.len());
+    for backend in common::BACKENDS {
+        let ctx = common::gpu();
+        let tables = EnergyTables::compute();
+        let mut imgs = Vec::new();
+        for mesh in [&body, &dented] {
+            let scene = RenderScene::assemble(mesh, &cfg).unwrap();
+            imgs.push(path_trace(&ctx, &scene, &cfg, backend, &tables, None, |_| {}).unwrap());
+        }
+        common::assert_clean(&ctx);
+        assert_sane("20 um dent", &imgs[1]);
+        let off = imgs[0]
+            .data
+            .iter()
+            .zip(&imgs[1].data)
+            .filter(|(a, b)| (*a - *b).abs() > 1e-3 * (a.abs() + 1e-3))
+            .count();
+        println!("{}: 20 um dent changes {off} pixels", backend.name());
+        assert!(off <= 4, "{}: a 20 um dent changed {off} pixels", backend.name());
     }
 }
 
@@ -514,8 +583,9 @@ fn steep_slope_map_has_no_black_fringes() {
                 "{view}, 85-degree slopes: {bad} NaN/Inf/negative pixels"
             );
         }
+        // docs/rendering.md: measured 42 % (33 % with independent + uniform); bound 15 %.
         assert!(
-            gmin > 0.05 * fmin,
+            gmin > 0.15 * fmin,
             "{}: a grooved pixel at {gmin} (flat min {fmin})",
             backend.name()
         );
