@@ -35,7 +35,11 @@ pub fn read_text_limited(path: &Path, limit: u64, what: &str) -> std::io::Result
     let f = std::fs::File::open(path)?;
     let len = f.metadata()?.len();
     if len > limit {
-        return Err(too_big(what, format!("{len} bytes"), format!("{limit} bytes")));
+        return Err(too_big(
+            what,
+            format!("{len} bytes"),
+            format!("{limit} bytes"),
+        ));
     }
     let mut s = String::new();
     f.take(limit + 1).read_to_string(&mut s)?;

@@ -70,11 +70,16 @@ fn bad_input_fails_before_any_work_naming_the_input() {
     let bad = dp.join("bad.toml");
     std::fs::write(
         &bad,
-        std::fs::read_to_string(job).unwrap().replace("bounces = 2", "bounces = 0"),
+        std::fs::read_to_string(job)
+            .unwrap()
+            .replace("bounces = 2", "bounces = 0"),
     )
     .unwrap();
     let bad = bad.to_str().unwrap();
-    assert_fails(&synosis(&["dataset", "check", bad], dp), &["render.bounces"]);
+    assert_fails(
+        &synosis(&["dataset", "check", bad], dp),
+        &["render.bounces"],
+    );
     assert_fails(
         &synosis(&["dataset", "run", bad, "--out", "o"], dp),
         &["render.bounces"],
@@ -93,7 +98,15 @@ fn bad_input_fails_before_any_work_naming_the_input() {
         &["--out afile/sub", "afile"],
     );
     assert_fails(
-        &synosis(&["render", &format!("{ROOT}/scenes/demo.toml"), "--out", "afile/r"], dp),
+        &synosis(
+            &[
+                "render",
+                &format!("{ROOT}/scenes/demo.toml"),
+                "--out",
+                "afile/r",
+            ],
+            dp,
+        ),
         &["--out afile/r"],
     );
     // Shard settings that would silently render the wrong part.
@@ -116,7 +129,16 @@ fn bad_input_fails_before_any_work_naming_the_input() {
     // render --width 1 names --width, not a field the user never set.
     let e = assert_fails(
         &synosis(
-            &["render", &format!("{ROOT}/scenes/demo.toml"), "--out", "r", "--width", "1", "--height", "1"],
+            &[
+                "render",
+                &format!("{ROOT}/scenes/demo.toml"),
+                "--out",
+                "r",
+                "--width",
+                "1",
+                "--height",
+                "1",
+            ],
             dp,
         ),
         &["--width"],
@@ -145,7 +167,14 @@ fn render_and_dataset_run_write_their_files_and_report_on_stdout() {
         dp,
     );
     assert!(o.status.success(), "{}", text(&o.stderr));
-    for f in ["radiance.exr", "image.png", "mask.png", "instances.png", "faces.png", "coverage.png"] {
+    for f in [
+        "radiance.exr",
+        "image.png",
+        "mask.png",
+        "instances.png",
+        "faces.png",
+        "coverage.png",
+    ] {
         assert!(dp.join("r").join(f).is_file(), "render wrote no {f}");
     }
     assert!(text(&o.stdout).contains("32x24"), "{}", text(&o.stdout));
@@ -159,11 +188,20 @@ fn render_and_dataset_run_write_their_files_and_report_on_stdout() {
         "{}",
         text(&o.stdout)
     );
-    for f in ["job.toml", "manifest.jsonl", "coco/train.json", "images/000000/image.png"] {
+    for f in [
+        "job.toml",
+        "manifest.jsonl",
+        "coco/train.json",
+        "images/000000/image.png",
+    ] {
         assert!(dp.join("ds").join(f).is_file(), "dataset run wrote no {f}");
     }
     // Again: nothing left to do, nothing rendered.
     let o = synosis(&["dataset", "run", job, "--out", "ds", "--quiet"], dp);
     assert!(o.status.success(), "{}", text(&o.stderr));
-    assert!(text(&o.stdout).contains("(1 already done, 0 rendered)"), "{}", text(&o.stdout));
+    assert!(
+        text(&o.stdout).contains("(1 already done, 0 rendered)"),
+        "{}",
+        text(&o.stdout)
+    );
 }

@@ -448,10 +448,7 @@ fn bad_job_files_fail_before_rendering_naming_the_field() {
     assert!(dataset::prepare_text(&good, "job", tmp.path()).is_ok());
     let cases: Vec<(String, &str)> = vec![
         // What the renderer would refuse at the first image is refused by the check.
-        (
-            good.replace("bounces = 1", "bounces = 0"),
-            "render.bounces",
-        ),
+        (good.replace("bounces = 1", "bounces = 0"), "render.bounces"),
         (good.replace("width = 64", "width = 1"), "render.width"),
         (
             good.replace(
@@ -640,7 +637,16 @@ fn blob_masks() -> Vec<(usize, usize, Vec<bool>)> {
     // Parts one pixel wide: a lone pixel, a line, an L, a diagonal staircase (pinches).
     let (w, h) = (9, 7);
     let mut m = vec![false; w * h];
-    for (x, y) in [(1, 1), (3, 1), (4, 1), (5, 1), (7, 1), (7, 2), (7, 3), (6, 3)] {
+    for (x, y) in [
+        (1, 1),
+        (3, 1),
+        (4, 1),
+        (5, 1),
+        (7, 1),
+        (7, 2),
+        (7, 3),
+        (6, 3),
+    ] {
         m[y * w + x] = true;
     }
     for k in 0..3 {
@@ -802,7 +808,11 @@ fn coco_rle_and_labelme_polygons_give_back_the_masks() {
             filled.fill_polygon(&p);
         }
         assert_eq!(show(&lm, w), show(&want, w), "LabelMe's rasterisation");
-        assert_eq!(show(&filled.data, w), show(&want, w), "compare's rasterisation");
+        assert_eq!(
+            show(&filled.data, w),
+            show(&want, w),
+            "compare's rasterisation"
+        );
     }
 }
 
@@ -1054,7 +1064,10 @@ fn a_resubmitted_array_task_renders_only_what_is_missing() {
         Err(DatasetError::Interrupted { done: 1 })
     ));
     let r = run_all(&f, &out, Shard::ALL, None).unwrap();
-    assert_eq!((r.already_done, r.rendered), (total - per_shard + 1, per_shard - 1));
+    assert_eq!(
+        (r.already_done, r.rendered),
+        (total - per_shard + 1, per_shard - 1)
+    );
     assert!(r.finished);
     assert_same_dataset(&full, &out);
 }
@@ -1185,10 +1198,14 @@ fn shard_settings_from_the_environment_are_resolved_or_refused() {
         ok(None, Some(3), &[("JOB_COMPLETION_INDEX", "2")]),
         Ok((2, 3, ShardSource::Kubernetes))
     );
-    assert_eq!(ok(Some("1/5"), None, stepped), Ok((1, 5, ShardSource::Flag)));
+    assert_eq!(
+        ok(Some("1/5"), None, stepped),
+        Ok((1, 5, ShardSource::Flag))
+    );
     assert_eq!(ok(None, None, &[]), Ok((0, 1, ShardSource::Whole)));
     // Refused, each naming what to do.
-    let refused: Vec<(Option<usize>, &'static [(&str, &str)], &str)> = vec![
+    type Vars = &'static [(&'static str, &'static str)];
+    let refused: Vec<(Option<usize>, Vars, &str)> = vec![
         // A list array (--array=1,3,7): not evenly spaced.
         (
             None,
@@ -1211,19 +1228,34 @@ fn shard_settings_from_the_environment_are_resolved_or_refused() {
         ),
         // --shard-count without an index.
         (Some(4), &[], "without JOB_COMPLETION_INDEX"),
-        (None, &[("SYNOSIS_SHARD_COUNT", "4")], "without JOB_COMPLETION_INDEX"),
+        (
+            None,
+            &[("SYNOSIS_SHARD_COUNT", "4")],
+            "without JOB_COMPLETION_INDEX",
+        ),
         // --shard-count on a Slurm task.
         (
             Some(4),
-            &[("SLURM_ARRAY_TASK_ID", "1"), ("SLURM_ARRAY_TASK_COUNT", "4")],
+            &[
+                ("SLURM_ARRAY_TASK_ID", "1"),
+                ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ],
             "Slurm array task",
         ),
         (None, &[("JOB_COMPLETION_INDEX", "1")], "--shard-count"),
-        (None, &[("SLURM_ARRAY_TASK_ID", "x")], "not a non-negative integer"),
+        (
+            None,
+            &[("SLURM_ARRAY_TASK_ID", "x")],
+            "not a non-negative integer",
+        ),
     ];
     for (count, vars, want) in refused {
         let e = ok(None, count, vars).unwrap_err();
         assert!(e.contains(want), "{vars:?}: {e:?} does not say {want:?}");
     }
-    assert!(ok(Some("1/4"), Some(4), &[]).unwrap_err().contains("together"));
+    assert!(
+        ok(Some("1/4"), Some(4), &[])
+            .unwrap_err()
+            .contains("together")
+    );
 }

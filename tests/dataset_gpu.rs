@@ -48,7 +48,10 @@ fn smoke(accel: AccelChoice, name: &str) {
                 .map(move |d| (e.id.clone(), d.instance))
         })
         .collect();
-    assert!(!kept.is_empty(), "the visibility filter removed every defect");
+    assert!(
+        !kept.is_empty(),
+        "the visibility filter removed every defect"
+    );
     for (id, inst) in &kept {
         let lab = image::open(out.join("images").join(id).join("instances.png"))
             .unwrap()
@@ -58,7 +61,10 @@ fn smoke(accel: AccelChoice, name: &str) {
             "{id}: kept defect {inst} is not in instances.png"
         );
         let coco = std::fs::read_to_string(out.join("images").join(id).join("coco.json")).unwrap();
-        assert!(coco.contains(&format!("\"instance\": {inst}")), "{id}: {coco}");
+        assert!(
+            coco.contains(&format!("\"instance\": {inst}")),
+            "{id}: {coco}"
+        );
     }
     for e in entries {
         assert!(e.renderer.starts_with("gpu-path-tracer"));

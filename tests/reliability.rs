@@ -60,7 +60,10 @@ fn fuzz(name: &str, seed: &[u8], dir: &Path, ext: &str, read: &dyn Fn(&Path) -> 
         }
     }
     // Most mutations must be refused (a reader that accepts anything proves nothing).
-    assert!(errors > CASES / 4, "{name}: only {errors} of {CASES} refused");
+    assert!(
+        errors > CASES / 4,
+        "{name}: only {errors} of {CASES} refused"
+    );
 }
 
 fn tmp() -> tempfile::TempDir {
@@ -72,7 +75,9 @@ fn exr_bytes_are_reproducible() {
     // 300 x 200 at 64 x 64 tiles: 20 chunks, compressed in parallel.
     let (w, h) = (300, 200);
     let mut rng = Rng(3);
-    let data: Vec<f32> = (0..w * h).map(|_| (rng.next() >> 40) as f32 * 1e-6).collect();
+    let data: Vec<f32> = (0..w * h)
+        .map(|_| (rng.next() >> 40) as f32 * 1e-6)
+        .collect();
     let d = tmp();
     let mut first: Option<Vec<u8>> = None;
     for k in 0..6 {
@@ -84,8 +89,7 @@ fn exr_bytes_are_reproducible() {
             Some(f) => assert!(f == &b, "write {k} gave other bytes"),
         }
     }
-    let (rw, rh, back) =
-        synosis::image_io::read_exr_f32(&d.path().join("r0.exr")).unwrap();
+    let (rw, rh, back) = synosis::image_io::read_exr_f32(&d.path().join("r0.exr")).unwrap();
     assert_eq!((rw, rh), (w, h));
     assert!(back == data);
 }
@@ -131,7 +135,11 @@ fn crc32(bytes: &[u8]) -> u32 {
     for &b in bytes {
         c ^= b as u32;
         for _ in 0..8 {
-            c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
         }
     }
     !c
@@ -162,10 +170,17 @@ fn oversized_headers_are_refused_before_allocating() {
 
     // metrics: 20000 x 20000 would take about 12 GB; refused with the limit named.
     let p = png_claiming(d.path(), 20_000, 20_000);
-    let e = synosis::metrics::GrayImage::load(&p).unwrap_err().to_string();
-    assert!(e.contains("claims.png") && e.contains("20000 x 20000") && e.contains("Mpixel"), "{e}");
+    let e = synosis::metrics::GrayImage::load(&p)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("claims.png") && e.contains("20000 x 20000") && e.contains("Mpixel"),
+        "{e}"
+    );
     // The dataset's PNG reader: limit of the image decoder.
-    let e = synosis::dataset::files::read_gray8(&p).unwrap_err().to_string();
+    let e = synosis::dataset::files::read_gray8(&p)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("claims.png"), "{e}");
 
     // Text files: a 17 MiB job file.
@@ -173,7 +188,10 @@ fn oversized_headers_are_refused_before_allocating() {
     let f = std::fs::File::create(&big).unwrap();
     f.set_len(17 << 20).unwrap();
     let e = synosis::dataset::Job::load(&big).unwrap_err().to_string();
-    assert!(e.contains("big.toml") && e.contains("16777216 bytes"), "{e}");
+    assert!(
+        e.contains("big.toml") && e.contains("16777216 bytes"),
+        "{e}"
+    );
     let e = synosis::scene::config::SceneConfig::load(&big)
         .unwrap_err()
         .to_string();
@@ -233,7 +251,12 @@ fn every_reader_survives_fuzzed_input() {
     let mut xyz = String::from("# x y z\n");
     for j in 0..6 {
         for i in 0..6 {
-            xyz.push_str(&format!("{} {} {}\n", i as f64 * 1e-6, j as f64 * 1e-6, (i * j) as f64 * 1e-7));
+            xyz.push_str(&format!(
+                "{} {} {}\n",
+                i as f64 * 1e-6,
+                j as f64 * 1e-6,
+                (i * j) as f64 * 1e-7
+            ));
         }
     }
     fuzz("xyz", xyz.as_bytes(), d.path(), "xyz", &|p| {

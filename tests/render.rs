@@ -238,7 +238,10 @@ fn backends_agree() {
     // the mean), no pixel off by more than 1e-4 relative (docs/rendering.md). The bounds
     // are about 13 times that, and 3 pixels of 3072.
     assert!(diff < 1e-6 * m, "backends differ by {diff} (mean {m})");
-    assert!(differing <= 3, "{differing} pixels differ by more than 1e-4");
+    assert!(
+        differing <= 3,
+        "{differing} pixels differ by more than 1e-4"
+    );
 }
 
 #[test]
@@ -327,7 +330,11 @@ rim_width = 0.5
             .filter(|(a, b)| (*a - *b).abs() > 1e-3 * (a.abs() + 1e-3))
             .count();
         println!("{}: 20 um dent changes {off} pixels", backend.name());
-        assert!(off <= 4, "{}: a 20 um dent changed {off} pixels", backend.name());
+        assert!(
+            off <= 4,
+            "{}: a 20 um dent changed {off} pixels",
+            backend.name()
+        );
     }
 }
 

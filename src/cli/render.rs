@@ -46,7 +46,8 @@ pub struct RenderArgs {
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     // Before any work: the output folder must be writable.
-    synosis::util::check_writable_dir(&a.out).with_context(|| format!("--out {}", a.out.display()))?;
+    synosis::util::check_writable_dir(&a.out)
+        .with_context(|| format!("--out {}", a.out.display()))?;
     if let Some(p) = &a.profile
         && let Some(dir) = p.parent()
     {

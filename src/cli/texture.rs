@@ -275,8 +275,10 @@ fn write_all(map: &HeightMap, out: &Path, preview_size: usize) -> Result<()> {
     let user = |i: usize, e: synosis::texture::TextureError| {
         anyhow::anyhow!(
             "{}",
-            e.to_string()
-                .replace(&temps[i].display().to_string(), &finals[i].display().to_string())
+            e.to_string().replace(
+                &temps[i].display().to_string(),
+                &finals[i].display().to_string()
+            )
         )
     };
     let result = (|| -> Result<()> {

@@ -488,7 +488,10 @@ pub fn verify_entry(dir: &Path, e: &ManifestEntry) -> std::result::Result<(), St
         }
         let bytes = std::fs::read(&p).map_err(|err| format!("{}: {err}", p.display()))?;
         if files::content_hash(&bytes) != *hash {
-            return Err(format!("{} differs from its hash in the manifest", p.display()));
+            return Err(format!(
+                "{} differs from its hash in the manifest",
+                p.display()
+            ));
         }
     }
     Ok(())
@@ -1138,7 +1141,11 @@ fn finish_locked(dir: &Path) -> Result<usize> {
 fn missing_error(dir: &Path, plan: &Plan, missing: &[usize]) -> Result<DatasetError> {
     let mut counts: BTreeMap<usize, usize> = BTreeMap::new();
     for m in shard_manifests(dir)? {
-        let name = m.file_name().unwrap_or_default().to_string_lossy().into_owned();
+        let name = m
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
         if let Some(n) = name
             .strip_suffix(".jsonl")
             .and_then(|n| n.split_once("-of-"))

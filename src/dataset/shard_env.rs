@@ -40,7 +40,8 @@ pub fn resolve_shard(
                     .into(),
             );
         }
-        let sh = Shard::parse(s).ok_or_else(|| format!("--shard {s:?}: expected i/n with 0 <= i < n"))?;
+        let sh = Shard::parse(s)
+            .ok_or_else(|| format!("--shard {s:?}: expected i/n with 0 <= i < n"))?;
         return Ok((sh, ShardSource::Flag));
     }
     if slurm_id.is_some() && k8s_index.is_some() {
@@ -63,9 +64,9 @@ pub fn resolve_shard(
         if step == 0 {
             return Err("SLURM_ARRAY_TASK_STEP=0".into());
         }
-        let off = id
-            .checked_sub(min)
-            .ok_or_else(|| format!("SLURM_ARRAY_TASK_ID={id} is below SLURM_ARRAY_TASK_MIN={min}"))?;
+        let off = id.checked_sub(min).ok_or_else(|| {
+            format!("SLURM_ARRAY_TASK_ID={id} is below SLURM_ARRAY_TASK_MIN={min}")
+        })?;
         let index = off / step;
         if off % step != 0 || count == 0 || index >= count {
             return Err(format!(

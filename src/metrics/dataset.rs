@@ -195,8 +195,10 @@ fn load_real(dir: &Path, index: &Path) -> Result<Vec<Sample>, MetricsError> {
 }
 
 fn read(path: &Path) -> Result<String, MetricsError> {
-    crate::limits::read_text_limited(path, 1 << 30, "a manifest or table").map_err(|source| MetricsError::Io {
-        path: path.to_path_buf(),
-        source,
+    crate::limits::read_text_limited(path, 1 << 30, "a manifest or table").map_err(|source| {
+        MetricsError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }

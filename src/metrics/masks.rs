@@ -133,9 +133,11 @@ impl Mask {
             let b = points[(i + 1) % points.len()];
             let (x0, x1) = (a[0].min(b[0]), a[0].max(b[0]));
             let (y0, y1) = (a[1].min(b[1]), a[1].max(b[1]));
-            let ys = (y0.ceil().max(0.0) as i64)..=(y1.floor().min(self.height as f64 - 1.0) as i64);
+            let ys =
+                (y0.ceil().max(0.0) as i64)..=(y1.floor().min(self.height as f64 - 1.0) as i64);
             for y in ys {
-                let xs = (x0.ceil().max(0.0) as i64)..=(x1.floor().min(self.width as f64 - 1.0) as i64);
+                let xs =
+                    (x0.ceil().max(0.0) as i64)..=(x1.floor().min(self.width as f64 - 1.0) as i64);
                 for x in xs {
                     let (px, py) = (x as f64 - a[0], y as f64 - a[1]);
                     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
