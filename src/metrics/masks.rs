@@ -199,9 +199,10 @@ mod tests {
     fn polygon_fill_uses_integer_pixel_centres() {
         let mut m = Mask::filled(8, 6, false);
         m.fill_polygon(&[[2.0, 1.0], [5.0, 1.0], [5.0, 4.0], [2.0, 4.0]]);
-        // x in 2..=5; y half-open [1, 4), so a shared vertex row is counted once.
+        // x in 2..=5, y in 1..=4: centres inside or on the edges, as PIL's fill plus
+        // outline (LabelMe's shape_to_mask).
         let want: Vec<bool> = (0..48)
-            .map(|i| (2..=5).contains(&(i % 8)) && (1..4).contains(&(i / 8)))
+            .map(|i| (2..=5).contains(&(i % 8)) && (1..=4).contains(&(i / 8)))
             .collect();
         assert_eq!(m.data, want);
         assert_eq!(
@@ -210,7 +211,7 @@ mod tests {
                 x0: 2,
                 y0: 1,
                 x1: 6,
-                y1: 4
+                y1: 5
             })
         );
         // A triangle covers about half its bounding box.
