@@ -24,7 +24,8 @@ uint label_at(vec2 pixel_pos) {
     vec2 ndc = pixel_pos / vec2(pc.width, pc.height) * 2.0 - 1.0;
     vec3 dir = normalize(pc.forward.xyz + ndc.x * pc.right.xyz - ndc.y * pc.up.xyz);
     Hit h = trace(pc.eye.xyz, dir, 0.0, 3.0e38);
-    return h.prim == NO_HIT ? 0u : labels[h.prim];
+    // Triangles past the labelled ones (a second trace level: the view's light) carry none.
+    return h.prim == NO_HIT || h.prim >= uint(labels.length()) ? 0u : labels[h.prim];
 }
 
 void main() {

@@ -20,6 +20,7 @@ layout(local_size_x = 8, local_size_y = 8) in;
 struct Tri { vec4 a; vec4 b; vec4 c; };
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 0) readonly buffer Geometry { Tri tris[]; };
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 1) readonly buffer Materials { uint mats[]; };
+layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 10) readonly buffer LightGeometry { Tri light_tris[]; };
 // x: triangle index, y: float bits of the inclusive area CDF.
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 2) readonly buffer Lights { uvec2 lights[]; };
 layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 3) readonly buffer Energy { float energy[]; };
@@ -83,6 +84,25 @@ uint pick_light(float u) {
     return lights[lo].x;
 }
 
+// Triangles are numbered object (with the table) first, then the view's light: the
+// object's live in `tris`, the light's in `light_tris` (a second trace level).
+// (Member by member: the two blocks' Tri are distinct SPIR-V types.)
+Tri fetch_tri(uint prim) {
+    Tri t;
+    if (prim < prm.light_first) {
+        t.a = tris[prim].a; t.b = tris[prim].b; t.c = tris[prim].c;
+    } else {
+        uint k = prim - prm.light_first;
+        t.a = light_tris[k].a; t.b = light_tris[k].b; t.c = light_tris[k].c;
+    }
+    return t;
+}
+
+// Material in the low byte, inspected face id in the next; light triangles are MAT_LIGHT.
+uint mat_word(uint prim) {
+    return prim < prm.light_first ? mats[prim] : MAT_LIGHT;
+}
+
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 
 // Facing sampling: selection weight of one light triangle seen from x (normal n), an
@@ -90,7 +110,7 @@ vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 // floored at 0.05 so every triangle keeps a non-zero probability (unbiased even where
 // the centroid faces away but part of the triangle does not).
 float light_weight(uint tri, vec3 x, vec3 n) {
-    Tri lt = tris[tri];
+    Tri lt = fetch_tri(tri);
     vec3 nl = tri_normal(lt);
     float area2 = length(nl);
     vec3 to = (lt.a.xyz + lt.b.xyz + lt.c.xyz) * (1.0 / 3.0) - x;
@@ -117,7 +137,7 @@ float light_area_pdf(uint tri, vec3 x, vec3 n) {
     uint seg = (tri - prm.light_first) / prm.segment_tris;
     if (seg >= prm.ring_segments) return 0.0;
     float wsum = segment_weight(seg, x, n);
-    float area = 0.5 * length(tri_normal(tris[tri]));
+    float area = 0.5 * length(tri_normal(fetch_tri(tri)));
     return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(prm.ring_segments) * area) : 0.0;
 }
 
@@ -239,9 +259,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
         if (h.prim == NO_HIT) break;   // no environment light
-        Tri t = tris[h.prim];
-        uint mat = mats[h.prim] & 0xffu;
-        uint face = (mats[h.prim] >> 8) & 0xffu;
+        Tri t = fetch_tri(h.prim);
+        uint mat = mat_word(h.prim) & 0xffu;
+        uint face = (mat_word(h.prim) >> 8) & 0xffu;
         vec3 ng_raw = tri_normal(t);
         vec3 ng = normalize(ng_raw);
         if (mat == MAT_LIGHT) {
@@ -276,7 +296,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         // Next-event estimation on the ring light.
         if (prm.light_count > 0u && prm.radiance > 0.0) {
             uint li = choose_light(sample_1d(rng), origin, ng);
-            Tri lt = tris[li];
+            Tri lt = fetch_tri(li);
             vec2 ul = sample_2d(rng);
             float su = sqrt(ul.x);
             float u2 = ul.y;
@@ -293,7 +313,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                 if (f > 0.0) {
                     Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
                     bool visible = s.prim == NO_HIT
-                        || ((mats[s.prim] & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
+                        || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
                     if (visible) {
                         float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
                         L += T * f * prm.radiance * power_heuristic(pdf_light, pdf_b) / pdf_light;

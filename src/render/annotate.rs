@@ -136,11 +136,11 @@ impl AnnotatePass {
         mesh: &Mesh,
         grid: u32,
     ) -> Result<Self, VkError> {
-        if mesh.labels.len() != scene.triangle_count {
+        if mesh.labels.len() != scene.object().triangle_count {
             return Err(VkError::Other(format!(
-                "mesh has {} labels for {} traced triangles",
+                "mesh has {} labels for {} traced object triangles",
                 mesh.labels.len(),
-                scene.triangle_count
+                scene.object().triangle_count
             )));
         }
         let push = std::mem::size_of::<AnnotatePush>() as u32;

@@ -320,11 +320,22 @@ pub fn render_frame(
             max,
         });
     }
-    let trace = TraceScene::build(ctx, &scene.mesh, backend, profiler)?;
+    let light_first = scene.lights.first().map_or(scene.mesh.triangles.len(), |l| l.0 as usize);
+    let object = Mesh {
+        positions: scene.mesh.positions.clone(),
+        triangles: scene.mesh.triangles[..light_first].to_vec(),
+        labels: scene.mesh.labels[..light_first].to_vec(),
+    };
+    let light = crate::trace::TriangleSoup {
+        positions: scene.mesh.positions.clone(),
+        triangles: scene.mesh.triangles[light_first..].to_vec(),
+    };
+    let geo = Arc::new(crate::trace::TraceGeometry::build(ctx, &object, backend, 0, profiler)?);
+    let trace = TraceScene::layered(ctx, geo, &light, profiler)?;
     let off = TraceScene::binding_kinds(backend).len() as u32;
     let annotation = match opts.annotate_grid {
         Some(grid) => Some((
-            AnnotatePass::new(ctx, &trace, &scene.mesh, grid)?,
+            AnnotatePass::new(ctx, &trace, &object, grid)?,
             AnnotationTargets::new(ctx, width, height)?,
         )),
         None => None,
@@ -333,7 +344,7 @@ pub fn render_frame(
         ctx,
         "path_trace",
         backend,
-        10,
+        11,
         std::mem::size_of::<Push>() as u32,
         [8, 8, 1],
     )?;
@@ -370,7 +381,7 @@ pub fn render_frame(
         radiance: cfg.light.radiance,
         light_area: scene.light_area,
         pad2: 0.0,
-        light_first: scene.lights.first().map_or(0, |l| l.0),
+        light_first: light_first as u32,
         ring_segments: scene.ring_segments[0],
         segment_tris: scene.ring_segments[1],
         pad3: 0,
@@ -431,7 +442,8 @@ pub fn render_frame(
         };
         let mut g = Graph::new(ctx, "path trace");
         let refs = trace.import(&mut g);
-        let geo = g.import(&trace.shade_tris);
+        let geo = g.import(trace.shade_tris());
+        let ltris = g.import(trace.second_shade_tris());
         let mats = g.import(&mat_buf);
         let lts = g.import(&light_buf);
         let en = g.import(&energy_buf);
@@ -467,6 +479,7 @@ pub fn render_frame(
             .read(off + 7, &ma)
             .read(off + 8, &mb)
             .read(off + 9, &mc)
+            .read(off + 10, &ltris)
             .push(&push)
             .submit();
         for t in g.execute(profiler)? {

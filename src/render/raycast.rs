@@ -225,7 +225,7 @@ pub fn raycast(
     let tiles = push.tiles();
     let mut g = Graph::new(ctx, "raycast");
     let refs = scene.import(&mut g);
-    let geo = g.import(&scene.shade_tris);
+    let geo = g.import(scene.shade_tris());
     let mut d = g.import(&depth_buf);
     let mut nb = g.import(&normal_buf);
     refs.bind(g.dispatch("raycast", &pipeline, [tiles, 1, 1]))
