@@ -14,7 +14,9 @@ use bytemuck::Zeroable;
 use glam::Vec3;
 
 use crate::graph::{AccelRef, BufferRef, DispatchBuilder, Graph};
-use crate::vk::{BindingKind, Blas, Buffer, ComputePipeline, Context, Profiler, Tlas, VkError, timed};
+use crate::vk::{
+    BindingKind, Blas, Buffer, ComputePipeline, Context, Profiler, Tlas, VkError, timed,
+};
 
 /// What `--accel` asks for.
 #[derive(
@@ -121,7 +123,10 @@ impl Triangles for TriangleSoup {
 enum Data {
     /// None for an empty level (no BLAS can be built over nothing).
     RayQuery(Option<Blas>),
-    Software { nodes: Buffer, tris: Buffer },
+    Software {
+        nodes: Buffer,
+        tris: Buffer,
+    },
 }
 
 /// One level of traceable geometry: a BVH (software) or BLAS (ray query) over one set of
@@ -269,8 +274,11 @@ impl TraceScene {
         let start = std::time::Instant::now();
         let tlas = match (&object.data, &second.data) {
             (Data::RayQuery(a), Data::RayQuery(b)) => {
-                let inst: Vec<(&Blas, u32)> =
-                    a.iter().map(|a| (a, 0)).chain(b.iter().map(|b| (b, first))).collect();
+                let inst: Vec<(&Blas, u32)> = a
+                    .iter()
+                    .map(|a| (a, 0))
+                    .chain(b.iter().map(|b| (b, first)))
+                    .collect();
                 Some(timed(profiler, "AS build (BLAS+TLAS)", || {
                     Tlas::build(ctx, &inst)
                 })?)
@@ -315,9 +323,14 @@ impl TraceScene {
     pub fn import<'a>(&'a self, g: &mut Graph<'a>) -> TraceRefs {
         match (&self.object.data, &self.second.data, &self.tlas) {
             (_, _, Some(t)) => TraceRefs::RayQuery(g.import_accel(&t.accel)),
-            (Data::Software { nodes, tris }, Data::Software { nodes: n2, tris: t2 }, None) => {
-                TraceRefs::Software([g.import(nodes), g.import(tris), g.import(n2), g.import(t2)])
-            }
+            (
+                Data::Software { nodes, tris },
+                Data::Software {
+                    nodes: n2,
+                    tris: t2,
+                },
+                None,
+            ) => TraceRefs::Software([g.import(nodes), g.import(tris), g.import(n2), g.import(t2)]),
             _ => unreachable!("both levels are built for one backend"),
         }
     }
