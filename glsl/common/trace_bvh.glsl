@@ -21,9 +21,12 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
         if (det == 0.0) continue;
         precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
         precise float t = tt / det;
-        if (t >= tmin && t < h.t) {
+        // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
+        // triangle index, so the result does not depend on the traversal order.
+        uint prim = floatBitsToUint(tri.v0.w);
+        if (t >= tmin && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim))) {
             h.t = t;
-            h.prim = floatBitsToUint(tri.v0.w);
+            h.prim = prim;
             h.bary = vec2(v / det, w / det);
             h.inst = TRACE_INST;
         }

@@ -207,11 +207,24 @@ pub fn cpu_closest_hit_counted(
                 let p = bvh.primitive_indices[k as usize];
                 let tri = &tris[p as usize];
                 stats.triangle_tests += 1;
-                if let Some((t, _)) =
-                    sheared.intersect(tri.v0.into(), tri.v1.into(), tri.v2.into(), tmin, *t_best)
-                {
-                    *t_best = t;
-                    best = Some((t, p));
+                // Ties at exactly the same distance go to the lower triangle index, as in
+                // the shader, so the hit does not depend on the traversal order.
+                let hit = sheared.intersect(
+                    tri.v0.into(),
+                    tri.v1.into(),
+                    tri.v2.into(),
+                    tmin,
+                    t_best.next_up(),
+                );
+                if let Some((t, _)) = hit {
+                    let closer = match best {
+                        Some((tb, pb)) => t < tb || p < pb,
+                        None => t < *t_best,
+                    };
+                    if closer {
+                        *t_best = t;
+                        best = Some((t, p));
+                    }
                 }
             }
         };
