@@ -8,6 +8,7 @@ use std::path::Path;
 const LAYERS: &[(&str, u32)] = &[
     ("util", 0),
     ("image_io", 0),
+    ("limits", 0),
     ("shaders", 0),
     ("gpu_interface", 0),
     ("vk", 1),
