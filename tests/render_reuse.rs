@@ -19,7 +19,8 @@ fn a_job_builds_pipelines_once_and_each_mesh_once() {
     .replace("width = 64", "width = 32")
     .replace("height = 48", "height = 24")
     .replace("spp = 4", "spp = 1");
-    let prep = dataset::prepare_text(&text, "smoke", tmp.path()).unwrap();
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
     let (tracers0, scenes0) = (PathTracer::built_count(), GpuScene::built_count());
     let mut r = GpuRenderer::new(AccelChoice::Software, true).unwrap();
     let out = tmp.path().join("out");
