@@ -83,14 +83,14 @@ pub(super) fn derive<'p>(
     for (stage, accesses) in passes {
         let mut buffers = Vec::new();
         for &(r, a) in accesses {
-            if let Some(&(ps, pa)) = last.get(&r) {
-                if pa.writes() || a.writes() {
-                    buffers.push(BufferBarrier {
-                        buffer: r,
-                        src: (ps, pa),
-                        dst: (stage, a),
-                    });
-                }
+            if let Some(&(ps, pa)) = last.get(&r)
+                && (pa.writes() || a.writes())
+            {
+                buffers.push(BufferBarrier {
+                    buffer: r,
+                    src: (ps, pa),
+                    dst: (stage, a),
+                });
             }
         }
         for &(r, a) in accesses {
