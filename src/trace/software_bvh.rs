@@ -47,6 +47,23 @@ pub fn build_bvh(tris: &[Triangle]) -> Bvh2 {
     )
 }
 
+/// A BVH no ray can hit anything in: one node whose two children are the same leaf of one
+/// degenerate triangle (all corners at the origin: the watertight test's determinant is
+/// 0, so it never reports a hit). Bindings may not be empty; this fills an empty level.
+pub fn empty() -> (Vec<GpuNode>, Vec<GpuTri>) {
+    let leaf_min = [0.0, 0.0, 0.0, f32::from_bits(0)];
+    let leaf_max = [0.0, 0.0, 0.0, f32::from_bits(1)];
+    (
+        vec![GpuNode {
+            l_min: leaf_min,
+            l_max: leaf_max,
+            r_min: leaf_min,
+            r_max: leaf_max,
+        }],
+        vec![GpuTri::default()],
+    )
+}
+
 /// Flattens `bvh` into GPU nodes (root at 0) and leaf-ordered triangles.
 pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
     let gpu_tris: Vec<GpuTri> = bvh
