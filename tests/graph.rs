@@ -50,10 +50,11 @@ fn graph_orders_culls_and_times_passes() {
 
 #[test]
 fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
-    use synosis::trace::{Backend, trace_pipeline};
+    use synosis::trace::{Backend, TraceScene, trace_pipeline};
     use synosis::vk::{BindingKind, VkError};
     let ctx = common::gpu();
-    // Software backend: bindings 0, 1 (BVH), 2, 3 (rays, hits); 16-byte push block.
+    // Software backend: its own bindings first, then rays, hits; 16-byte push block.
+    let off = TraceScene::binding_kinds(Backend::Software).len() as u32;
     let pipe = trace_pipeline(&ctx, "hits", Backend::Software, 2, 16, [64, 1, 1]).unwrap();
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let out = Buffer::new(&ctx, "out", 256, usage, MemoryKind::Readback).unwrap();
@@ -61,25 +62,28 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
         let mut g = Graph::new(&ctx, "misuse");
         let a = g.create_buffer("a", 256).unwrap();
         let mut o = g.import(&out);
-        let mut d = g.dispatch(name, &pipe, groups).read(0, &a).read(1, &a);
+        let mut d = g.dispatch(name, &pipe, groups);
+        for b in 0..off {
+            d = d.read(b, &a);
+        }
         if bind_rays {
-            d = d.read(2, &a);
+            d = d.read(off, &a);
         }
         match words {
             4 => d.push(push),
             _ => d.push(&[push[0], push[1], push[2]]),
         }
-        .write(3, &mut o)
+        .write(off + 1, &mut o)
         .submit();
         g.execute(None)
     };
     match run("half bound", false, &[0; 4], 4, [1, 1, 1]) {
         Err(VkError::UnboundBinding {
             pass,
-            binding: 2,
+            binding,
             kind: BindingKind::StorageBuffer,
             ..
-        }) => assert_eq!(pass, "half bound"),
+        }) => assert_eq!((pass.as_str(), binding), ("half bound", off)),
         other => panic!("{other:?}"),
     }
     match run("short push", true, &[0; 4], 3, [1, 1, 1]) {
