@@ -1,4 +1,6 @@
 //! Writing images: single-channel f32 EXR and PNG, always through a temporary name.
+//! Every PNG the crate writes is encoded here (8/16-bit grey, RGBA, the streamed 16-bit
+//! RGB normal map, the compact 8-bit preview).
 
 use std::path::Path;
 
@@ -65,14 +67,34 @@ pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
     Ok((size.0, size.1, data))
 }
 
-fn encode_png(img: image::DynamicImage, path: &Path) -> std::io::Result<()> {
+/// PNG bytes of an image (the image crate's default PNG settings).
+fn png_bytes(img: image::DynamicImage) -> std::io::Result<Vec<u8>> {
     let mut bytes = Vec::new();
     img.write_to(
         &mut std::io::Cursor::new(&mut bytes),
         image::ImageFormat::Png,
     )
     .map_err(std::io::Error::other)?;
-    crate::util::write_atomic(path, &bytes)
+    Ok(bytes)
+}
+
+fn encode_png(img: image::DynamicImage, path: &Path) -> std::io::Result<()> {
+    crate::util::write_atomic(path, &png_bytes(img)?)
+}
+
+/// The bytes of an 8-bit grayscale PNG (for callers that hash what they write).
+pub fn png_gray8(width: u32, height: u32, data: &[u8]) -> std::io::Result<Vec<u8>> {
+    let img = image::GrayImage::from_raw(width, height, data.to_vec())
+        .ok_or_else(|| std::io::Error::other("image size mismatch"))?;
+    png_bytes(image::DynamicImage::ImageLuma8(img))
+}
+
+/// The bytes of a 16-bit grayscale PNG (for callers that hash what they write).
+pub fn png_gray16(width: u32, height: u32, data: &[u16]) -> std::io::Result<Vec<u8>> {
+    let img =
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, data.to_vec())
+            .ok_or_else(|| std::io::Error::other("image size mismatch"))?;
+    png_bytes(image::DynamicImage::ImageLuma16(img))
 }
 
 /// 8-bit RGBA PNG from packed u32 pixels (R in the low byte).
@@ -85,15 +107,63 @@ pub fn write_png_rgba8(path: &Path, width: u32, height: u32, rgba: &[u32]) -> st
 
 /// 8-bit grayscale PNG.
 pub fn write_png_gray8(path: &Path, width: u32, height: u32, data: &[u8]) -> std::io::Result<()> {
-    let img = image::GrayImage::from_raw(width, height, data.to_vec())
-        .ok_or_else(|| std::io::Error::other("size mismatch"))?;
-    encode_png(image::DynamicImage::ImageLuma8(img), path)
+    crate::util::write_atomic(path, &png_gray8(width, height, data)?)
 }
 
 /// 16-bit grayscale PNG.
 pub fn write_png_gray16(path: &Path, width: u32, height: u32, data: &[u16]) -> std::io::Result<()> {
-    let img =
-        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, data.to_vec())
-            .ok_or_else(|| std::io::Error::other("size mismatch"))?;
-    encode_png(image::DynamicImage::ImageLuma16(img), path)
+    crate::util::write_atomic(path, &png_gray16(width, height, data)?)
+}
+
+/// 8-bit grayscale PNG made small rather than fast (best compression, adaptive row
+/// filters): for previews that go into docs.
+pub fn write_png_gray8_compact(
+    path: &Path,
+    width: u32,
+    height: u32,
+    data: &[u8],
+) -> std::io::Result<()> {
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    crate::util::write_atomic_with(path, |f| {
+        PngEncoder::new_with_quality(
+            std::io::BufWriter::new(f),
+            CompressionType::Best,
+            FilterType::Adaptive,
+        )
+        .write_image(data, width, height, image::ExtendedColorType::L8)
+        .map_err(std::io::Error::other)
+    })
+}
+
+/// 16-bit RGB PNG (fast compression) streamed in bands of `band` rows, so an image
+/// larger than memory allows twice is never held whole: `fill(first_row, bytes)` fills
+/// the big-endian samples of the rows from `first_row` (6 bytes per pixel,
+/// `bytes.len() / (6 * width)` rows).
+pub fn write_png_rgb16_streamed(
+    path: &Path,
+    width: usize,
+    height: usize,
+    band: usize,
+    mut fill: impl FnMut(usize, &mut [u8]),
+) -> std::io::Result<()> {
+    let band = band.max(1);
+    crate::util::write_atomic_with(path, |f| {
+        let mut out = std::io::BufWriter::new(f);
+        let mut enc = png::Encoder::new(&mut out, width as u32, height as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Sixteen);
+        enc.set_compression(png::Compression::Fast);
+        let mut writer = enc.write_header().map_err(std::io::Error::other)?;
+        let mut stream = writer.stream_writer().map_err(std::io::Error::other)?;
+        let mut bytes = vec![0u8; band * width * 6];
+        for y0 in (0..height).step_by(band) {
+            let n = band.min(height - y0) * width * 6;
+            fill(y0, &mut bytes[..n]);
+            std::io::Write::write_all(&mut stream, &bytes[..n])?;
+        }
+        stream.finish().map_err(std::io::Error::other)?;
+        writer.finish().map_err(std::io::Error::other)?;
+        std::io::Write::flush(&mut out)
+    })
 }

@@ -49,6 +49,63 @@ fn graph_orders_culls_and_times_passes() {
 }
 
 #[test]
+fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
+    use synosis::trace::{Backend, TraceScene, trace_pipeline};
+    use synosis::vk::{BindingKind, VkError};
+    let ctx = common::gpu();
+    // Software backend: its own bindings first, then rays, hits; 16-byte push block.
+    let off = TraceScene::binding_kinds(Backend::Software).len() as u32;
+    let pipe = trace_pipeline(&ctx, "hits", Backend::Software, 2, 16, [64, 1, 1]).unwrap();
+    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let out = Buffer::new(&ctx, "out", 256, usage, MemoryKind::Readback).unwrap();
+    let run = |name: &str, bind_rays: bool, push: &[u32; 4], words: usize, groups: [u32; 3]| {
+        let mut g = Graph::new(&ctx, "misuse");
+        let a = g.create_buffer("a", 256).unwrap();
+        let mut o = g.import(&out);
+        let mut d = g.dispatch(name, &pipe, groups);
+        for b in 0..off {
+            d = d.read(b, &a);
+        }
+        if bind_rays {
+            d = d.read(off, &a);
+        }
+        match words {
+            4 => d.push(push),
+            _ => d.push(&[push[0], push[1], push[2]]),
+        }
+        .write(off + 1, &mut o)
+        .submit();
+        g.execute(None)
+    };
+    match run("half bound", false, &[0; 4], 4, [1, 1, 1]) {
+        Err(VkError::UnboundBinding {
+            pass,
+            binding,
+            kind: BindingKind::StorageBuffer,
+            ..
+        }) => assert_eq!((pass.as_str(), binding), ("half bound", off)),
+        other => panic!("{other:?}"),
+    }
+    match run("short push", true, &[0; 4], 3, [1, 1, 1]) {
+        Err(VkError::PushConstantSize {
+            pass,
+            expected: 16,
+            given: 12,
+            ..
+        }) => assert_eq!(pass, "short push"),
+        other => panic!("{other:?}"),
+    }
+    let max = ctx.info.max_workgroup_count;
+    if max[0] < u32::MAX {
+        match run("too wide", true, &[0; 4], 4, [max[0] + 1, 1, 1]) {
+            Err(VkError::WorkgroupLimit { pass, .. }) => assert_eq!(pass, "too wide"),
+            other => panic!("{other:?}"),
+        }
+    }
+    common::assert_clean(&ctx);
+}
+
+#[test]
 fn every_shader_variant_is_spirv_and_trace_shaders_have_both_backends() {
     for (name, bytes) in synosis::shaders::SHADERS {
         assert!(bytes.len() > 20 && bytes.len() % 4 == 0, "{name}");

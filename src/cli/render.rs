@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_scene};
-use synosis::render::sensor;
+use synosis::render::pixels::Exposure;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::trace::{AccelChoice, resolve};
 use synosis::vk::{Context, ContextOptions, Profiler};
@@ -110,11 +110,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         synosis::image_io::write_exr_f32(&exr, w as usize, h as usize, "Y", &img.data)
             .with_context(|| format!("writing {}", exr.display()))?;
         let png = a.out.join("image.png");
-        let (e, g) = (cfg.camera.exposure, cfg.camera.gain);
+        let sensor = Exposure::new(cfg.camera.exposure, cfg.camera.gain);
         if a.png16 {
-            synosis::image_io::write_png_gray16(&png, w, h, &sensor::quantise16(&img.data, e, g))
+            synosis::image_io::write_png_gray16(&png, w, h, &sensor.quantise16(&img.data))
         } else {
-            synosis::image_io::write_png_gray8(&png, w, h, &sensor::quantise8(&img.data, e, g))
+            synosis::image_io::write_png_gray8(&png, w, h, &sensor.quantise8(&img.data))
         }
         .with_context(|| format!("writing {}", png.display()))?;
         if let Some(ann) = &frame.annotation {

@@ -11,35 +11,21 @@ pub fn content_hash(bytes: &[u8]) -> String {
     format!("fnv1a64:{:016x}", fnv1a64(bytes))
 }
 
-fn encode(img: image::DynamicImage, path: &Path) -> Result<Vec<u8>> {
-    let mut bytes = Vec::new();
-    img.write_to(
-        &mut std::io::Cursor::new(&mut bytes),
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?;
-    Ok(bytes)
-}
-
 fn write(path: &Path, bytes: &[u8]) -> Result<String> {
     crate::util::write_atomic(path, bytes).map_err(|e| DatasetError::io(path, e))?;
     Ok(content_hash(bytes))
 }
 
 pub fn write_gray8(path: &Path, w: usize, h: usize, data: &[u8]) -> Result<String> {
-    let img = image::GrayImage::from_raw(w as u32, h as u32, data.to_vec())
-        .ok_or_else(|| DatasetError::io(path, std::io::Error::other("image size mismatch")))?;
-    write(path, &encode(image::DynamicImage::ImageLuma8(img), path)?)
+    let bytes = crate::image_io::png_gray8(w as u32, h as u32, data)
+        .map_err(|e| DatasetError::io(path, e))?;
+    write(path, &bytes)
 }
 
 pub fn write_gray16(path: &Path, w: usize, h: usize, data: &[u16]) -> Result<String> {
-    let img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(
-        w as u32,
-        h as u32,
-        data.to_vec(),
-    )
-    .ok_or_else(|| DatasetError::io(path, std::io::Error::other("image size mismatch")))?;
-    write(path, &encode(image::DynamicImage::ImageLuma16(img), path)?)
+    let bytes = crate::image_io::png_gray16(w as u32, h as u32, data)
+        .map_err(|e| DatasetError::io(path, e))?;
+    write(path, &bytes)
 }
 
 pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<String> {

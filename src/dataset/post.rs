@@ -3,7 +3,8 @@
 //!
 //! Intensity scale: every step works on **8-bit units, 0..=255, as f32** (the scale
 //! `synosis compare` reads, and the one the paper's biases 34 / 39 / 33 are given in).
-//! The renderer's linear radiance L enters as `255 * exposure * L` (`[sensor]`); the
+//! The renderer's linear radiance L enters as `255 * exposure * L` (`[sensor]`, through
+//! `render::pixels::Exposure::units8`, the pixel pipeline `synosis render` uses too); the
 //! thresholds the paper gives as fractions (blooming 0.95, visibility 0.05) are
 //! fractions of 255. Values are clamped to [0, 255] and rounded only when `image.png`
 //! is written, except blooming, which clips as the paper says.
@@ -14,8 +15,10 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-/// Full scale of the image values.
-pub const FULL_SCALE: f32 = 255.0;
+/// Full scale of the image values (the pixel pipeline's 8-bit units).
+pub use crate::render::pixels::FULL_SCALE;
+/// Rounds to 8 bit with clamping (NaN gives 0): the pixel pipeline's last step.
+pub use crate::render::pixels::quantise_units8 as quantize;
 
 /// The paper's linear factor and bias per texture type.
 pub fn paper_linear() -> BTreeMap<String, [f64; 2]> {
@@ -296,20 +299,6 @@ pub fn defect_pixels(class: &[u8], instance: &[u16]) -> Vec<(u16, u8, usize)> {
         }
     }
     m.into_iter().map(|(i, (c, n))| (i, c, n)).collect()
-}
-
-/// Rounds to 8 bit with clamping.
-pub fn quantize(image: &[f32]) -> Vec<u8> {
-    image
-        .iter()
-        .map(|&v| {
-            if v.is_nan() {
-                0
-            } else {
-                v.clamp(0.0, FULL_SCALE).round() as u8
-            }
-        })
-        .collect()
 }
 
 /// v' = factor * v + bias.

@@ -22,6 +22,7 @@ use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
 use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
+use crate::render::pixels::{Exposure, quantise_units8};
 use crate::scene::{Degenerates, Mesh, face_frames, import_mesh, testbody};
 
 /// A job with everything loaded and checked: meshes, defect sets, the plan.
@@ -855,12 +856,16 @@ fn write_raw(dir: &Path, img: &RenderedImage) -> Result<BTreeMap<String, String>
     Ok(m)
 }
 
+/// The job's exposure model (`[sensor]`; the dataset has no gain).
+fn sensor(job: &Job) -> Exposure {
+    Exposure::new(job.sensor.exposure as f32, 1.0)
+}
+
 fn raw_frame(job: &Job, img: &RenderedImage) -> Frame {
-    let scale = post::FULL_SCALE * job.sensor.exposure as f32;
     Frame {
         width: img.width as usize,
         height: img.height as usize,
-        image: img.radiance.iter().map(|&l| scale * l).collect(),
+        image: sensor(job).units8(&img.radiance),
         class: img.class.clone(),
         instance: img.instance.clone(),
         object: img.object.clone(),
@@ -879,11 +884,10 @@ fn read_raw_frame(job: &Job, dir: &Path) -> Result<Frame> {
     {
         return Err(DatasetError::layout(dir, "raw files of different sizes"));
     }
-    let scale = post::FULL_SCALE * job.sensor.exposure as f32;
     Ok(Frame {
         width: w,
         height: h,
-        image: radiance.iter().map(|&l| scale * l).collect(),
+        image: sensor(job).units8(&radiance),
         class,
         instance,
         object: object.iter().map(|&o| (o != 0) as u8).collect(),
@@ -912,7 +916,7 @@ fn write_post(
     let mut m = BTreeMap::new();
     m.insert(
         "image.png".into(),
-        files::write_gray8(&dir.join("image.png"), w, h, &post::quantize(&f.image))?,
+        files::write_gray8(&dir.join("image.png"), w, h, &quantise_units8(&f.image))?,
     );
     m.insert(
         "mask.png".into(),

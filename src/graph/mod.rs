@@ -5,16 +5,29 @@
 //!
 //! A pass that writes a resource takes its handle by `&mut`, so in Rust code the order
 //! of writes is the order of declaration, checked by the borrow checker.
+//!
+//! `execute` is a composition of four parts, the first two pure (no GPU, unit-tested):
+//! - [`schedule`]: declared accesses -> dependencies -> culling -> execution order;
+//! - [`barriers`]: declared accesses along that order -> barriers as plain data, then
+//!   the `vkCmdPipelineBarrier` calls;
+//! - [`record`]: misuse checks, descriptor pool and sets, the commands of each pass;
+//! - [`timestamps`]: a query pool (only where the device supports timestamps) and the
+//!   readback into per-pass GPU times.
 
-use std::collections::HashMap;
+mod barriers;
+mod record;
+mod schedule;
+mod timestamps;
+
 use std::sync::Arc;
 
 use ash::vk;
 
 use crate::vk::{
-    AccelStructure, BindingKind, Buffer, ComputePipeline, Context, MemoryKind, Profiler, Span,
-    VkError,
+    AccelStructure, Buffer, ComputePipeline, Context, MemoryKind, Profiler, Span, VkError,
 };
+
+use timestamps::Timestamps;
 
 /// A buffer known to the graph.
 #[derive(Debug, PartialEq, Eq, Hash)]
@@ -24,6 +37,7 @@ pub struct BufferRef(usize);
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct AccelRef(usize);
 
+/// How a pass uses a buffer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Access {
     Read,
@@ -37,30 +51,11 @@ impl Access {
     }
 }
 
+/// The pipeline stage a pass runs in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Stage {
     Compute,
     Transfer,
-}
-
-impl Stage {
-    fn flags(self) -> vk::PipelineStageFlags {
-        match self {
-            Stage::Compute => vk::PipelineStageFlags::COMPUTE_SHADER,
-            Stage::Transfer => vk::PipelineStageFlags::TRANSFER,
-        }
-    }
-    fn access(self, a: Access) -> vk::AccessFlags {
-        match (self, a) {
-            (Stage::Compute, Access::Read) => vk::AccessFlags::SHADER_READ,
-            (Stage::Compute, Access::Write) => vk::AccessFlags::SHADER_WRITE,
-            (Stage::Compute, Access::ReadWrite) => {
-                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE
-            }
-            (Stage::Transfer, Access::Read) => vk::AccessFlags::TRANSFER_READ,
-            (Stage::Transfer, _) => vk::AccessFlags::TRANSFER_WRITE,
-        }
-    }
 }
 
 enum BufSlot<'a> {
@@ -252,377 +247,61 @@ impl<'a> Graph<'a> {
         });
     }
 
-    /// Execution order: a topological order of the dependency graph (read-after-write,
-    /// write-after-read, write-after-write), declaration order breaking ties, without
-    /// passes that contribute to no imported buffer.
-    fn schedule(&self) -> Vec<usize> {
-        let n = self.passes.len();
-        let mut deps: Vec<Vec<usize>> = vec![Vec::new(); n];
-        let mut last_writer: HashMap<usize, usize> = HashMap::new();
-        let mut readers: HashMap<usize, Vec<usize>> = HashMap::new();
-        for (i, p) in self.passes.iter().enumerate() {
-            for &(r, a) in &p.accesses {
-                if let Some(&w) = last_writer.get(&r) {
-                    deps[i].push(w);
-                }
-                if a.writes() {
-                    deps[i].extend(
-                        readers
-                            .remove(&r)
-                            .unwrap_or_default()
-                            .into_iter()
-                            .filter(|&x| x != i),
-                    );
-                }
-            }
-            for &(r, a) in &p.accesses {
-                if a.writes() {
-                    last_writer.insert(r, i);
-                } else {
-                    readers.entry(r).or_default().push(i);
-                }
-            }
-        }
-        // Culling: keep passes that write an imported buffer and everything they need.
-        let mut keep = vec![false; n];
-        let mut stack: Vec<usize> = (0..n)
-            .filter(|&i| {
-                self.passes[i]
-                    .accesses
-                    .iter()
-                    .any(|&(r, a)| a.writes() && matches!(self.buffers[r], BufSlot::Imported(_)))
-            })
-            .collect();
-        while let Some(i) = stack.pop() {
-            if !keep[i] {
-                keep[i] = true;
-                stack.extend(deps[i].iter().copied());
-            }
-        }
-        // Kahn's algorithm, always taking the earliest-declared ready pass.
-        let mut indeg: Vec<usize> = (0..n)
-            .map(|i| deps[i].iter().filter(|&&d| keep[d]).count())
-            .collect();
-        let mut order = Vec::new();
-        let mut done = vec![false; n];
-        while let Some(i) = (0..n).find(|&i| keep[i] && !done[i] && indeg[i] == 0) {
-            done[i] = true;
-            order.push(i);
-            for j in 0..n {
-                if keep[j] && !done[j] {
-                    indeg[j] -= deps[j].iter().filter(|&&d| d == i).count();
-                }
-            }
-        }
-        order
+    /// Whether buffer `r` is the caller's (its contents are the graph's result).
+    fn imported(&self) -> Vec<bool> {
+        self.buffers
+            .iter()
+            .map(|b| matches!(b, BufSlot::Imported(_)))
+            .collect()
     }
 
     /// Records, submits and waits. Per-pass GPU times go to `profiler` (if given) and
-    /// are returned.
+    /// are returned (none where the device has no timestamps). Misuse of a dispatch
+    /// (a binding left unbound or of the wrong kind, a push-constant block of the wrong
+    /// size, too many workgroups) is an error naming the pass, before anything runs.
     pub fn execute(self, profiler: Option<&Profiler>) -> Result<Vec<PassTiming>, VkError> {
-        let ctx = self.ctx.clone();
-        let dev = &ctx.device;
-        let order = self.schedule();
+        let accesses: Vec<&[(usize, Access)]> =
+            self.passes.iter().map(|p| p.accesses.as_slice()).collect();
+        let order = schedule::schedule(&accesses, &self.imported());
         if order.is_empty() {
             return Ok(Vec::new());
         }
-        let timestamps = ctx.info.timestamps_supported;
-        let nq = 2 * order.len() as u32;
-        let query_pool = unsafe {
-            dev.create_query_pool(
-                &vk::QueryPoolCreateInfo::default()
-                    .query_type(vk::QueryType::TIMESTAMP)
-                    .query_count(nq),
-                None,
-            )
-        }?;
-        let mut pool_sizes: HashMap<vk::DescriptorType, u32> = HashMap::new();
-        let mut sets_needed = 0;
-        for &i in &order {
-            if let PassKind::Dispatch { pipeline, .. } = &self.passes[i].kind {
-                sets_needed += 1;
-                for b in &pipeline.bindings {
-                    *pool_sizes.entry(b.descriptor_type()).or_default() += 1;
-                }
-            }
-        }
-        let sizes: Vec<vk::DescriptorPoolSize> = pool_sizes
-            .iter()
-            .map(|(&ty, &n)| vk::DescriptorPoolSize {
-                ty,
-                descriptor_count: n,
-            })
-            .collect();
-        let desc_pool = if sets_needed > 0 {
-            match unsafe {
-                dev.create_descriptor_pool(
-                    &vk::DescriptorPoolCreateInfo::default()
-                        .max_sets(sets_needed)
-                        .pool_sizes(&sizes),
-                    None,
-                )
-            } {
-                Ok(p) => p,
-                Err(e) => {
-                    unsafe { dev.destroy_query_pool(query_pool, None) };
-                    return Err(e.into());
-                }
-            }
-        } else {
-            vk::DescriptorPool::null()
-        };
-        let result = self.record_and_run(&order, query_pool, desc_pool, timestamps, profiler);
-        unsafe {
-            if desc_pool != vk::DescriptorPool::null() {
-                dev.destroy_descriptor_pool(desc_pool, None);
-            }
-            dev.destroy_query_pool(query_pool, None);
-        }
-        result
-    }
-
-    fn record_and_run(
-        &self,
-        order: &[usize],
-        query_pool: vk::QueryPool,
-        desc_pool: vk::DescriptorPool,
-        timestamps: bool,
-        profiler: Option<&Profiler>,
-    ) -> Result<Vec<PassTiming>, VkError> {
-        let ctx = &self.ctx;
-        let dev = &ctx.device;
-        // Descriptor sets first (they must be written before recording uses them).
-        let mut sets: HashMap<usize, vk::DescriptorSet> = HashMap::new();
-        for &i in order {
-            let PassKind::Dispatch {
-                pipeline,
-                buffers,
-                accels,
-                ..
-            } = &self.passes[i].kind
-            else {
-                continue;
-            };
-            let layouts = [pipeline.set_layout];
-            let set = unsafe {
-                dev.allocate_descriptor_sets(
-                    &vk::DescriptorSetAllocateInfo::default()
-                        .descriptor_pool(desc_pool)
-                        .set_layouts(&layouts),
-                )
-            }?[0];
-            for (binding, kind) in pipeline.bindings.iter().enumerate() {
-                let binding = binding as u32;
-                let bound = match kind {
-                    BindingKind::StorageBuffer => buffers.iter().any(|&(b, _)| b == binding),
-                    BindingKind::AccelerationStructure => accels.iter().any(|&(b, _)| b == binding),
-                };
-                if !bound {
-                    return Err(VkError::Other(format!(
-                        "pass {:?}: binding {binding} of pipeline {:?} is not bound",
-                        self.passes[i].name, pipeline.name
-                    )));
-                }
-            }
-            for &(binding, r) in buffers {
-                let info = [vk::DescriptorBufferInfo::default()
-                    .buffer(self.buffers[r].buffer().raw)
-                    .offset(0)
-                    .range(vk::WHOLE_SIZE)];
-                let w = vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(binding)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(&info);
-                unsafe { dev.update_descriptor_sets(&[w], &[]) };
-            }
-            for &(binding, a) in accels {
-                let handles = [self.accels[a].raw];
-                let mut as_info = vk::WriteDescriptorSetAccelerationStructureKHR::default()
-                    .acceleration_structures(&handles);
-                let w = vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(binding)
-                    .descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
-                    .descriptor_count(1)
-                    .push_next(&mut as_info);
-                unsafe { dev.update_descriptor_sets(&[w], &[]) };
-            }
-            sets.insert(i, set);
-        }
-
+        record::check(&self, &order)?;
+        let barriers = barriers::derive(
+            order
+                .iter()
+                .map(|&i| (self.passes[i].stage(), self.passes[i].accesses.as_slice())),
+        );
+        let ctx = self.ctx.clone();
+        let timestamps = Timestamps::new(&ctx, order.len())?;
+        let descriptors = record::Descriptors::new(&self, &order)?;
         let submit_us = profiler.map(|p| p.now_us()).unwrap_or(0.0);
         ctx.submit_and_wait(|cb| {
-            ctx.begin_label(cb, &self.label);
-            if timestamps {
-                unsafe { dev.cmd_reset_query_pool(cb, query_pool, 0, 2 * order.len() as u32) };
-            }
-            // Last access of each buffer so far: (stage, access).
-            let mut last: HashMap<usize, (Stage, Access)> = HashMap::new();
-            for (k, &i) in order.iter().enumerate() {
-                let pass = &self.passes[i];
-                let stage = pass.stage();
-                let mut src_stage = vk::PipelineStageFlags::empty();
-                let mut barriers = Vec::new();
-                for &(r, a) in &pass.accesses {
-                    if let Some(&(ps, pa)) = last.get(&r) {
-                        // Read after read needs no barrier; everything else does.
-                        if pa.writes() || a.writes() {
-                            src_stage |= ps.flags();
-                            barriers.push(
-                                vk::BufferMemoryBarrier::default()
-                                    .src_access_mask(ps.access(pa))
-                                    .dst_access_mask(stage.access(a))
-                                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                                    .buffer(self.buffers[r].buffer().raw)
-                                    .offset(0)
-                                    .size(vk::WHOLE_SIZE),
-                            );
-                        }
-                    }
-                }
-                if !barriers.is_empty() {
-                    unsafe {
-                        dev.cmd_pipeline_barrier(
-                            cb,
-                            src_stage,
-                            stage.flags(),
-                            vk::DependencyFlags::empty(),
-                            &[],
-                            &barriers,
-                            &[],
-                        )
-                    };
-                }
-                for &(r, a) in &pass.accesses {
-                    // A read after a write keeps the write as "last" for the next barrier.
-                    let e = last.entry(r).or_insert((stage, a));
-                    if a.writes() || !e.1.writes() {
-                        *e = (stage, a);
-                    } else {
-                        *e = (stage, Access::ReadWrite);
-                    }
-                }
-                ctx.begin_label(cb, &pass.name);
-                if timestamps {
-                    unsafe {
-                        dev.cmd_write_timestamp(
-                            cb,
-                            vk::PipelineStageFlags::ALL_COMMANDS,
-                            query_pool,
-                            2 * k as u32,
-                        )
-                    };
-                }
-                match &pass.kind {
-                    PassKind::Dispatch {
-                        pipeline,
-                        push,
-                        groups,
-                        ..
-                    } => unsafe {
-                        dev.cmd_bind_pipeline(
-                            cb,
-                            vk::PipelineBindPoint::COMPUTE,
-                            pipeline.pipeline,
-                        );
-                        dev.cmd_bind_descriptor_sets(
-                            cb,
-                            vk::PipelineBindPoint::COMPUTE,
-                            pipeline.layout,
-                            0,
-                            &[sets[&i]],
-                            &[],
-                        );
-                        if !push.is_empty() {
-                            dev.cmd_push_constants(
-                                cb,
-                                pipeline.layout,
-                                vk::ShaderStageFlags::COMPUTE,
-                                0,
-                                push,
-                            );
-                        }
-                        dev.cmd_dispatch(cb, groups[0], groups[1], groups[2]);
-                    },
-                    PassKind::Copy { src, dst, size } => unsafe {
-                        let region = [vk::BufferCopy::default().size(*size)];
-                        dev.cmd_copy_buffer(
-                            cb,
-                            self.buffers[*src].buffer().raw,
-                            self.buffers[*dst].buffer().raw,
-                            &region,
-                        );
-                    },
-                    PassKind::Fill { dst, value } => unsafe {
-                        dev.cmd_fill_buffer(
-                            cb,
-                            self.buffers[*dst].buffer().raw,
-                            0,
-                            vk::WHOLE_SIZE,
-                            *value,
-                        );
-                    },
-                }
-                if timestamps {
-                    unsafe {
-                        dev.cmd_write_timestamp(
-                            cb,
-                            vk::PipelineStageFlags::ALL_COMMANDS,
-                            query_pool,
-                            2 * k as u32 + 1,
-                        )
-                    };
-                }
-                ctx.end_label(cb);
-            }
-            // Make every write visible to the host for readback.
-            let host = vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ);
-            unsafe {
-                dev.cmd_pipeline_barrier(
-                    cb,
-                    vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::HOST,
-                    vk::DependencyFlags::empty(),
-                    &[host],
-                    &[],
-                    &[],
-                )
+            let rec = record::Recorder {
+                graph: &self,
+                cb,
+                descriptors: &descriptors,
+                timestamps: timestamps.as_ref(),
             };
-            ctx.end_label(cb);
+            rec.record(&order, &barriers);
             Ok(())
         })?;
-
-        let mut timings = Vec::new();
-        if timestamps {
-            let mut ts = vec![0u64; 2 * order.len()];
-            unsafe {
-                dev.get_query_pool_results(
-                    query_pool,
-                    0,
-                    &mut ts,
-                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
-                )
-            }?;
-            let period_ms = ctx.info.timestamp_period_ns as f64 * 1e-6;
-            let t0 = ts[0];
-            for (k, &i) in order.iter().enumerate() {
-                let start_ms = ts[2 * k].saturating_sub(t0) as f64 * period_ms;
-                let gpu_ms = ts[2 * k + 1].saturating_sub(ts[2 * k]) as f64 * period_ms;
-                let name = self.passes[i].name.clone();
-                if let Some(p) = profiler {
-                    p.push(Span {
-                        name: name.clone(),
-                        track: "gpu",
-                        start_us: submit_us + start_ms * 1e3,
-                        dur_us: gpu_ms * 1e3,
-                    });
-                }
-                timings.push(PassTiming { name, gpu_ms });
+        let Some(timestamps) = timestamps else {
+            return Ok(Vec::new());
+        };
+        let times = timestamps.read(ctx.info.timestamp_period_ns)?;
+        let mut timings = Vec::with_capacity(order.len());
+        for (&i, (start_ms, gpu_ms)) in order.iter().zip(times) {
+            let name = self.passes[i].name.clone();
+            if let Some(p) = profiler {
+                p.push(Span {
+                    name: name.clone(),
+                    track: "gpu",
+                    start_us: submit_us + start_ms * 1e3,
+                    dur_us: gpu_ms * 1e3,
+                });
             }
+            timings.push(PassTiming { name, gpu_ms });
         }
         Ok(timings)
     }

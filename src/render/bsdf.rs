@@ -3,8 +3,9 @@
 //! `energy` use exactly the model the shader evaluates.
 //!
 //! Local frame: the shading normal is +z; `wo` points away from the surface (towards
-//! the viewer), `wi` towards the light. GGX after Walter et al. 2007, height-correlated
-//! Smith masking-shadowing (separable, see `ggx_g2`), visible-normal sampling (Heitz 2018).
+//! the viewer), `wi` towards the light. GGX after Walter et al. 2007, separable
+//! (uncorrelated) Smith masking-shadowing G1(wo) G1(wi) (not the height-correlated form;
+//! see `ggx_g2` for why), visible-normal sampling (Heitz 2018).
 
 use std::f32::consts::PI;
 

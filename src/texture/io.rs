@@ -1,6 +1,7 @@
 //! Files for people: EXR height (one f32 channel `Y`, micrometres), 16-bit PNG normal
-//! map, 8-bit preview. Writers write exactly the given path; callers that need
-//! all-or-nothing output write temp names and rename (see the CLI).
+//! map, 8-bit preview. The PNGs are encoded by `crate::image_io` (through a temporary
+//! sibling name); callers that need all-or-nothing output of the whole set write temp
+//! names and rename (see the CLI).
 
 use std::path::Path;
 
@@ -50,19 +51,9 @@ fn png_err(path: &Path, e: impl ToString) -> TextureError {
 /// y down, z out of the surface). Streamed in bands of rows so a 13107^2 map does not
 /// need a second full-size buffer (the image crate would hold two: 2 GB).
 pub fn write_normal_png16(map: &HeightMap, path: &Path) -> Result<()> {
-    let (w, h) = (map.width, map.height);
-    let file = std::fs::File::create(path).map_err(|e| png_err(path, e))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Sixteen);
-    enc.set_compression(png::Compression::Fast);
-    let mut writer = enc.write_header().map_err(|e| png_err(path, e))?;
-    let mut stream = writer.stream_writer().map_err(|e| png_err(path, e))?;
-    const BAND: usize = 256;
-    let mut bytes = vec![0u8; BAND * w * 6];
-    for y0 in (0..h).step_by(BAND) {
-        let rows = BAND.min(h - y0);
-        bytes[..rows * w * 6]
+    let w = map.width;
+    crate::image_io::write_png_rgb16_streamed(path, w, map.height, 256, |y0, bytes| {
+        bytes
             .par_chunks_mut(w * 6)
             .enumerate()
             .for_each(|(r, row)| {
@@ -73,34 +64,17 @@ pub fn write_normal_png16(map: &HeightMap, path: &Path) -> Result<()> {
                         row[6 * x + 2 * c..6 * x + 2 * c + 2].copy_from_slice(&v.to_be_bytes());
                     }
                 })
-            });
-        std::io::Write::write_all(&mut stream, &bytes[..rows * w * 6])
-            .map_err(|e| png_err(path, e))?;
-    }
-    stream.finish().map_err(|e| png_err(path, e))?;
-    writer.finish().map_err(|e| png_err(path, e))
+            })
+    })
+    .map_err(|e| png_err(path, e))
 }
 
 /// 8-bit grey preview, box-downsampled to at most `max_side`, mean +- 2.5 Sq mapped to
-/// black..white.
+/// black..white. Previews go into docs: small files matter more than encode time here.
 pub fn write_preview_png(map: &HeightMap, path: &Path, max_side: usize) -> Result<()> {
-    use image::ImageEncoder;
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let img = preview(map, max_side);
-    let file = std::fs::File::create(path).map_err(|e| png_err(path, e))?;
-    // Previews go into docs: small files matter more than encode time here.
-    PngEncoder::new_with_quality(
-        std::io::BufWriter::new(file),
-        CompressionType::Best,
-        FilterType::Adaptive,
-    )
-    .write_image(
-        img.as_raw(),
-        img.width(),
-        img.height(),
-        image::ExtendedColorType::L8,
-    )
-    .map_err(|e| png_err(path, e))
+    crate::image_io::write_png_gray8_compact(path, img.width(), img.height(), img.as_raw())
+        .map_err(|e| png_err(path, e))
 }
 
 pub fn preview(map: &HeightMap, max_side: usize) -> ImageBuffer<Luma<u8>, Vec<u8>> {

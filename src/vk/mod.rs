@@ -38,6 +38,46 @@ pub enum VkError {
     Alloc(#[from] gpu_allocator::AllocationError),
     #[error("Vulkan validation reported {count} error(s); first: {first}")]
     Validation { count: usize, first: String },
+    /// A render-graph dispatch leaves a binding of its pipeline without a resource.
+    #[error("pass {pass:?}: binding {binding} ({kind:?}) of pipeline {pipeline:?} is not bound")]
+    UnboundBinding {
+        pass: String,
+        pipeline: String,
+        binding: u32,
+        kind: BindingKind,
+    },
+    /// A render-graph dispatch binds a resource where its pipeline declares none, or
+    /// one of another kind (`declared` is `None` past the pipeline's last binding).
+    #[error(
+        "pass {pass:?}: binding {binding} is given a {bound:?} but pipeline {pipeline:?} declares {declared:?} there (it has bindings 0..{count})"
+    )]
+    BindingMismatch {
+        pass: String,
+        pipeline: String,
+        binding: u32,
+        bound: BindingKind,
+        declared: Option<BindingKind>,
+        count: usize,
+    },
+    /// A render-graph dispatch pushes a block of another size than its pipeline's.
+    #[error(
+        "pass {pass:?}: push constants are {given} bytes but pipeline {pipeline:?} declares {expected}"
+    )]
+    PushConstantSize {
+        pass: String,
+        pipeline: String,
+        expected: u32,
+        given: usize,
+    },
+    /// A render-graph dispatch asks for more workgroups than the device allows.
+    #[error(
+        "pass {pass:?}: {groups:?} workgroups exceed the device's limit of {max:?} per dimension"
+    )]
+    WorkgroupLimit {
+        pass: String,
+        groups: [u32; 3],
+        max: [u32; 3],
+    },
     #[error("{0}")]
     Other(String),
 }
