@@ -14,12 +14,25 @@ pub fn write_exr_f32(
     channel: &str,
     data: &[f32],
 ) -> std::io::Result<()> {
+    write_exr_with(path, (width, height), channel, data, "", &[])
+}
+
+/// The crate's one EXR writer: one f32 channel, a layer name and f32 attributes (e.g.
+/// a height map's `spacing_um`), through a temporary sibling name, removed on failure.
+pub fn write_exr_with(
+    path: &Path,
+    (width, height): (usize, usize),
+    channel: &str,
+    data: &[f32],
+    layer_name: &str,
+    attributes: &[(&str, f32)],
+) -> std::io::Result<()> {
     assert_eq!(data.len(), width * height, "image size mismatch");
     let tmp = crate::util::temp_sibling(path).with_extension("tmp.exr");
     let ch = AnyChannel::new(channel, FlatSamples::F32(data.to_vec()));
-    let layer = Layer::new(
+    let mut layer = Layer::new(
         (width, height),
-        LayerAttributes::named(""),
+        LayerAttributes::named(layer_name),
         // A fixed chunk order: the parallel compressor otherwise writes chunks in the
         // order they finish, and the same image gives different bytes (and hashes).
         Encoding {
@@ -28,6 +41,12 @@ pub fn write_exr_f32(
         },
         AnyChannels::sort(SmallVec::from_vec(vec![ch])),
     );
+    for (k, v) in attributes {
+        layer
+            .attributes
+            .other
+            .insert(Text::from(*k), AttributeValue::F32(*v));
+    }
     let result = Image::from_layer(layer)
         .write()
         .to_file(&tmp)
@@ -43,16 +62,33 @@ pub fn write_exr_f32(
 /// f32/f16 EXR: (width, height, data). Several channels without `Y` are refused. The
 /// header is checked against `limits::MAX_IMAGE_SIDE` before any pixel is read.
 pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
+    read_exr_channel(path, None)
+}
+
+/// The crate's one EXR reader: channel `required` (an error naming the file's channels
+/// when it is missing), or with `None` channel `Y` or the only channel. The header is
+/// checked against `limits::MAX_IMAGE_SIDE` before any pixel is read.
+pub fn read_exr_channel(
+    path: &Path,
+    required: Option<&str>,
+) -> std::io::Result<(usize, usize, Vec<f32>)> {
     let (_, _, names) = crate::limits::exr_header(path)?;
-    let want = if names.iter().any(|n| n == "Y") {
-        "Y".to_string()
-    } else if names.len() == 1 {
-        names[0].clone()
-    } else {
-        return Err(std::io::Error::other(format!(
-            "no channel named Y among several (channels: {})",
-            names.join(", ")
-        )));
+    let want = match required {
+        Some(c) if names.iter().any(|n| n == c) => c.to_string(),
+        Some(c) => {
+            return Err(std::io::Error::other(format!(
+                "no channel named {c} (channels: {})",
+                names.join(", ")
+            )));
+        }
+        None if names.iter().any(|n| n == "Y") => "Y".to_string(),
+        None if names.len() == 1 => names[0].clone(),
+        None => {
+            return Err(std::io::Error::other(format!(
+                "no channel named Y among several (channels: {})",
+                names.join(", ")
+            )));
+        }
     };
     let img = read_first_flat_layer_from_file(path).map_err(std::io::Error::other)?;
     let size = img.layer_data.size;
@@ -64,6 +100,14 @@ pub fn read_exr_f32(path: &Path) -> std::io::Result<(usize, usize, Vec<f32>)> {
         .find(|c| c.name.to_string() == want)
         .ok_or_else(|| std::io::Error::other(format!("EXR has no channel {want}")))?;
     let data: Vec<f32> = ch.sample_data.values_as_f32().collect();
+    if data.len() != size.0 * size.1 {
+        return Err(std::io::Error::other(format!(
+            "{} samples for {} x {} pixels",
+            data.len(),
+            size.0,
+            size.1
+        )));
+    }
     Ok((size.0, size.1, data))
 }
 

@@ -11,33 +11,21 @@ use rayon::prelude::*;
 use super::error::{Result, TextureError};
 use super::maps::{HeightMap, normal_from_slope};
 
+/// The height map as channel `Y` (µm) with its texel spacing as attribute `spacing_um`,
+/// through `image_io`'s EXR writer.
 pub fn write_exr_height(map: &HeightMap, path: &Path) -> Result<()> {
-    use exr::prelude::*;
-    let w = map.width;
-    let channels = SpecificChannels::build()
-        .with_channel("Y")
-        .with_pixel_fn(|pos: Vec2<usize>| (map.data[pos.y() * w + pos.x()],));
-    let mut layer = Layer::new(
+    crate::image_io::write_exr_with(
+        path,
         (map.width, map.height),
-        LayerAttributes::named("height_um"),
-        // Fixed chunk order: same map, same bytes.
-        Encoding {
-            line_order: LineOrder::Increasing,
-            ..Encoding::FAST_LOSSLESS
-        },
-        channels,
-    );
-    layer.attributes.other.insert(
-        Text::from("spacing_um"),
-        AttributeValue::F32(map.spacing_um as f32),
-    );
-    Image::from_layer(layer)
-        .write()
-        .to_file(path)
-        .map_err(|e| TextureError::Exr {
-            path: path.to_owned(),
-            message: e.to_string(),
-        })
+        "Y",
+        &map.data,
+        "height_um",
+        &[("spacing_um", map.spacing_um as f32)],
+    )
+    .map_err(|e| TextureError::Exr {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })
 }
 
 fn png_err(path: &Path, e: impl ToString) -> TextureError {

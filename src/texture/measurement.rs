@@ -147,26 +147,8 @@ pub fn read_exr(path: &Path, spacing_um: f64) -> Result<HeightMap> {
         path: path.to_owned(),
         message,
     };
-    let (_, _, names) = crate::limits::exr_header(path).map_err(|e| err(e.to_string()))?;
-    if !names.iter().any(|n| n == "Y") {
-        return Err(err(format!(
-            "no channel named Y (channels: {}); write the height map (µm) as channel Y",
-            names.join(", ")
-        )));
-    }
-    let img =
-        exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
-    let layer = &img.layer_data;
-    let (w, h) = (layer.size.width(), layer.size.height());
-    let chans = &layer.channel_data.list;
-    let ch = chans
-        .iter()
-        .find(|c| c.name.to_string() == "Y")
-        .ok_or_else(|| err("no channel named Y".into()))?;
-    let mut data: Vec<f32> = ch.sample_data.values_as_f32().collect();
-    if data.len() != w * h {
-        return Err(err(format!("{} samples for {w} x {h} pixels", data.len())));
-    }
+    let (w, h, mut data) = crate::image_io::read_exr_channel(path, Some("Y"))
+        .map_err(|e| err(format!("{e}; write the height map (µm) as channel Y")))?;
     if !fill_invalid(&mut data) {
         return Err(err(
             "no finite sample (all NaN or infinite): refused rather than rendered flat".into(),
