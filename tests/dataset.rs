@@ -105,7 +105,7 @@ impl ImageRenderer for OrthoLabelTestDouble {
                             + 0.1 * l.face as f32
                             + 0.3 * (l.class > 0) as u8 as f32
                             + 0.05 * jitter
-                            + 0.2 * req.roughness;
+                            + 0.2 * req.alpha;
                     }
                 }
             }
@@ -435,6 +435,28 @@ fn splits_keep_instances_together_with_ratios_and_label_balance() {
 }
 
 #[test]
+fn roughness_is_appleseed_r_and_alpha_is_ggx_alpha() {
+    let base = job_text(1, 1);
+    let params = |text: &str| {
+        let job = Job::parse(text, "job", Path::new(".")).unwrap();
+        let plan = dataset::expand(&job);
+        dataset::plan::instance_params(&job, &plan.instances[0])
+    };
+    let r = params(&base.replace(
+        "[texture]",
+        "[material]\nroughness = [0.05, 0.3]\n[texture]",
+    ));
+    let a = params(&base.replace("[texture]", "[material]\nalpha = [0.05, 0.3]\n[texture]"));
+    let d = params(&base);
+    // Same draw, two readings: alpha = r^2 for `roughness`, the draw itself for `alpha`.
+    assert!((0.05..=0.3).contains(&a.alpha));
+    assert!((r.alpha - a.alpha * a.alpha).abs() < 1e-12, "{r:?} {a:?}");
+    assert!((r.roughness - a.alpha).abs() < 1e-12);
+    // No [material]: the paper's roughness.
+    assert_eq!(d, r);
+}
+
+#[test]
 fn bad_job_files_fail_before_rendering_naming_the_field() {
     let tmp = tempfile::tempdir().unwrap();
     std::fs::write(tmp.path().join("defects.toml"), DEFECT_SPEC).unwrap();
@@ -499,6 +521,17 @@ fn bad_job_files_fail_before_rendering_naming_the_field() {
         (
             good.replace("spec = \"defects.toml\"", "spec = \"missing.toml\""),
             "missing.toml",
+        ),
+        (
+            good.replace(
+                "[texture]",
+                "[material]\nroughness = [0.1, 0.2]\nalpha = [0.01, 0.04]\n[texture]",
+            ),
+            "material.roughness / material.alpha",
+        ),
+        (
+            good.replace("[texture]", "[material]\nroughness = [0.3, 0.1]\n[texture]"),
+            "material.roughness[1]",
         ),
     ];
     for (text, want) in cases {

@@ -93,7 +93,7 @@ fn face_textures_reach_the_image() {
             mesh: &mesh,
             mesh_key: 1,
             view: "A0",
-            roughness: 0.1,
+            alpha: 0.1,
             face_textures: textures,
             width: 48,
             height: 40,

@@ -68,7 +68,7 @@ impl ImageRenderer for GpuRenderer {
         cfg.render.max_bounces = req.bounces;
         // The shader takes a 32-bit seed: fold the 64-bit one.
         cfg.render.seed = (req.seed ^ (req.seed >> 32)) as u32;
-        cfg.material.alpha = req.roughness;
+        cfg.material.alpha = req.alpha;
         cfg.validate().map_err(|e| e.to_string())?;
         let mut object = req.mesh.clone();
         for l in &mut object.labels {

@@ -63,17 +63,41 @@ pub struct RenderSettings {
     pub bounces: i64,
 }
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+/// The object material's roughness, drawn uniformly per object instance from a range
+/// given in one of two conventions: `roughness` (appleseed / Disney r, GGX alpha = r^2;
+/// the paper's convention, since its renderer is appleseed) or `alpha` (GGX alpha
+/// itself). Exactly one may be given; neither means the paper's `roughness = [0.05, 0.3]`.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSettings {
-    /// GGX alpha drawn uniformly per object instance from [min, max].
-    pub roughness: [f64; 2],
+    /// Roughness r in [min, max], drawn uniformly; alpha = r^2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roughness: Option<[f64; 2]>,
+    /// GGX alpha in [min, max], drawn uniformly.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<[f64; 2]>,
 }
 
-impl Default for MaterialSettings {
-    fn default() -> Self {
-        MaterialSettings {
-            roughness: [0.05, 0.3],
+/// The paper's roughness range (appleseed r): "we uniformly sample the material
+/// roughness parameter from the range [0.05, 0.3]".
+pub const PAPER_ROUGHNESS: [f64; 2] = [0.05, 0.3];
+
+/// Which convention a drawn range is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RoughnessConvention {
+    /// appleseed / Disney r: alpha = r^2.
+    Roughness,
+    /// GGX alpha.
+    Alpha,
+}
+
+impl MaterialSettings {
+    /// The range and its convention (the paper's roughness when neither is given).
+    pub fn range(&self) -> ([f64; 2], RoughnessConvention) {
+        match (self.roughness, self.alpha) {
+            (_, Some(a)) => (a, RoughnessConvention::Alpha),
+            (Some(r), None) => (r, RoughnessConvention::Roughness),
+            (None, None) => (PAPER_ROUGHNESS, RoughnessConvention::Roughness),
         }
     }
 }
@@ -348,9 +372,20 @@ impl Job {
                 return Err(self.field(format!("views[{i}]"), format!("{v:?}"), "listed twice"));
             }
         }
-        let [lo, hi] = self.material.roughness;
-        self.real("material.roughness[0]", lo, 0.001, 1.0)?;
-        self.real("material.roughness[1]", hi, lo, 1.0)?;
+        if let (Some(r), Some(a)) = (self.material.roughness, self.material.alpha) {
+            return Err(self.field(
+                "material.roughness / material.alpha",
+                format!("{r:?} / {a:?}"),
+                "give one of them: `roughness` (appleseed/Disney r, alpha = r^2) or `alpha` (GGX alpha)",
+            ));
+        }
+        let ([lo, hi], conv) = self.material.range();
+        let key = match conv {
+            RoughnessConvention::Roughness => "material.roughness",
+            RoughnessConvention::Alpha => "material.alpha",
+        };
+        self.real(&format!("{key}[0]"), lo, 0.001, 1.0)?;
+        self.real(&format!("{key}[1]"), hi, lo, 1.0)?;
         self.real(
             "mapping.rotation_deg",
             self.mapping.rotation_deg,

@@ -35,8 +35,8 @@ pub struct ImageRequest<'a> {
     pub mesh_key: u64,
     /// Viewpoint name, e.g. "A20" (face A, 20 degrees from its normal, aimed at its centre).
     pub view: &'a str,
-    /// GGX alpha of the aluminium.
-    pub roughness: f32,
+    /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
+    pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,
     pub width: u32,
     pub height: u32,
