@@ -435,6 +435,28 @@ fn splits_keep_instances_together_with_ratios_and_label_balance() {
 }
 
 #[test]
+fn paper_job_uses_the_papers_roughness_and_spiral_exit_lines() {
+    let job = Job::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/paper-dataset.toml"
+    )))
+    .unwrap();
+    assert_eq!(job.material.roughness, Some([0.05, 0.3]));
+    assert_eq!(job.material.alpha, None);
+    let spirals: Vec<_> = job
+        .finishes
+        .iter()
+        .filter(|f| f.texture_type() == "spiral")
+        .collect();
+    assert_eq!(spirals.len(), 4);
+    for f in spirals {
+        let p: synosis::texture::MilledParams =
+            toml::Value::Table(f.params.clone()).try_into().unwrap();
+        assert!(p.spiral_exit_line, "{}", f.name);
+    }
+}
+
+#[test]
 fn roughness_is_appleseed_r_and_alpha_is_ggx_alpha() {
     let base = job_text(1, 1);
     let params = |text: &str| {

@@ -127,7 +127,8 @@ fn paper_spec_imprint_is_watertight_labelled_and_reapplies_to_the_mirror() {
     assert_eq!(set.defects.len(), 12);
     let out = imprint(&b, &set).unwrap();
     check_imprinted(&b, &set, &out);
-    // Material was removed, not added (no rims in the paper spec).
+    // Net material was removed: scratches only remove, and a dent's rim (as high as the
+    // dent is deep, over 1 ... 1.5 semi-axes) adds 0.625 pi a b c against the pit's 0.667.
     assert!(volume(&out) < volume(&b));
     // The same face-local set on the mirror body.
     let m = testbody(Variant::M);
@@ -169,6 +170,7 @@ fn dents_only(text: &str) -> DefectSpec {
 
 #[test]
 fn dents_have_the_specified_depth_diameter_and_volume() {
+    // The pit alone (rims off; `a_rim_raises_material_around_the_dent` checks the rim).
     let b = testbody(Variant::B);
     let spec = dents_only(
         r#"
@@ -178,12 +180,14 @@ fn dents_have_the_specified_depth_diameter_and_volume() {
         diameter_mm = [0.2, 1.0]
         elongation = [1, 4]
         depth = [0.2, 1.0]
+        rim_height = 0
         [[dent]]
         name = "tiny"
         quantity = 4
         diameter_mm = 0.02
         elongation = [1, 2]
         depth = [0.05, 0.2]
+        rim_height = 0
         "#,
     );
     let set = sample_defects(&b, &spec, 3).unwrap();
