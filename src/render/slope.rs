@@ -31,20 +31,25 @@ impl SlopeMap {
 
     /// Parallel sinusoidal grooves running along the map's y axis:
     /// h(x) = A sin(2 pi x / period), with A chosen so the steepest slope is
-    /// `max_slope_deg`. Covers `extent_mm` x `extent_mm`. A test pattern, not a finish.
+    /// `max_slope_deg` and x measured from the **map centre** (so the pattern at the
+    /// centre does not depend on the map's size, and a map moved by an offset moves its
+    /// grooves by exactly that offset). Covers `extent_mm` x `extent_mm`. A test pattern,
+    /// not a finish.
     pub fn test_grooves(
         extent_mm: f32,
         spacing_um: f64,
         period_mm: f32,
         max_slope_deg: f32,
     ) -> SlopeMap {
-        let n = ((extent_mm as f64 * 1000.0 / spacing_um).ceil() as usize).max(1);
+        // An even texel count puts texel corners on the map centre for every extent, so a
+        // bigger map (a farther offset elsewhere) samples the grooves at the same points.
+        let n = ((extent_mm as f64 * 1000.0 / spacing_um / 2.0).ceil() as usize).max(1) * 2;
         let smax = max_slope_deg.to_radians().tan();
         let k = std::f64::consts::TAU / (period_mm as f64 * 1000.0);
         let mut data = vec![[0.0f32; 2]; n * n];
         for y in 0..n {
             for x in 0..n {
-                let xu = (x as f64 + 0.5) * spacing_um;
+                let xu = (x as f64 + 0.5 - 0.5 * n as f64) * spacing_um;
                 // dh/dx = A k cos(k x) with A k = tan(max slope).
                 data[y * n + x] = [(smax as f64 * (k * xu).cos()) as f32, 0.0];
             }
@@ -324,6 +329,56 @@ mod tests {
         assert_eq!(f16_bits(-2.0), 0xc000);
         assert_eq!(f16_bits(1e9), 0x7bff);
         assert_eq!(f16_bits(0.0), 0);
+    }
+
+    /// dh/dx (map x) of the grooves of one scene file at `points` on face `face`.
+    fn groove_slopes(
+        cfg: &crate::scene::config::SceneConfig,
+        face: FaceId,
+        points: &[Vec3],
+    ) -> Vec<f32> {
+        let mesh = crate::scene::testbody(crate::scene::Variant::B);
+        let scene = crate::render::path_trace::RenderScene::assemble(&mesh, cfg).expect("scene");
+        let (h, t) = pack(&scene.face_maps, &scene.face_frames, 1 << 27).expect("pack");
+        points
+            .iter()
+            .map(|&p| lookup(&h[face as usize], &t[face as usize - 1], p)[0])
+            .collect()
+    }
+
+    #[test]
+    fn offsets_move_grooves_by_the_offset_on_their_face_only() {
+        use crate::scene::mesh::FACE_A;
+        let mut cfg = crate::scene::config::SceneConfig::parse(
+            "[texture]\nkind = \"test-grooves\"\nspacing_um = 10.0\ngroove_period_mm = 1.2\n\
+             rotation_deg = [30.0, 0.0, 0.0]\n",
+        )
+        .expect("cfg");
+        let mesh = crate::scene::testbody(crate::scene::Variant::B);
+        let frames = crate::scene::face_frames(&mesh);
+        let fa = *frames.iter().find(|f| f.face == FACE_A).expect("A");
+        let ax = fa.u * 30f32.to_radians().cos() + fa.v * 30f32.to_radians().sin();
+        // Points along the grooves' direction of variation (map x) around A's centre.
+        let points: Vec<Vec3> = (0..24)
+            .map(|i| fa.centre + ax * (i as f32 * 0.05 - 0.6))
+            .collect();
+        let base = groove_slopes(&cfg, FACE_A, &points);
+        // Offset (0.5, 0) along u on the 30-degree face: the grooves move by
+        // 0.5 cos 30 = 0.433 mm along map x, so the slope at p + 0.433 ax is the old one at p.
+        cfg.texture.offset_mm[0] = [0.5, 0.0];
+        let shift = 0.5 * 30f32.to_radians().cos();
+        let moved: Vec<Vec3> = points.iter().map(|&p| p + ax * shift).collect();
+        for (s, b) in groove_slopes(&cfg, FACE_A, &moved).iter().zip(&base) {
+            assert!((s - b).abs() < 0.01, "offset A: {s} vs {b}");
+        }
+        // An offset on face B leaves face A's grooves where they were.
+        cfg.texture.offset_mm[0] = [0.0, 0.0];
+        cfg.texture.offset_mm[1] = [3.0, -2.0];
+        assert_eq!(
+            groove_slopes(&cfg, FACE_A, &points),
+            base,
+            "offset B moved A"
+        );
     }
 
     #[test]
