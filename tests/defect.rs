@@ -514,3 +514,45 @@ fn a_curvy_scratch_removes_the_volume_of_its_path_length() {
         s.length_mm
     );
 }
+
+/// Planar regions (scene::regions) of a defected mesh are those of the undefected one:
+/// same ids, planes, frames, centres and areas; every defect triangle is in the region
+/// of its face.
+#[test]
+fn planar_regions_survive_the_imprint() {
+    use synosis::scene::regions::{RegionTolerance, planar_regions, region_per_triangle};
+    let b = testbody(Variant::B);
+    let tol = RegionTolerance::default();
+    let before = planar_regions(&b, &tol);
+    let set = sample_defects(&b, &DefectSpec::paper(), 3).unwrap();
+    let out = imprint(&b, &set).unwrap();
+    let after = planar_regions(&out, &tol);
+    assert_eq!(after.len(), before.len());
+    for (x, y) in before.iter().zip(&after) {
+        assert_eq!((x.id, x.face), (y.id, y.face));
+        assert!((x.normal - y.normal).length() < 1e-5);
+        assert!((x.u - y.u).length() < 1e-5 && (x.v - y.v).length() < 1e-5);
+        assert!(
+            (x.centre - y.centre).length() < 1e-3,
+            "{} {}",
+            x.centre,
+            y.centre
+        );
+        assert!(
+            (x.area - y.area).abs() < 1e-4 * x.area,
+            "{} {}",
+            x.area,
+            y.area
+        );
+    }
+    let per = region_per_triangle(&out, &after);
+    let mut defect_tris = 0;
+    for (t, l) in out.labels.iter().enumerate() {
+        assert_ne!(per[t], u32::MAX);
+        if l.class != 0 {
+            defect_tris += 1;
+            assert_eq!(after[per[t] as usize].face, l.face);
+        }
+    }
+    assert!(defect_tris > 0);
+}

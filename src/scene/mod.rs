@@ -11,3 +11,5 @@ pub mod testbody;
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
 pub use testbody::{FaceFrame, Variant, face_frames, testbody};
+pub mod regions;
+pub use regions::{PlanarRegion, RegionTolerance, planar_regions};
