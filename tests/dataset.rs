@@ -898,3 +898,116 @@ fn texture_cache_is_bounded() {
     }
     assert_eq!(cache.made, 3);
 }
+
+/// A measurement named in a job: a milled finish is moment matched to it (after plane
+/// levelling), a sandblasted finish synthesises from it; a missing file or a clash with
+/// `exemplar` / `params.moments` fails naming the fields.
+#[test]
+fn measured_height_maps_drive_the_finishes() {
+    use synosis::dataset::texture_bridge::ModuleTextures;
+    use synosis::texture::{
+        FormRemoval, HeightMap, SandblastParams, XyzUnit, generate_sandblasted, load_measurement,
+        write_exr_height,
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    // A tilted plane (removed by levelling) plus bumps of Sq about 1.4 um.
+    let mut m = HeightMap::new(96, 96, 2.0);
+    for j in 0..96 {
+        for i in 0..96 {
+            let bumps = 2.0 * (i as f32 * 0.7).sin() * (j as f32 * 0.45).cos();
+            m.data[j * 96 + i] = 40.0 + 0.5 * i as f32 - 0.3 * j as f32 + bumps;
+        }
+    }
+    write_exr_height(&m, &tmp.path().join("scan.exr")).unwrap();
+    let text = r#"
+seed = 1
+[render]
+width = 8
+height = 8
+spp = 1
+bounces = 1
+[texture]
+size_px = 64
+spacing_um = 4.0
+[[object]]
+name = "o"
+mesh = "testbody-b"
+defective = 0
+defect_free = 1
+[[finish]]
+name = "parallel-m"
+kind = "milled"
+textures = 1
+params = { head_diameter_mm = 0.2, radial_depth = 0.5, delta_mm = 0.02 }
+measurement = { path = "scan.exr", exr_spacing_um = 2.0 }
+[[finish]]
+name = "sandblasted-m"
+kind = "sandblasted"
+textures = 1
+params = { patch_size = 32, overlap = 16 }
+measurement = { path = "scan.exr", exr_spacing_um = 2.0 }
+"#;
+    let job = Job::parse(text, "job", tmp.path()).unwrap();
+    let levelled = load_measurement(
+        &tmp.path().join("scan.exr"),
+        XyzUnit::M,
+        2.0,
+        FormRemoval::Plane,
+    )
+    .unwrap();
+    let target = levelled.moments();
+    assert!(
+        target.mean_um.abs() < 1e-3 && (target.sq_um - 1.0).abs() < 0.1,
+        "{target:?}"
+    );
+    let mut src = ModuleTextures::default();
+    // Milled: the same map as with the levelled measurement's moments given by hand.
+    let got = src.make(&job.finishes[0], 0, 5, 64, 4.0).unwrap();
+    let mut by_hand = job.finishes[0].clone();
+    by_hand.measurement = None;
+    let mut moments = toml::Table::new();
+    moments.insert("mean_um".into(), toml::Value::Float(target.mean_um));
+    moments.insert("sq_um".into(), toml::Value::Float(target.sq_um));
+    by_hand
+        .params
+        .insert("moments".into(), toml::Value::Table(moments));
+    let want = ModuleTextures::default()
+        .make(&by_hand, 0, 5, 64, 4.0)
+        .unwrap();
+    assert_eq!(got.data, want.data);
+    // Sandblasted: synthesised from the levelled measurement.
+    let got = src.make(&job.finishes[1], 0, 9, 64, 4.0).unwrap();
+    let p = SandblastParams {
+        patch_size: 32,
+        overlap: 16,
+        ..Default::default()
+    };
+    let want = generate_sandblasted(&levelled, &p, 64, 64, 4.0, 9, &synosis::texture::NoProgress)
+        .unwrap()
+        .slopes();
+    assert_eq!(got.data, want.data);
+    // Errors name the fields.
+    for (bad, want) in [
+        (
+            text.replace("path = \"scan.exr\", exr", "path = \"nope.exr\", exr"),
+            "finish[0].measurement.path",
+        ),
+        (
+            text.replace(
+                "params = { patch_size = 32, overlap = 16 }",
+                "params = { patch_size = 32, overlap = 16 }\nexemplar = { pressure_bar = 6.0 }",
+            ),
+            "finish[1].exemplar / finish[1].measurement",
+        ),
+        (
+            text.replace(
+                "delta_mm = 0.02 }",
+                "delta_mm = 0.02, moments = { mean_um = 0.0, sq_um = 1.0 } }",
+            ),
+            "finish[0].params.moments / finish[0].measurement",
+        ),
+    ] {
+        let e = Job::parse(&bad, "job", tmp.path()).unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
