@@ -1011,3 +1011,40 @@ measurement = { path = "scan.exr", exr_spacing_um = 2.0 }
         assert!(e.contains(want), "{e}");
     }
 }
+
+/// The realism report of a rendered folder: one page with every finish, example PNGs
+/// beside it, and kept counts equal to the manifest's.
+#[test]
+fn realism_report_summarises_a_dataset_folder() {
+    use synosis::dataset::report::{folder_entries, write_report};
+    let f = fixture(2, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let entries = folder_entries(&out).unwrap();
+    assert_eq!(entries.len(), f.prep.plan.items.len());
+    let rdir = out.join("report");
+    let reports = write_report(&out, &f.prep.job, &entries, 2, &rdir).unwrap();
+    assert_eq!(reports.len(), f.prep.job.finishes.len());
+    let html = std::fs::read_to_string(rdir.join("report.html")).unwrap();
+    for r in &reports {
+        assert!(html.contains(&r.name));
+        assert_eq!(r.examples.len(), 2);
+        for e in &r.examples {
+            assert!(rdir.join(e).is_file(), "{e}");
+            assert!(html.contains(e.as_str()));
+        }
+        let want: Vec<(u8, bool)> = entries
+            .iter()
+            .filter(|e| e.finish == r.name)
+            .flat_map(|e| e.defects.iter().map(|d| (d.class, d.kept)))
+            .collect();
+        for class in [1u8, 2] {
+            let n = want.iter().filter(|d| d.0 == class).count();
+            let k = want.iter().filter(|d| d.0 == class && d.1).count();
+            assert_eq!(r.kept(class), (k, n));
+        }
+        let pixels: u64 = r.histogram.iter().sum();
+        assert!(pixels > 0 && r.p01_p99.0 <= r.p01_p99.1);
+    }
+    assert!(html.contains("<svg") && !html.contains("src=\"http"));
+}

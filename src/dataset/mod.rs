@@ -12,6 +12,7 @@ pub mod labels;
 pub mod plan;
 pub mod post;
 pub mod renderer;
+pub mod report;
 pub mod runner;
 pub mod seed;
 pub mod texture_bridge;
