@@ -6,7 +6,8 @@ use std::time::Instant;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
-use synosis::render::raycast::{PinholeCamera, RayIn, trace_rays};
+use synosis::render::raycast::{RayIn, trace_rays};
+use synosis::scene::Camera;
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::trace::software_bvh::{
     TraversalStats, build_bvh, cpu_closest_hit, cpu_closest_hit_counted, obvhs_triangles,
@@ -17,10 +18,10 @@ use synosis::vk::{Context, ContextOptions};
 fn main() -> anyhow::Result<()> {
     let mesh = bumpy_sphere(316, 159, 10.0, 0.05);
     let n_side = 1024u32;
-    let cam = PinholeCamera::framing(&mesh, 1.0);
+    let cam = Camera::framing(&mesh, n_side, n_side);
     let primary: Vec<RayIn> = (0..n_side * n_side)
         .map(|i| {
-            let d = cam.ray_dir((i % n_side) as f32, (i / n_side) as f32, n_side, n_side);
+            let d = cam.pixel_dir(i % n_side, i / n_side);
             RayIn {
                 origin: cam.eye.into(),
                 tmin: 0.0,

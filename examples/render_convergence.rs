@@ -335,22 +335,29 @@ pub fn svg_plot(series: &[(String, Vec<(f64, f64)>)], xlabel: &str, ylabel: &str
 /// normals point outward) and the camera and materials as JSON.
 fn export_mitsuba(dir: &Path, scene: &RenderScene, cfg: &SceneConfig) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
+    let light = &scene.view.light.tris;
     for (name, pick) in [
         ("object", None),
         ("table", Some(MAT_TABLE)),
         ("light", Some(MAT_LIGHT)),
     ] {
-        let tris: Vec<[u32; 3]> = scene
-            .mesh
-            .triangles
-            .iter()
-            .zip(&scene.materials)
-            .filter(|(_, m)| match pick {
-                Some(p) => **m == p,
-                None => **m != MAT_TABLE && **m != MAT_LIGHT,
-            })
-            .map(|(t, _)| *t)
-            .collect();
+        let (positions, tris): (&[glam::Vec3], Vec<[u32; 3]>) = if pick == Some(MAT_LIGHT) {
+            (&light.positions, light.triangles.clone())
+        } else {
+            let tris = scene
+                .stage
+                .mesh
+                .triangles
+                .iter()
+                .zip(&scene.stage.materials)
+                .filter(|(_, m)| match pick {
+                    Some(p) => **m == p,
+                    None => **m != MAT_TABLE,
+                })
+                .map(|(t, _)| *t)
+                .collect();
+            (&scene.stage.mesh.positions, tris)
+        };
         let mut f =
             std::io::BufWriter::new(std::fs::File::create(dir.join(format!("{name}.ply")))?);
         write!(
@@ -362,7 +369,7 @@ fn export_mitsuba(dir: &Path, scene: &RenderScene, cfg: &SceneConfig) -> anyhow:
         // Unshared vertices: Mitsuba would otherwise be free to smooth normals.
         for t in &tris {
             for &i in t {
-                for c in scene.mesh.positions[i as usize].to_array() {
+                for c in positions[i as usize].to_array() {
                     f.write_all(&c.to_le_bytes())?;
                 }
             }
@@ -374,7 +381,7 @@ fn export_mitsuba(dir: &Path, scene: &RenderScene, cfg: &SceneConfig) -> anyhow:
             }
         }
     }
-    let c = &scene.camera;
+    let c = &scene.view.camera;
     let json = serde_json::json!({
         "eye": c.eye.to_array(),
         "forward": c.forward.to_array(),

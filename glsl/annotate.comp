@@ -5,33 +5,29 @@
 // the pixel whose first hit is a defect triangle. Occlusion is exact: these are first
 // hits of camera rays against the same geometry the image is rendered from.
 #include "common/trace.glsl"
-#include "common/scramble.glsl"
+#include "interface.glsl"
+#include "common/tile.glsl"
+#include "common/camera.glsl"
 
-layout(local_size_x = 8, local_size_y = 8) in;
+layout(local_size_x = TILE, local_size_y = TILE) in;
 
-// Per original triangle: face | class << 8 | instance << 16.
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 0) readonly buffer Labels { uint labels[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 1) writeonly buffer Ids { uint ids[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 2) writeonly buffer Coverage { float coverage[]; };
+// Per original triangle: face | class << LABEL_CLASS_SHIFT | instance << LABEL_INSTANCE_SHIFT.
+layout(std430, set = 0, binding = AN_LABELS) readonly buffer Labels { uint labels[]; };
+layout(std430, set = 0, binding = AN_IDS) writeonly buffer Ids { uint ids[]; };
+layout(std430, set = 0, binding = AN_COVERAGE) writeonly buffer Coverage { float coverage[]; };
 
-layout(push_constant) uniform Push {
-    vec4 eye; vec4 right; vec4 up; vec4 forward;
-    uint width; uint height; uint tiles_x; uint mult;
-    uint grid; uint pad0; uint pad1; uint pad2;
-} pc;
+layout(push_constant) uniform Push { ImagePush pc; };
 
 uint label_at(vec2 pixel_pos) {
-    vec2 ndc = pixel_pos / vec2(pc.width, pc.height) * 2.0 - 1.0;
-    vec3 dir = normalize(pc.forward.xyz + ndc.x * pc.right.xyz - ndc.y * pc.up.xyz);
-    Hit h = trace(pc.eye.xyz, dir, 0.0, 3.0e38);
-    return h.prim == NO_HIT ? 0u : labels[h.prim];
+    vec3 dir = camera_dir(pc.cam, pixel_pos, vec2(pc.width, pc.height));
+    Hit h = trace(pc.cam.eye.xyz, dir, 0.0, 3.0e38);
+    // Triangles past the labelled ones (a second trace level: the view's light) carry none.
+    return h.prim == NO_HIT || h.prim >= uint(labels.length()) ? 0u : labels[h.prim];
 }
 
 void main() {
-    uint tiles = pc.tiles_x * ((pc.height + 7u) / 8u);
-    uint tile = scramble_group(gl_WorkGroupID.x, tiles, pc.mult);
-    uint px = (tile % pc.tiles_x) * 8u + gl_LocalInvocationID.x;
-    uint py = (tile / pc.tiles_x) * 8u + gl_LocalInvocationID.y;
+    uvec2 pix = tile_pixel(pc.tiles);
+    uint px = pix.x, py = pix.y;
     if (px >= pc.width || py >= pc.height) return;
     uint i = py * pc.width + px;
     ids[i] = label_at(vec2(px, py) + 0.5);
@@ -41,7 +37,7 @@ void main() {
         for (uint sx = 0u; sx < n; ++sx) {
             vec2 sub = (vec2(sx, sy) + 0.5) / float(n);
             uint l = label_at(vec2(px, py) + sub);
-            defect += ((l >> 8) & 0xffu) != 0u ? 1u : 0u;
+            defect += ((l >> LABEL_CLASS_SHIFT) & 0xffu) != 0u ? 1u : 0u;
         }
     }
     coverage[i] = float(defect) / float(n * n);

@@ -2,15 +2,16 @@
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
 // Traces a list of rays and writes the closest hit of each (tests and benchmarks).
 #include "common/trace.glsl"
+#include "interface.glsl"
 #include "common/scramble.glsl"
 
 layout(local_size_x = 64) in;
 
 struct RayIn { vec4 o_tmin; vec4 d_tmax; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 0) readonly buffer Rays { RayIn rays[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 1) writeonly buffer Hits { vec4 hits[]; };
+layout(std430, set = 0, binding = HT_RAYS) readonly buffer Rays { RayIn rays[]; };
+layout(std430, set = 0, binding = HT_HITS) writeonly buffer Hits { vec4 hits[]; };
 
-layout(push_constant) uniform Push { uint count; uint groups; uint mult; uint pad; } pc;
+layout(push_constant) uniform Push { HitsPush pc; };
 
 void main() {
     uint g = scramble_group(gl_WorkGroupID.x, pc.groups, pc.mult);

@@ -7,55 +7,36 @@
 // dispatch adds `sample_count` samples per pixel into `accum` (a running sum).
 // See docs/rendering.md for every approximation and its parameter.
 #include "common/trace.glsl"
-#include "common/scramble.glsl"
+#include "interface.glsl"
+#include "common/tile.glsl"
+#include "common/camera.glsl"
 #include "common/sampler.glsl"
 #include "common/offset_ray.glsl"
 
-layout(local_size_x = 8, local_size_y = 8) in;
+layout(local_size_x = TILE, local_size_y = TILE) in;
 
-#define MAT_CONDUCTOR 0u
-#define MAT_TABLE 1u
-#define MAT_LIGHT 2u
-
-struct Tri { vec4 a; vec4 b; vec4 c; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 0) readonly buffer Geometry { Tri tris[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 1) readonly buffer Materials { uint mats[]; };
+layout(std430, set = 0, binding = PT_GEOMETRY) readonly buffer Geometry { Tri tris[]; };
+layout(std430, set = 0, binding = PT_MATERIALS) readonly buffer Materials { uint mats[]; };
+layout(std430, set = 0, binding = PT_LIGHT_GEOMETRY) readonly buffer LightGeometry { Tri light_tris[]; };
 // x: triangle index, y: float bits of the inclusive area CDF.
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 2) readonly buffer Lights { uvec2 lights[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 3) readonly buffer Energy { float energy[]; };
-float energy_at(uint i) { return energy[i]; }
+layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 lights[]; };
 #include "common/ggx.glsl"
 
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 4) readonly buffer Params {
-    vec4 eye;       // xyz camera position
-    vec4 right;     // image-plane x axis scaled to the half width at distance 1
-    vec4 up;        // image-plane y axis scaled to the half height
-    vec4 forward;   // unit view direction
-    uint width; uint height; uint max_bounces; uint seed;
-    float alpha; float ior_n; float ior_k; float f_avg;
-    uint comp; uint light_count; uint sample_gen; uint light_sampling;
-    float table_albedo; float radiance; float light_area; float pad2;
-    // Ring layout for facing sampling: first light triangle, ring segments, triangles
-    // per segment (all light triangles are one ring, segment by segment).
-    uint light_first; uint ring_segments; uint segment_tris; uint pad3;
-} prm;
+// See PathParams in src/gpu_interface.in. Ring layout for facing sampling: first light
+// triangle, ring segments, triangles per segment (all light triangles are one ring,
+// segment by segment).
+layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams prm; };
 
-#define LIGHT_UNIFORM 0u
-#define LIGHT_FACING 1u
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 5) buffer Accum { float accum[]; };
+layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
 
 // Slope maps, one header per face id (0 = other: never a map); see src/render/slope.rs.
-struct FaceMapHeader {
-    vec4 origin;    // xyz map centre (world, mm), w texels per mm
-    vec4 axis_x;    // xyz map x axis (world)
-    vec4 axis_up;   // xyz map up axis (-y, world)
-    uvec4 dims;     // width, height, first texel (0: one buffer per face), present
-};
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 6) readonly buffer FaceMaps { FaceMapHeader face_maps[]; };
+// FaceMapHeader: origin (xyz map centre, world mm; w texels per mm), axis_x (map x axis),
+// axis_up (map up axis, -y), dims (width, height, first texel, 1 = present).
+layout(std430, set = 0, binding = PT_FACE_MAPS) readonly buffer FaceMaps { FaceMapHeader face_maps[]; };
 // Texels of faces A, B, C, one buffer each: two f16 slopes [dh/dx, dh/dy] per uint.
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 7) readonly buffer SlopesA { uint slopes_a[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 8) readonly buffer SlopesB { uint slopes_b[]; };
-layout(std430, set = 0, binding = TRACE_BINDING_COUNT + 9) readonly buffer SlopesC { uint slopes_c[]; };
+layout(std430, set = 0, binding = PT_SLOPES_A) readonly buffer SlopesA { uint slopes_a[]; };
+layout(std430, set = 0, binding = PT_SLOPES_B) readonly buffer SlopesB { uint slopes_b[]; };
+layout(std430, set = 0, binding = PT_SLOPES_C) readonly buffer SlopesC { uint slopes_c[]; };
 
 vec2 slope_texel(uint face, uint i) {
     uint w;
@@ -65,9 +46,7 @@ vec2 slope_texel(uint face, uint i) {
     return unpackHalf2x16(w);
 }
 
-layout(push_constant) uniform Push {
-    uint sample_start; uint sample_count; uint tiles_x; uint mult;
-} pc;
+layout(push_constant) uniform Push { PathPush pc; };
 
 float power_heuristic(float a, float b) {
     float a2 = a * a, b2 = b * b;
@@ -83,6 +62,25 @@ uint pick_light(float u) {
     return lights[lo].x;
 }
 
+// Triangles are numbered object (with the table) first, then the view's light: the
+// object's live in `tris`, the light's in `light_tris` (a second trace level).
+// (Member by member: the two blocks' Tri are distinct SPIR-V types.)
+Tri fetch_tri(uint prim) {
+    Tri t;
+    if (prim < prm.light_first) {
+        t.a = tris[prim].a; t.b = tris[prim].b; t.c = tris[prim].c;
+    } else {
+        uint k = prim - prm.light_first;
+        t.a = light_tris[k].a; t.b = light_tris[k].b; t.c = light_tris[k].c;
+    }
+    return t;
+}
+
+// Material in the low byte, inspected face id in the next; light triangles are MAT_LIGHT.
+uint mat_word(uint prim) {
+    return prim < prm.light_first ? mats[prim] : MAT_LIGHT;
+}
+
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 
 // Facing sampling: selection weight of one light triangle seen from x (normal n), an
@@ -90,7 +88,7 @@ vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 // floored at 0.05 so every triangle keeps a non-zero probability (unbiased even where
 // the centroid faces away but part of the triangle does not).
 float light_weight(uint tri, vec3 x, vec3 n) {
-    Tri lt = tris[tri];
+    Tri lt = fetch_tri(tri);
     vec3 nl = tri_normal(lt);
     float area2 = length(nl);
     vec3 to = (lt.a.xyz + lt.b.xyz + lt.c.xyz) * (1.0 / 3.0) - x;
@@ -117,7 +115,7 @@ float light_area_pdf(uint tri, vec3 x, vec3 n) {
     uint seg = (tri - prm.light_first) / prm.segment_tris;
     if (seg >= prm.ring_segments) return 0.0;
     float wsum = segment_weight(seg, x, n);
-    float area = 0.5 * length(tri_normal(tris[tri]));
+    float area = 0.5 * length(tri_normal(fetch_tri(tri)));
     return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(prm.ring_segments) * area) : 0.0;
 }
 
@@ -222,9 +220,8 @@ bool surface_sample(uint mat, Conductor c, vec3 wo, vec3 u, out vec3 wi, out flo
 float radiance_sample(uint pixel, uint px, uint py, uint s) {
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec2 jitter = sample_2d(rng);
-    vec2 ndc = (vec2(px, py) + jitter) / vec2(prm.width, prm.height) * 2.0 - 1.0;
-    vec3 o = prm.eye.xyz;
-    vec3 d = normalize(prm.forward.xyz + ndc.x * prm.right.xyz - ndc.y * prm.up.xyz);
+    vec3 o = prm.cam.eye.xyz;
+    vec3 d = camera_dir(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height));
     Conductor cond;
     cond.alpha = clamp(prm.alpha, 1e-4, 1.0);
     cond.n = prm.ior_n;
@@ -239,9 +236,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
         if (h.prim == NO_HIT) break;   // no environment light
-        Tri t = tris[h.prim];
-        uint mat = mats[h.prim] & 0xffu;
-        uint face = (mats[h.prim] >> 8) & 0xffu;
+        Tri t = fetch_tri(h.prim);
+        uint mat = mat_word(h.prim) & 0xffu;
+        uint face = (mat_word(h.prim) >> MAT_FACE_SHIFT) & 0xffu;
         vec3 ng_raw = tri_normal(t);
         vec3 ng = normalize(ng_raw);
         if (mat == MAT_LIGHT) {
@@ -265,7 +262,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         // towards the viewer if needed. Side and visibility tests use ng: directions below
         // the geometric surface are never lit nor continued (no light leaks).
         vec3 ns = ng;
-        if (mat == MAT_CONDUCTOR && face != 0u && face < 4u) {
+        if (mat == MAT_CONDUCTOR && face != 0u && face < FACE_SLOTS) {
             ns = bend_towards_viewer(shading_normal(face, p, ng), ng, -d);
         }
         vec3 tb, bt;
@@ -276,7 +273,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         // Next-event estimation on the ring light.
         if (prm.light_count > 0u && prm.radiance > 0.0) {
             uint li = choose_light(sample_1d(rng), origin, ng);
-            Tri lt = tris[li];
+            Tri lt = fetch_tri(li);
             vec2 ul = sample_2d(rng);
             float su = sqrt(ul.x);
             float u2 = ul.y;
@@ -293,7 +290,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                 if (f > 0.0) {
                     Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
                     bool visible = s.prim == NO_HIT
-                        || ((mats[s.prim] & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
+                        || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
                     if (visible) {
                         float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
                         L += T * f * prm.radiance * power_heuristic(pdf_light, pdf_b) / pdf_light;
@@ -325,10 +322,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
 }
 
 void main() {
-    uint tiles = pc.tiles_x * ((prm.height + 7u) / 8u);
-    uint tile = scramble_group(gl_WorkGroupID.x, tiles, pc.mult);
-    uint px = (tile % pc.tiles_x) * 8u + gl_LocalInvocationID.x;
-    uint py = (tile / pc.tiles_x) * 8u + gl_LocalInvocationID.y;
+    uvec2 pix = tile_pixel(pc.tiles);
+    uint px = pix.x, py = pix.y;
     if (px >= prm.width || py >= prm.height) return;
     uint i = py * prm.width + px;
     float sum = 0.0;

@@ -7,6 +7,7 @@
 
 pub mod dataset;
 pub mod defect;
+pub mod gpu_interface;
 pub mod graph;
 pub mod image_io;
 pub mod metrics;

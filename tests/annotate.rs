@@ -5,7 +5,7 @@ mod common;
 
 use glam::Vec3;
 use synosis::render::annotate::{Annotation, annotate};
-use synosis::render::raycast::PinholeCamera;
+use synosis::scene::Camera;
 use synosis::scene::{Mesh, TriLabel};
 use synosis::trace::TraceScene;
 
@@ -63,13 +63,8 @@ fn scene() -> Mesh {
     m
 }
 
-fn camera() -> PinholeCamera {
-    PinholeCamera {
-        eye: Vec3::new(0.0, 0.0, 50.0),
-        forward: -Vec3::Z,
-        up: Vec3::Y,
-        vfov_deg: 30.0,
-    }
+fn camera() -> Camera {
+    Camera::look(Vec3::new(0.0, 0.0, 50.0), -Vec3::Z, Vec3::Y, 30.0, W, W)
 }
 
 const W: u32 = 200;
@@ -83,7 +78,7 @@ fn run(backend: synosis::trace::Backend) -> Annotation {
     let ctx = common::gpu();
     let mesh = scene();
     let ts = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
-    let (a, t) = annotate(&ctx, &ts, &mesh, &camera(), (W, W), 4, None).unwrap();
+    let (a, t) = annotate(&ctx, &ts, &mesh, &camera(), 4, None).unwrap();
     assert!(t.gpu_ms.is_finite());
     common::assert_clean(&ctx);
     a

@@ -5,7 +5,8 @@ mod common;
 use std::process::Command;
 
 use glam::Vec3;
-use synosis::render::raycast::{PinholeCamera, raycast};
+use synosis::render::raycast::raycast;
+use synosis::scene::Camera;
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::scene::{Mesh, TriLabel, export_mesh};
 use synosis::trace::{Backend, TraceScene};
@@ -44,12 +45,12 @@ fn test_mesh() -> Mesh {
 fn backends_give_the_same_raycast_image() {
     let ctx = common::gpu();
     let mesh = test_mesh();
-    let cam = PinholeCamera::framing(&mesh, 4.0 / 3.0);
+    let cam = Camera::framing(&mesh, 320, 240);
     let imgs: Vec<_> = [Backend::RayQuery, Backend::Software]
         .iter()
         .map(|&b| {
             let scene = TraceScene::build(&ctx, &mesh, b, None).unwrap();
-            raycast(&ctx, &scene, &cam, 320, 240, None).unwrap()
+            raycast(&ctx, &scene, &cam, None).unwrap()
         })
         .collect();
     let (a, b) = (&imgs[0], &imgs[1]);

@@ -9,7 +9,7 @@ use synosis::render::bsdf::{Conductor, Fresnel, ggx_d, ggx_g1, sample_vndf};
 use synosis::render::energy::EnergyTables;
 
 use synosis::render::path_trace::{
-    FrameOptions, MAT_TABLE, Radiance, RenderScene, load_object, path_trace, render_frame,
+    FrameOptions, MAT_TABLE, Radiance, RenderScene, load_object, path_trace, render_scene,
 };
 use synosis::render::slope::{FaceMap, SlopeMap};
 use synosis::scene::config::SceneConfig;
@@ -302,7 +302,7 @@ fn diffuse_plate_matches_irradiance_integral() {
     cfg.render.batch_spp = 1024;
     cfg.set_resolution(16, 12).expect("size");
     let scene = RenderScene::assemble(&plate, &cfg).expect("scene");
-    let cam = scene.camera;
+    let cam = scene.view.camera;
     let radiance = cfg.light.radiance as f64;
     use synosis::scene::config::LightSampling;
     let base_cfg = cfg;
@@ -315,7 +315,7 @@ fn diffuse_plate_matches_irradiance_integral() {
         cfg.light.sampling = sampling;
         let ctx = common::gpu();
         let mut s = RenderScene::assemble(&plate, &cfg).expect("scene");
-        for m in s.materials.iter_mut().take(2) {
+        for m in s.stage.materials.iter_mut().take(2) {
             *m = MAT_TABLE;
         }
         let tables = EnergyTables::compute();
@@ -364,8 +364,8 @@ fn diffuse_plate_matches_irradiance_integral() {
 fn irradiance(s: &RenderScene, p: Vec3, radiance: f64) -> f64 {
     let mut e = 0.0f64;
     let n = 8;
-    for &(t, _) in &s.lights {
-        let [a, b, c] = s.mesh.corners(t as usize).map(|v| v.as_dvec3());
+    for &(t, _) in &s.view.light.lights {
+        let [a, b, c] = s.view.light.corners(t).map(|v| v.as_dvec3());
         let nl = (b - a).cross(c - a);
         let area = 0.5 * nl.length();
         let nl = nl.normalize();
@@ -410,6 +410,7 @@ fn flat_map_equals_no_map() {
         let flat = render(&cfg, backend, |s| {
             let map = Arc::new(SlopeMap::flat(300, 300, 100.0));
             s.face_maps = s
+                .stage
                 .face_frames
                 .iter()
                 .map(|f| FaceMap {
@@ -450,7 +451,7 @@ fn render_faces(cfg: &SceneConfig, backend: Backend) -> (Radiance, Vec<u8>) {
         annotate_grid: Some(1),
         profiler: None,
     };
-    let f = render_frame(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
+    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
     common::assert_clean(&ctx);
     let ann = f.annotation.expect("annotation");
     (f.radiance, ann.face)
@@ -656,8 +657,7 @@ fn texture_file_becomes_face_maps() {
     let mut missing = cfg.clone();
     missing.texture.path = Some(dir.path().join("nope.exr"));
     let e = RenderScene::assemble(&object, &missing)
-        .err()
-        .expect("missing file")
+        .expect_err("missing file")
         .to_string();
     assert!(e.contains("texture.path"), "{e}");
 }
@@ -733,7 +733,7 @@ fn conductor_plate_matches_rust_bsdf_integral() {
             },
             Some(&tables),
         );
-        let cam = s.camera;
+        let cam = s.view.camera;
         let mut worst = 0.0f64;
         for (px, py) in [(8u32, 6u32), (3, 3), (12, 9)] {
             let got = img.data[(py * cam.width + px) as usize] as f64;
@@ -765,8 +765,8 @@ fn conductor_plate_matches_rust_bsdf_integral() {
 fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
     let mut e = 0.0f64;
     let n = 6;
-    for &(t, _) in &s.lights {
-        let [a, b, c] = s.mesh.corners(t as usize).map(|v| v.as_dvec3());
+    for &(t, _) in &s.view.light.lights {
+        let [a, b, c] = s.view.light.corners(t).map(|v| v.as_dvec3());
         let nl = (b - a).cross(c - a);
         let area = 0.5 * nl.length();
         let nl = nl.normalize();

@@ -72,7 +72,11 @@ vec3 cosine_hemisphere(float u1, float u2) {
 
 // Energy tables (src/render/energy.rs): E at [alpha_row * N + mu], then E_avg[N].
 #define ENERGY_N 32
-float energy_at(uint i);   // provided by the including shader (a storage buffer)
+#ifndef PT_ENERGY
+#error "include interface.glsl (after trace.glsl) before ggx.glsl"
+#endif
+layout(std430, set = 0, binding = PT_ENERGY) readonly buffer Energy { float energy_table[]; };
+float energy_at(uint i) { return energy_table[i]; }
 
 void energy_alpha_coord(float alpha, out uint j0, out float f) {
     float x = min(clamp(alpha, 0.0, 1.0) * float(ENERGY_N - 1), float(ENERGY_N - 1));

@@ -1,6 +1,10 @@
 // One intersection interface, two bodies chosen by a define at build time:
-//   TRACE_RAY_QUERY  - VK_KHR_ray_query against a TLAS (binding 0)
-//   TRACE_SOFTWARE   - stack traversal of a flattened obvhs BVH2 (bindings 0, 1)
+//   TRACE_RAY_QUERY  - VK_KHR_ray_query against a TLAS (binding 0) whose instances are
+//                      the object and the view's second level (instance custom index =
+//                      first triangle index of the level)
+//   TRACE_SOFTWARE   - stack traversal of two flattened obvhs BVH2s, the object's
+//                      (bindings 0, 1) and the second level's (bindings 2, 3)
+// Both return the closest hit over both levels, triangles numbered in one index space.
 // Passes put their own bindings from TRACE_BINDING_COUNT on.
 #ifndef TRACE_GLSL
 #define TRACE_GLSL
@@ -27,7 +31,8 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     while (rayQueryProceedEXT(rq)) {}
     if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
         h.t = rayQueryGetIntersectionTEXT(rq, true);
-        h.prim = uint(rayQueryGetIntersectionPrimitiveIndexEXT(rq, true));
+        h.prim = uint(rayQueryGetIntersectionPrimitiveIndexEXT(rq, true))
+            + uint(rayQueryGetIntersectionInstanceCustomIndexEXT(rq, true));
         h.bary = rayQueryGetIntersectionBarycentricsEXT(rq, true);
         h.inst = uint(rayQueryGetIntersectionInstanceIdEXT(rq, true));
     }
@@ -35,7 +40,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
 }
 
 #elif defined(TRACE_SOFTWARE)
-#define TRACE_BINDING_COUNT 2
+#define TRACE_BINDING_COUNT 4
 // Child-pair node: both children's boxes live in the parent, so one 64-byte load
 // tests two boxes. w of *_min: child node index (inner) or first triangle (leaf);
 // w of *_max: triangle count, 0 for an inner child.
@@ -44,6 +49,8 @@ struct BvhNode { vec4 l_min; vec4 l_max; vec4 r_min; vec4 r_max; };
 struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
 layout(std430, set = 0, binding = 0) readonly buffer TraceNodes { BvhNode trace_nodes[]; };
 layout(std430, set = 0, binding = 1) readonly buffer TraceTris { BvhTri trace_tris[]; };
+layout(std430, set = 0, binding = 2) readonly buffer TraceNodes2 { BvhNode trace_nodes2[]; };
+layout(std430, set = 0, binding = 3) readonly buffer TraceTris2 { BvhTri trace_tris2[]; };
 
 #define TRACE_STACK 64
 
@@ -80,33 +87,24 @@ TraceRay trace_setup(vec3 o, vec3 d) {
     return r;
 }
 
-void trace_leaf(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
-    for (uint i = first; i < first + count; ++i) {
-        BvhTri tri = trace_tris[i];
-        precise vec3 a = tri.v0.xyz - r.o;
-        precise vec3 b = tri.v1.xyz - r.o;
-        precise vec3 c = tri.v2.xyz - r.o;
-        precise float ax = a[r.kx] - r.s.x * a[r.kz];
-        precise float ay = a[r.ky] - r.s.y * a[r.kz];
-        precise float bx = b[r.kx] - r.s.x * b[r.kz];
-        precise float by = b[r.ky] - r.s.y * b[r.kz];
-        precise float cx = c[r.kx] - r.s.x * c[r.kz];
-        precise float cy = c[r.ky] - r.s.y * c[r.kz];
-        precise float u = cx * by - cy * bx;
-        precise float v = ax * cy - ay * cx;
-        precise float w = bx * ay - by * ax;
-        if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) continue;
-        precise float det = u + v + w;
-        if (det == 0.0) continue;
-        precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
-        precise float t = tt / det;
-        if (t >= tmin && t < h.t) {
-            h.t = t;
-            h.prim = floatBitsToUint(tri.v0.w);
-            h.bary = vec2(v / det, w / det);
-        }
-    }
-}
+
+#define TRACE_NODES trace_nodes
+#define TRACE_TRIS trace_tris
+#define TRACE_LEAF trace_leaf_0
+#define TRACE_BVH trace_bvh_0
+#define TRACE_INST 0u
+#include "trace_bvh.glsl"
+#undef TRACE_NODES
+#undef TRACE_TRIS
+#undef TRACE_LEAF
+#undef TRACE_BVH
+#undef TRACE_INST
+#define TRACE_NODES trace_nodes2
+#define TRACE_TRIS trace_tris2
+#define TRACE_LEAF trace_leaf_1
+#define TRACE_BVH trace_bvh_1
+#define TRACE_INST 1u
+#include "trace_bvh.glsl"
 
 Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     Hit h;
@@ -115,41 +113,8 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
     vec3 inv_d = 1.0 / dd;
     TraceRay tr = trace_setup(o, d);
-    // Each pushed node keeps its entry distance, so a node farther than a hit found
-    // meanwhile is dropped on pop without loading it.
-    uint stack[TRACE_STACK];
-    float stack_t[TRACE_STACK];
-    int sp = 0;
-    uint node = 0u;
-    while (true) {
-        BvhNode n = trace_nodes[node];
-        float nl, nr;
-        bool hl = trace_box(n.l_min.xyz, n.l_max.xyz, o, inv_d, tmin, h.t, nl);
-        bool hr = trace_box(n.r_min.xyz, n.r_max.xyz, o, inv_d, tmin, h.t, nr);
-        uint lc = floatBitsToUint(n.l_max.w);
-        uint rc = floatBitsToUint(n.r_max.w);
-        if (hl && lc > 0u) { trace_leaf(floatBitsToUint(n.l_min.w), lc, tr, tmin, h); hl = false; }
-        if (hr && rc > 0u) { trace_leaf(floatBitsToUint(n.r_min.w), rc, tr, tmin, h); hr = false; }
-        uint li = floatBitsToUint(n.l_min.w);
-        uint ri = floatBitsToUint(n.r_min.w);
-        if (hl && hr) {
-            uint near = nl <= nr ? li : ri;
-            uint far = nl <= nr ? ri : li;
-            if (sp < TRACE_STACK) { stack[sp] = far; stack_t[sp] = max(nl, nr); ++sp; }
-            node = near;
-        } else if (hl) {
-            node = li;
-        } else if (hr) {
-            node = ri;
-        } else {
-            bool found = false;
-            while (sp > 0) {
-                --sp;
-                if (stack_t[sp] <= h.t) { node = stack[sp]; found = true; break; }
-            }
-            if (!found) break;
-        }
-    }
+    trace_bvh_0(o, inv_d, tr, tmin, h);
+    trace_bvh_1(o, inv_d, tr, tmin, h);
     return h;
 }
 #else

@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use synosis::render::raycast::{PinholeCamera, raycast};
+use synosis::render::raycast::raycast;
+use synosis::scene::Camera;
 use synosis::scene::{Degenerates, import_mesh};
 use synosis::trace::{AccelChoice, TraceScene, auto_backend, resolve};
 use synosis::vk::{Context, ContextOptions, Profiler};
@@ -104,8 +105,8 @@ pub fn raycast_cmd(a: RaycastArgs) -> anyhow::Result<()> {
     })?;
     let backend = resolve(a.accel, &ctx.info)?;
     let scene = TraceScene::build(&ctx, &mesh, backend, Some(&profiler))?;
-    let cam = PinholeCamera::framing(&mesh, a.width as f32 / a.height as f32);
-    let img = raycast(&ctx, &scene, &cam, a.width, a.height, Some(&profiler))?;
+    let cam = Camera::framing(&mesh, a.width, a.height);
+    let img = raycast(&ctx, &scene, &cam, Some(&profiler))?;
     ctx.check_validation()?;
 
     std::fs::create_dir_all(&a.out)

@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_frame};
+use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_scene};
 use synosis::render::sensor;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::trace::{AccelChoice, resolve};
@@ -82,7 +82,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         annotate_grid: Some(DEFAULT_COVERAGE_GRID),
         profiler: Some(&profiler),
     };
-    let frame = render_frame(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
+    let frame = render_scene(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
         bar.set_position(done as u64)
     })?;
     let img = frame.radiance;

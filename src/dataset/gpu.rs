@@ -1,20 +1,20 @@
 //! The production renderer behind [`ImageRenderer`]: the Vulkan path tracer with the
-//! annotation pass in the same render graph (`render::path_trace::render_frame`).
-//!
-//! Limitation (documented in docs/dataset.md): the path tracer has no slope-map input
-//! yet, so the requests' face textures are made (and recorded in the manifest) but not
-//! applied; faces render as the smooth GGX conductor at the instance's roughness.
+//! annotation pass in the same render graph. The path tracer (pipelines, energy tables)
+//! is built once per process; the GPU scene (acceleration structure, materials, labels)
+//! once per mesh key, and kept while the job renders that mesh's views; each request's
+//! face textures are placed on it as slope maps (re-uploaded only when they change).
 
 use std::sync::Arc;
 
 use super::renderer::{ImageRenderer, ImageRequest, RenderedImage};
 use crate::render::annotate::DEFAULT_COVERAGE_GRID;
 use crate::render::energy::EnergyTables;
-use crate::render::path_trace::{FrameOptions, RenderScene, render_frame};
 use crate::render::slope::FaceMap;
-use crate::scene::config::SceneConfig;
+use crate::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
+use crate::scene::assemble::{Stage, ViewSetup};
+use crate::scene::config::{SceneConfig, parse_view};
 use crate::scene::mesh::FACE_OTHER;
-use crate::trace::{AccelChoice, Backend, resolve};
+use crate::trace::{AccelChoice, resolve};
 use crate::vk::{Context, ContextOptions, Profiler};
 
 /// Face id given to the object's non-inspected triangles for the annotation pass only,
@@ -25,14 +25,16 @@ const FACE_OBJECT_OTHER: u8 = 4;
 /// (camera, ring light, table, aluminium IOR).
 pub struct GpuRenderer {
     ctx: Arc<Context>,
-    backend: Backend,
-    tables: EnergyTables,
+    tracer: PathTracer,
+    /// The GPU scene of the last mesh key, with the stage it was built from.
+    cached: Option<(u64, Stage, GpuScene)>,
     base: SceneConfig,
     stages: Vec<(String, f64)>,
 }
 
 impl GpuRenderer {
-    /// Opens the Vulkan device (validation also by `SYNOSIS_VALIDATION=1`).
+    /// Opens the Vulkan device (validation also by `SYNOSIS_VALIDATION=1`) and builds the
+    /// path tracer.
     pub fn new(accel: AccelChoice, validation: bool) -> Result<GpuRenderer, String> {
         let ctx = Context::new(&ContextOptions {
             validation,
@@ -40,19 +42,58 @@ impl GpuRenderer {
         })
         .map_err(|e| format!("Vulkan: {e}"))?;
         let backend = resolve(accel, &ctx.info).map_err(|e| e.to_string())?;
+        let tracer =
+            PathTracer::new(&ctx, backend, &EnergyTables::compute()).map_err(|e| e.to_string())?;
         Ok(GpuRenderer {
             ctx,
-            backend,
-            tables: EnergyTables::compute(),
+            tracer,
+            cached: None,
             base: SceneConfig::default(),
             stages: Vec::new(),
         })
     }
 }
 
+/// The GPU scene for `req`'s mesh: the cached one when the mesh key is the same.
+fn scene_for<'c>(
+    cached: &'c mut Option<(u64, Stage, GpuScene)>,
+    tracer: &PathTracer,
+    base: &SceneConfig,
+    req: &ImageRequest,
+    profiler: &Profiler,
+) -> Result<&'c mut (u64, Stage, GpuScene), String> {
+    if cached.as_ref().map(|c| c.0) != Some(req.mesh_key) {
+        *cached = None; // free the old scene before building the next
+        let mut object = req.mesh.clone();
+        for l in &mut object.labels {
+            if l.face == FACE_OTHER {
+                l.face = FACE_OBJECT_OTHER;
+            }
+        }
+        let stage = Stage::new(&object, base.object.position_mm, &base.table);
+        let scene = GpuScene::new(tracer, &stage, Some(profiler)).map_err(|e| e.to_string())?;
+        *cached = Some((req.mesh_key, stage, scene));
+    }
+    Ok(cached.as_mut().expect("just filled"))
+}
+
+/// Each inspected face's texture: planar projection in the face frame, rotated, shifted
+/// by whole texture pixels along the face's (u, v) axes.
+fn face_maps(req: &ImageRequest) -> Vec<FaceMap> {
+    req.face_textures
+        .iter()
+        .map(|t| FaceMap {
+            face: t.face,
+            slopes: t.map.clone(),
+            rotation_deg: t.rotation_rad.to_degrees(),
+            offset_mm: t.offset_px.map(|p| p * (t.map.spacing_um * 1e-3) as f32),
+        })
+        .collect()
+}
+
 impl ImageRenderer for GpuRenderer {
     fn describe(&self) -> String {
-        format!("gpu-path-tracer/{}", self.backend.name())
+        format!("gpu-path-tracer/{}", self.tracer.backend.name())
     }
 
     fn last_stages(&self) -> Vec<(String, f64)> {
@@ -70,41 +111,24 @@ impl ImageRenderer for GpuRenderer {
         cfg.render.seed = (req.seed ^ (req.seed >> 32)) as u32;
         cfg.material.alpha = req.alpha;
         cfg.validate().map_err(|e| e.to_string())?;
-        let mut object = req.mesh.clone();
-        for l in &mut object.labels {
-            if l.face == FACE_OTHER {
-                l.face = FACE_OBJECT_OTHER;
-            }
-        }
-        let mut scene = RenderScene::assemble(&object, &cfg).map_err(|e| e.to_string())?;
-        // Each inspected face's texture: planar projection in the face frame, rotated,
-        // shifted by whole texture pixels along the face's (u, v) axes.
-        scene.face_maps = req
-            .face_textures
-            .iter()
-            .map(|t| FaceMap {
-                face: t.face,
-                slopes: t.map.clone(),
-                rotation_deg: t.rotation_rad.to_degrees(),
-                offset_mm: t.offset_px.map(|p| p * (t.map.spacing_um * 1e-3) as f32),
-            })
-            .collect();
+        let view = parse_view(&cfg.camera.view).map_err(|e| e.to_string())?;
         let profiler = Profiler::new();
+        let tracer = &self.tracer;
+        let (_, stage, scene) = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
+        scene
+            .set_face_maps(tracer, &face_maps(req))
+            .map_err(|e| e.to_string())?;
+        let setup =
+            ViewSetup::for_view(stage, view, &cfg.camera, &cfg.light).map_err(|e| e.to_string())?;
         let opts = FrameOptions {
             annotate_grid: Some(DEFAULT_COVERAGE_GRID),
             profiler: Some(&profiler),
         };
-        let frame = render_frame(
-            &self.ctx,
-            &scene,
-            &cfg,
-            self.backend,
-            &self.tables,
-            opts,
-            |_| {},
-        )
-        .map_err(|e| e.to_string())?;
-        // CPU phases of the acceleration structure, GPU time of the two passes.
+        let settings = RenderSettings::from(&cfg);
+        let frame = render_frame(tracer, scene, &setup, &settings, opts, |_| {})
+            .map_err(|e| e.to_string())?;
+        // CPU phases of the acceleration structures (the object's only when this request
+        // built its GPU scene; the view's light every time), GPU time of the two passes.
         let secs = |names: &[&str]| names.iter().map(|n| profiler.total_ms(n)).sum::<f64>() / 1e3;
         self.stages = vec![
             (

@@ -404,6 +404,16 @@ impl Job {
         let r = &self.render;
         self.int("render.width", r.width, 1, MAX_SIZE)?;
         self.int("render.height", r.height, 1, MAX_SIZE)?;
+        let max_pixels = crate::gpu_interface::MAX_IMAGE_PIXELS as i64;
+        if r.width * r.height > max_pixels {
+            return Err(self.field(
+                "render.width x render.height",
+                r.width * r.height,
+                &format!(
+                    "must be at most {max_pixels} pixels (e.g. 8192 x 4096): one f32 per pixel must fit the 128 MiB storage-buffer range every Vulkan device has"
+                ),
+            ));
+        }
         self.int("render.spp", r.spp, 1, 1 << 16)?;
         self.int("render.bounces", r.bounces, 0, 64)?;
         if self.views.is_empty() {

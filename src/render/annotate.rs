@@ -6,9 +6,11 @@ use std::sync::Arc;
 
 use ash::vk;
 
+use super::gpu_scene::label_word;
+use super::view::{Tiling, camera_block};
+use crate::gpu_interface::{AnnotateBinding, CameraBlock, ImagePush, TILE};
 use crate::graph::{BufferRef, Graph, PassTiming};
-use crate::render::raycast::{CameraPush, PinholeCamera};
-use crate::scene::{Mesh, TriLabel};
+use crate::scene::{Camera, Mesh};
 use crate::trace::{TraceRefs, TraceScene, trace_pipeline};
 use crate::vk::{Buffer, ComputePipeline, Context, MemoryKind, Profiler, VkError};
 
@@ -73,27 +75,50 @@ impl Annotation {
     }
 }
 
-fn pack(l: &TriLabel) -> u32 {
-    l.face as u32 | (l.class as u32) << 8 | (l.instance as u32) << 16
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct AnnotatePush {
-    cam: CameraPush,
+/// Adds the annotation dispatch(es) to `g`: labels of the first hits of `cam`'s rays,
+/// written into `targets` (ids, coverage).
+#[allow(clippy::too_many_arguments)]
+pub fn record_annotate<'a>(
+    g: &mut Graph<'a>,
+    pipeline: &'a ComputePipeline,
+    trace: &TraceRefs,
+    backend_bindings: u32,
+    labels: &BufferRef,
+    targets: (&mut BufferRef, &mut BufferRef),
+    cam: &CameraBlock,
+    (width, height): (u32, u32),
     grid: u32,
-    pad: [u32; 3],
+    tiling: &Tiling,
+) {
+    let off = backend_bindings;
+    for (tiles, groups) in tiling.dispatches() {
+        let push = ImagePush {
+            cam: *cam,
+            width,
+            height,
+            grid: grid.clamp(1, 16),
+            tiles,
+            ..Default::default()
+        };
+        trace
+            .bind(g.dispatch("annotate", pipeline, [groups, 1, 1]))
+            .read(AnnotateBinding::Labels.at(off), labels)
+            .write(AnnotateBinding::Ids.at(off), targets.0)
+            .write(AnnotateBinding::Coverage.at(off), targets.1)
+            .push(&push)
+            .submit();
+    }
 }
 
-/// The annotation pass's pipeline and per-mesh label buffer, reusable across images
-/// of the same mesh and backend.
+/// The annotation pass's pipeline and per-mesh label buffer, for annotating a mesh on
+/// its own (the path tracer's views use [`record_annotate`] with the scene's labels).
 pub struct AnnotatePass {
     pipeline: ComputePipeline,
     labels: Buffer,
+    max_groups: u32,
     /// Rays per pixel side for the coverage fraction.
     pub grid: u32,
 }
-
 /// Output buffers of one annotation, owned by the caller so the pass can join any graph.
 pub struct AnnotationTargets {
     pub ids: Buffer,
@@ -136,16 +161,17 @@ impl AnnotatePass {
         mesh: &Mesh,
         grid: u32,
     ) -> Result<Self, VkError> {
-        if mesh.labels.len() != scene.triangle_count {
+        if mesh.labels.len() != scene.object().triangle_count {
             return Err(VkError::Other(format!(
-                "mesh has {} labels for {} traced triangles",
+                "mesh has {} labels for {} traced object triangles",
                 mesh.labels.len(),
-                scene.triangle_count
+                scene.object().triangle_count
             )));
         }
-        let push = std::mem::size_of::<AnnotatePush>() as u32;
-        let pipeline = trace_pipeline(ctx, "annotate", scene.backend, 3, push, [8, 8, 1])?;
-        let packed: Vec<u32> = mesh.labels.iter().map(pack).collect();
+        let push = std::mem::size_of::<ImagePush>() as u32;
+        let n = AnnotateBinding::COUNT;
+        let pipeline = trace_pipeline(ctx, "annotate", scene.backend, n, push, [TILE, TILE, 1])?;
+        let packed: Vec<u32> = mesh.labels.iter().map(label_word).collect();
         let labels = Buffer::from_slice(
             ctx,
             "triangle labels",
@@ -155,6 +181,7 @@ impl AnnotatePass {
         Ok(AnnotatePass {
             pipeline,
             labels,
+            max_groups: ctx.info.max_workgroup_count[0],
             grid: grid.clamp(1, 16),
         })
     }
@@ -165,26 +192,25 @@ impl AnnotatePass {
         g: &mut Graph<'a>,
         trace: &TraceRefs,
         backend_bindings: u32,
-        cam: &PinholeCamera,
+        cam: &Camera,
         targets: (&mut BufferRef, &mut BufferRef),
-        size: (u32, u32),
     ) {
         let labels = g.import(&self.labels);
-        let cam = CameraPush::new(cam, size.0, size.1);
-        let tiles = cam.tiles();
-        let push = AnnotatePush {
-            cam,
-            grid: self.grid,
-            pad: [0; 3],
-        };
-        let off = backend_bindings;
-        trace
-            .bind(g.dispatch("annotate", &self.pipeline, [tiles, 1, 1]))
-            .read(off, &labels)
-            .write(off + 1, targets.0)
-            .write(off + 2, targets.1)
-            .push(&push)
-            .submit();
+        let size = (cam.width, cam.height);
+        let tiling = Tiling::new(cam.width, cam.height, self.max_groups);
+        let block = camera_block(cam);
+        record_annotate(
+            g,
+            &self.pipeline,
+            trace,
+            backend_bindings,
+            &labels,
+            targets,
+            &block,
+            size,
+            self.grid,
+            &tiling,
+        );
     }
 }
 
@@ -193,11 +219,11 @@ pub fn annotate(
     ctx: &Arc<Context>,
     scene: &TraceScene,
     mesh: &Mesh,
-    cam: &PinholeCamera,
-    (width, height): (u32, u32),
+    cam: &Camera,
     grid: u32,
     profiler: Option<&Profiler>,
 ) -> Result<(Annotation, PassTiming), VkError> {
+    let (width, height) = (cam.width, cam.height);
     let pass = AnnotatePass::new(ctx, scene, mesh, grid)?;
     let targets = AnnotationTargets::new(ctx, width, height)?;
     let mut g = Graph::new(ctx, "annotation");
@@ -205,14 +231,7 @@ pub fn annotate(
     let mut ids = g.import(&targets.ids);
     let mut cov = g.import(&targets.coverage);
     let nb = TraceScene::binding_kinds(scene.backend).len() as u32;
-    pass.record(
-        &mut g,
-        &refs,
-        nb,
-        cam,
-        (&mut ids, &mut cov),
-        (width, height),
-    );
+    pass.record(&mut g, &refs, nb, cam, (&mut ids, &mut cov));
     let timing = g
         .execute(profiler)?
         .into_iter()

@@ -1,10 +1,22 @@
-//! GPU passes that make images: the path tracer, the annotation pass, first-hit
-//! raycasts, and the CPU-side models they share (BSDF, energy tables, sensor).
+//! GPU passes that make images, by lifetime: a [`PathTracer`] per device (pipelines,
+//! energy tables), a [`GpuScene`] per mesh (acceleration structure, materials, labels,
+//! slope maps), a [`View`] per image (camera, light, accumulation, annotation); and the
+//! CPU-side models they share (BSDF, energy tables, slope maps, pixel values).
 
 pub mod annotate;
 pub mod bsdf;
 pub mod energy;
+pub mod gpu_scene;
 pub mod path_trace;
 pub mod raycast;
 pub mod sensor;
+pub mod settings;
 pub mod slope;
+pub mod tracer;
+pub mod view;
+
+pub use gpu_scene::GpuScene;
+pub use path_trace::{Frame, FrameOptions, Radiance, RenderError, render_frame, render_scene};
+pub use settings::{Material, RenderSettings};
+pub use tracer::PathTracer;
+pub use view::View;

@@ -7,89 +7,22 @@
 //! face normal (counter-clockwise seen from outside, i.e. towards `v`), its "up" (-y) is
 //! the rotated `v`, and its centre sits at `centre + offset_mm[0] u + offset_mm[1] v`.
 
-use std::sync::Arc;
-
 use glam::Vec3;
 
-use crate::scene::mesh::FaceId;
 use crate::scene::testbody::FaceFrame;
 
 /// Per-texel slopes from the texture module (`[dh/dx, dh/dy]`, row 0 at the top, y down,
 /// `spacing_um`); the renderer takes it as is.
 pub use crate::texture::SlopeMap;
 
-impl SlopeMap {
-    /// All slopes zero: renders exactly as no map (tested).
-    pub fn flat(width: usize, height: usize, spacing_um: f64) -> SlopeMap {
-        SlopeMap {
-            width,
-            height,
-            spacing_um,
-            data: vec![[0.0; 2]; width * height],
-        }
-    }
+/// A slope map placed on one inspected face (assembled in `scene::assemble`).
+pub use crate::scene::assemble::FaceMap;
 
-    /// Parallel sinusoidal grooves running along the map's y axis:
-    /// h(x) = A sin(2 pi x / period), with A chosen so the steepest slope is
-    /// `max_slope_deg` and x measured from the **map centre** (so the pattern at the
-    /// centre does not depend on the map's size, and a map moved by an offset moves its
-    /// grooves by exactly that offset). Covers `extent_mm` x `extent_mm`. A test pattern,
-    /// not a finish.
-    pub fn test_grooves(
-        extent_mm: f32,
-        spacing_um: f64,
-        period_mm: f32,
-        max_slope_deg: f32,
-    ) -> SlopeMap {
-        // An even texel count puts texel corners on the map centre for every extent, so a
-        // bigger map (a farther offset elsewhere) samples the grooves at the same points.
-        let n = ((extent_mm as f64 * 1000.0 / spacing_um / 2.0).ceil() as usize).max(1) * 2;
-        let smax = max_slope_deg.to_radians().tan();
-        let k = std::f64::consts::TAU / (period_mm as f64 * 1000.0);
-        let mut data = vec![[0.0f32; 2]; n * n];
-        for y in 0..n {
-            for x in 0..n {
-                let xu = (x as f64 + 0.5 - 0.5 * n as f64) * spacing_um;
-                // dh/dx = A k cos(k x) with A k = tan(max slope).
-                data[y * n + x] = [(smax as f64 * (k * xu).cos()) as f32, 0.0];
-            }
-        }
-        SlopeMap {
-            width: n,
-            height: n,
-            spacing_um,
-            data,
-        }
-    }
-}
+/// Face ids 0..FACE_SLOTS index the header table (0, "other", never has a map).
+pub const FACE_SLOTS: usize = crate::gpu_interface::FACE_SLOTS as usize;
 
-/// A slope map placed on one inspected face.
-#[derive(Clone, Debug)]
-pub struct FaceMap {
-    pub face: FaceId,
-    pub slopes: Arc<SlopeMap>,
-    /// Rotation of the map about the face normal, degrees, from `u` towards `v`.
-    pub rotation_deg: f32,
-    /// Map centre relative to the face centre along (u, v), mm.
-    pub offset_mm: [f32; 2],
-}
-
-/// One face's placement as the shader reads it (4 x vec4, std430).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct FaceMapGpu {
-    /// xyz: map centre (world, mm); w: texels per mm.
-    pub origin: [f32; 4],
-    /// xyz: the map's x axis in the world; w: unused.
-    pub axis_x: [f32; 4],
-    /// xyz: the map's up axis (-y) in the world; w: unused.
-    pub axis_up: [f32; 4],
-    /// width, height, first texel in the data buffer, 1 = present.
-    pub dims: [u32; 4],
-}
-
-/// Face ids 0..=3 index the header table (0, "other", never has a map).
-pub const FACE_SLOTS: usize = 4;
+/// One face's placement as the shader reads it (declared in src/gpu_interface.in).
+pub use crate::gpu_interface::FaceMapHeader as FaceMapGpu;
 
 /// Why face maps cannot be packed.
 #[derive(Debug, thiserror::Error)]
@@ -254,6 +187,7 @@ pub fn lookup(h: &FaceMapGpu, texels: &[u32], p: Vec3) -> [f32; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::Arc;
 
     #[test]
     fn placement_follows_rotation_offset_and_image_axes() {
@@ -334,12 +268,13 @@ mod tests {
     /// dh/dx (map x) of the grooves of one scene file at `points` on face `face`.
     fn groove_slopes(
         cfg: &crate::scene::config::SceneConfig,
-        face: FaceId,
+        face: crate::scene::mesh::FaceId,
         points: &[Vec3],
     ) -> Vec<f32> {
         let mesh = crate::scene::testbody(crate::scene::Variant::B);
-        let scene = crate::render::path_trace::RenderScene::assemble(&mesh, cfg).expect("scene");
-        let (h, t) = pack(&scene.face_maps, &scene.face_frames, 1 << 27).expect("pack");
+        let frames = crate::scene::face_frames(&mesh);
+        let maps = crate::scene::assemble::texture_maps(&cfg.texture, &frames).expect("maps");
+        let (h, t) = pack(&maps, &frames, 1 << 27).expect("pack");
         points
             .iter()
             .map(|&p| lookup(&h[face as usize], &t[face as usize - 1], p)[0])

@@ -5,8 +5,9 @@ use glam::{DVec3, Vec3};
 use super::config::{CameraConfig, LightConfig, View};
 use super::testbody::FaceFrame;
 
-/// A pinhole camera: eye, orthonormal forward/right/up, and the half extents of the
-/// image plane at distance 1 (sensor half size / focal length).
+/// The camera (one type for every pass): a pinhole with eye, orthonormal
+/// forward/right/up, the half extents of the image plane at distance 1 (sensor half
+/// size / focal length) and the image size in pixels.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     pub eye: Vec3,
@@ -18,6 +19,11 @@ pub struct Camera {
     pub width: u32,
     pub height: u32,
 }
+
+/// Vertical field of view of the raycast framing camera.
+pub const FRAMING_VFOV_DEG: f32 = 40.0;
+/// Margin around the bounding box in the framing camera (10 %).
+pub const FRAMING_MARGIN: f32 = 1.1;
 
 impl Camera {
     /// The view `view` of `face`: the camera sits at the working distance from the face
@@ -44,6 +50,52 @@ impl Camera {
             width: cam.width,
             height: cam.height,
         }
+    }
+
+    /// Looks along `forward` with `up` as the image's up (made orthogonal), square
+    /// pixels and a vertical field of view of `vfov_deg`.
+    pub fn look(
+        eye: Vec3,
+        forward: Vec3,
+        up: Vec3,
+        vfov_deg: f32,
+        width: u32,
+        height: u32,
+    ) -> Camera {
+        let forward = forward.normalize();
+        let right = forward.cross(up).normalize();
+        let up = right.cross(forward).normalize();
+        let tan_half_h = (vfov_deg.to_radians() * 0.5).tan();
+        Camera {
+            eye,
+            forward,
+            right,
+            up,
+            tan_half_w: tan_half_h * width as f32 / height as f32,
+            tan_half_h,
+            width,
+            height,
+        }
+    }
+
+    /// Looks straight down -Z from above the centre of `mesh`'s bounding box, image up
+    /// = +Y, right = +X, far enough that the box's XY extent (plus 10 %) fills the view
+    /// (vertical field of view 40 degrees).
+    pub fn framing(mesh: &super::Mesh, width: u32, height: u32) -> Camera {
+        let (lo, hi) = mesh.bounds();
+        let c = (lo + hi) * 0.5;
+        let half = (hi - lo) * 0.5;
+        let aspect = width as f32 / height as f32;
+        let tan = (FRAMING_VFOV_DEG.to_radians() * 0.5).tan();
+        let half_h = (half.y.max(half.x / aspect) * FRAMING_MARGIN).max(1e-6);
+        let dist = half_h / tan;
+        let eye = Vec3::new(c.x, c.y, hi.z + dist);
+        Camera::look(eye, -Vec3::Z, Vec3::Y, FRAMING_VFOV_DEG, width, height)
+    }
+
+    /// Unit direction through the centre of pixel (px, py), row 0 at the top.
+    pub fn pixel_dir(&self, px: u32, py: u32) -> Vec3 {
+        self.dir(px as f32 + 0.5, py as f32 + 0.5)
     }
 
     /// Unit direction through image position (x, y) in pixels (row 0 at the top).

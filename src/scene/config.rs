@@ -385,6 +385,22 @@ fn range_u(
     }
 }
 
+/// The image must fit one storage buffer on every Vulkan device
+/// (`gpu_interface::MAX_IMAGE_PIXELS`, 33,554,432 pixels, e.g. 8192 x 4096).
+pub fn pixel_count(field: &'static str, width: u32, height: u32) -> Result<(), ConfigError> {
+    let max = crate::gpu_interface::MAX_IMAGE_PIXELS as u64;
+    let n = width as u64 * height as u64;
+    if n > max {
+        return Err(ConfigError::Invalid {
+            field,
+            message: format!(
+                "{width} x {height} = {n} pixels; allowed at most {max} (one f32 per pixel must fit the 128 MiB storage-buffer range every Vulkan device has)"
+            ),
+        });
+    }
+    Ok(())
+}
+
 impl SceneConfig {
     /// Reads and validates a scene file; a relative glTF path becomes relative to it.
     pub fn load(path: &Path) -> Result<SceneConfig, ConfigError> {
@@ -511,6 +527,7 @@ impl SceneConfig {
         let c = &self.camera;
         range_u("camera.width", c.width, 1, 16384, "[1, 16384]")?;
         range_u("camera.height", c.height, 1, 16384, "[1, 16384]")?;
+        pixel_count("camera.width x camera.height", c.width, c.height)?;
         range_f(
             "camera.pixel_um",
             c.pixel_um,
@@ -619,6 +636,7 @@ impl SceneConfig {
     pub fn set_resolution(&mut self, width: u32, height: u32) -> Result<(), ConfigError> {
         range_u("--width", width, 1, 16384, "[1, 16384]")?;
         range_u("--height", height, 1, 16384, "[1, 16384]")?;
+        pixel_count("--width x --height", width, height)?;
         self.camera.pixel_um *= self.camera.width as f32 / width as f32;
         self.camera.width = width;
         self.camera.height = height;

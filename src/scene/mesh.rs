@@ -55,6 +55,15 @@ pub struct Mesh {
     pub labels: Vec<TriLabel>,
 }
 
+impl crate::trace::Triangles for Mesh {
+    fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+}
+
 impl Mesh {
     /// Axis-aligned bounds (min, max). Empty meshes give (+inf, -inf).
     pub fn bounds(&self) -> (Vec3, Vec3) {

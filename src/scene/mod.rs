@@ -1,6 +1,7 @@
 //! Scene description: meshes and their labels, glTF import/export, the test body, the
 //! scene file, cameras and the ring light.
 
+pub mod assemble;
 pub mod camera;
 pub mod config;
 pub mod gltf_io;
@@ -8,6 +9,7 @@ pub mod mesh;
 pub mod procedural;
 pub mod testbody;
 
+pub use camera::Camera;
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
 pub use testbody::{FaceFrame, Variant, face_frames, testbody};

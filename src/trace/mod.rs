@@ -10,10 +10,12 @@ use std::sync::Arc;
 
 use ash::vk;
 
+use bytemuck::Zeroable;
+use glam::Vec3;
+
 use crate::graph::{AccelRef, BufferRef, DispatchBuilder, Graph};
-use crate::scene::Mesh;
 use crate::vk::{
-    BindingKind, Buffer, ComputePipeline, Context, Profiler, TriangleAccel, VkError, timed,
+    BindingKind, Blas, Buffer, ComputePipeline, Context, Profiler, Tlas, VkError, timed,
 };
 
 /// What `--accel` asks for.
@@ -95,51 +97,68 @@ pub struct ShadeTri {
     pub c: [f32; 4],
 }
 
-enum Data {
-    RayQuery(TriangleAccel),
-    Software { nodes: Buffer, tris: Buffer },
+/// Anything made of indexed triangles (a scene mesh, a light's tessellation). The trace
+/// layer sees geometry only through this, so it does not depend on the scene module.
+pub trait Triangles {
+    fn positions(&self) -> &[Vec3];
+    fn triangles(&self) -> &[[u32; 3]];
 }
 
-/// A mesh uploaded for tracing with one backend.
-pub struct TraceScene {
-    pub backend: Backend,
-    data: Data,
-    /// Original-order triangles for shading (normals, labels live elsewhere).
-    pub shade_tris: Buffer,
-    pub triangle_count: usize,
-    /// CPU time of the BVH build (software) or device time of the BLAS+TLAS build.
-    pub build_ms: f64,
+/// Plain indexed triangles.
+#[derive(Clone, Debug, Default)]
+pub struct TriangleSoup {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
 }
 
-/// Handles of a TraceScene inside one graph.
-pub enum TraceRefs {
-    RayQuery(AccelRef),
-    Software(BufferRef, BufferRef),
-}
-
-impl TraceRefs {
-    /// Binds the backend's resources (bindings 0..) to a dispatch.
-    pub fn bind<'g, 'a>(&self, d: DispatchBuilder<'g, 'a>) -> DispatchBuilder<'g, 'a> {
-        match self {
-            TraceRefs::RayQuery(a) => d.accel(0, *a),
-            TraceRefs::Software(n, t) => d.read(0, n).read(1, t),
-        }
+impl Triangles for TriangleSoup {
+    fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
     }
 }
 
-impl TraceScene {
+enum Data {
+    /// None for an empty level (no BLAS can be built over nothing).
+    RayQuery(Option<Blas>),
+    Software {
+        nodes: Buffer,
+        tris: Buffer,
+    },
+}
+
+/// One level of traceable geometry: a BVH (software) or BLAS (ray query) over one set of
+/// triangles, plus their corners in original order for shading. Built once per mesh and
+/// shared (`Arc`) by every view of it. Its triangles are numbered from `first_prim` in
+/// the scene's index space.
+pub struct TraceGeometry {
+    pub backend: Backend,
+    data: Data,
+    /// Original-order triangles for shading (normals; labels live elsewhere).
+    pub shade_tris: Buffer,
+    pub triangle_count: usize,
+    pub first_prim: u32,
+    /// CPU time of the BVH build (software) or device time of the BLAS build.
+    pub build_ms: f64,
+}
+
+impl TraceGeometry {
     pub fn build(
         ctx: &Arc<Context>,
-        mesh: &Mesh,
+        geo: &impl Triangles,
         backend: Backend,
+        first_prim: u32,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let (positions, triangles) = (geo.positions(), geo.triangles());
         let shade: Vec<ShadeTri> = timed(profiler, "upload geometry", || {
-            mesh.triangles
+            triangles
                 .iter()
                 .map(|t| {
-                    let p = t.map(|i| mesh.positions[i as usize]);
+                    let p = t.map(|i| positions[i as usize]);
                     ShadeTri {
                         a: p[0].extend(0.0).into(),
                         b: p[1].extend(0.0).into(),
@@ -148,21 +167,38 @@ impl TraceScene {
                 })
                 .collect()
         });
+        // A binding may not be empty: an empty level gets one degenerate triangle that
+        // no ray can hit (its determinant is 0).
+        let shade = if shade.is_empty() {
+            vec![ShadeTri::zeroed()]
+        } else {
+            shade
+        };
         let shade_tris = Buffer::from_slice(ctx, "shade triangles", &shade, storage)?;
         let start = std::time::Instant::now();
         let data = match backend {
+            Backend::RayQuery if triangles.is_empty() => Data::RayQuery(None),
             Backend::RayQuery => {
-                let pos: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
-                let accel = timed(profiler, "AS build (BLAS+TLAS)", || {
-                    TriangleAccel::build(ctx, &pos, &mesh.triangles)
+                let pos: Vec<[f32; 3]> = positions.iter().map(|p| p.to_array()).collect();
+                let blas = timed(profiler, "AS build (BLAS+TLAS)", || {
+                    Blas::build(ctx, &pos, triangles)
                 })?;
-                Data::RayQuery(accel)
+                Data::RayQuery(Some(blas))
             }
             Backend::Software => {
-                let tris = software_bvh::obvhs_triangles(&mesh.positions, &mesh.triangles);
-                let (nodes, gtris) = timed(profiler, "BVH build (obvhs)", || {
-                    software_bvh::flatten(&software_bvh::build_bvh(&tris), &tris)
-                });
+                let tris = software_bvh::obvhs_triangles(positions, triangles);
+                let (nodes, mut gtris) = if tris.is_empty() {
+                    software_bvh::empty()
+                } else {
+                    timed(profiler, "BVH build (obvhs)", || {
+                        software_bvh::flatten(&software_bvh::build_bvh(&tris), &tris)
+                    })
+                };
+                if first_prim != 0 {
+                    for t in &mut gtris {
+                        t.v0[3] = f32::from_bits(t.v0[3].to_bits() + first_prim);
+                    }
+                }
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
                         nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, storage)?,
@@ -171,28 +207,131 @@ impl TraceScene {
                 })?
             }
         };
-        Ok(TraceScene {
+        Ok(TraceGeometry {
             backend,
             data,
             shade_tris,
-            triangle_count: mesh.triangles.len(),
+            triangle_count: triangles.len(),
+            first_prim,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
         })
+    }
+}
+
+/// What a pass traces against: the object's geometry (shared between views) and a
+/// second level (the view's own geometry, e.g. the camera-mounted ring light; empty when
+/// there is none). The closest hit over both is returned, with triangle indices in one
+/// space: the object's from 0, the second level's from its `first_prim`.
+pub struct TraceScene {
+    pub backend: Backend,
+    object: Arc<TraceGeometry>,
+    second: TraceGeometry,
+    tlas: Option<Tlas>,
+    /// Triangles of both levels.
+    pub triangle_count: usize,
+    /// Build time of both levels (and the TLAS), ms.
+    pub build_ms: f64,
+}
+
+/// Handles of a TraceScene inside one graph.
+pub enum TraceRefs {
+    RayQuery(AccelRef),
+    Software([BufferRef; 4]),
+}
+
+impl TraceRefs {
+    /// Binds the backend's resources (bindings 0..) to a dispatch.
+    pub fn bind<'g, 'a>(&self, d: DispatchBuilder<'g, 'a>) -> DispatchBuilder<'g, 'a> {
+        match self {
+            TraceRefs::RayQuery(a) => d.accel(0, *a),
+            TraceRefs::Software([n, t, n2, t2]) => d.read(0, n).read(1, t).read(2, n2).read(3, t2),
+        }
+    }
+}
+
+impl TraceScene {
+    /// One mesh, nothing else.
+    pub fn build(
+        ctx: &Arc<Context>,
+        mesh: &impl Triangles,
+        backend: Backend,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
+        let object = Arc::new(TraceGeometry::build(ctx, mesh, backend, 0, profiler)?);
+        Self::layered(ctx, object, &TriangleSoup::default(), profiler)
+    }
+
+    /// `object` (built once, shared) plus `second`, numbered after the object's triangles.
+    pub fn layered(
+        ctx: &Arc<Context>,
+        object: Arc<TraceGeometry>,
+        second: &impl Triangles,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
+        let backend = object.backend;
+        let first = object.triangle_count as u32;
+        let second = TraceGeometry::build(ctx, second, backend, first, profiler)?;
+        let start = std::time::Instant::now();
+        let tlas = match (&object.data, &second.data) {
+            (Data::RayQuery(a), Data::RayQuery(b)) => {
+                let inst: Vec<(&Blas, u32)> = a
+                    .iter()
+                    .map(|a| (a, 0))
+                    .chain(b.iter().map(|b| (b, first)))
+                    .collect();
+                Some(timed(profiler, "AS build (BLAS+TLAS)", || {
+                    Tlas::build(ctx, &inst)
+                })?)
+            }
+            _ => None,
+        };
+        let build_ms = second.build_ms + start.elapsed().as_secs_f64() * 1e3;
+        Ok(TraceScene {
+            backend,
+            triangle_count: object.triangle_count + second.triangle_count,
+            build_ms: object.build_ms + build_ms,
+            object,
+            second,
+            tlas,
+        })
+    }
+
+    /// The shared object level.
+    pub fn object(&self) -> &Arc<TraceGeometry> {
+        &self.object
+    }
+
+    /// Original-order triangles of the object level (for shading).
+    pub fn shade_tris(&self) -> &Buffer {
+        &self.object.shade_tris
+    }
+
+    /// Original-order triangles of the second level (one degenerate triangle if empty).
+    pub fn second_shade_tris(&self) -> &Buffer {
+        &self.second.shade_tris
     }
 
     /// Descriptor kinds of the backend's bindings (they come first in every pipeline).
     pub fn binding_kinds(backend: Backend) -> Vec<BindingKind> {
         match backend {
             Backend::RayQuery => vec![BindingKind::AccelerationStructure],
-            Backend::Software => vec![BindingKind::StorageBuffer, BindingKind::StorageBuffer],
+            Backend::Software => vec![BindingKind::StorageBuffer; 4],
         }
     }
 
     /// Makes the backend's resources known to a graph.
     pub fn import<'a>(&'a self, g: &mut Graph<'a>) -> TraceRefs {
-        match &self.data {
-            Data::RayQuery(a) => TraceRefs::RayQuery(g.import_accel(&a.tlas)),
-            Data::Software { nodes, tris } => TraceRefs::Software(g.import(nodes), g.import(tris)),
+        match (&self.object.data, &self.second.data, &self.tlas) {
+            (_, _, Some(t)) => TraceRefs::RayQuery(g.import_accel(&t.accel)),
+            (
+                Data::Software { nodes, tris },
+                Data::Software {
+                    nodes: n2,
+                    tris: t2,
+                },
+                None,
+            ) => TraceRefs::Software([g.import(nodes), g.import(tris), g.import(n2), g.import(t2)]),
+            _ => unreachable!("both levels are built for one backend"),
         }
     }
 }

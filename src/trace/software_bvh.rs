@@ -47,6 +47,23 @@ pub fn build_bvh(tris: &[Triangle]) -> Bvh2 {
     )
 }
 
+/// A BVH no ray can hit anything in: one node whose two children are the same leaf of one
+/// degenerate triangle (all corners at the origin: the watertight test's determinant is
+/// 0, so it never reports a hit). Bindings may not be empty; this fills an empty level.
+pub fn empty() -> (Vec<GpuNode>, Vec<GpuTri>) {
+    let leaf_min = [0.0, 0.0, 0.0, f32::from_bits(0)];
+    let leaf_max = [0.0, 0.0, 0.0, f32::from_bits(1)];
+    (
+        vec![GpuNode {
+            l_min: leaf_min,
+            l_max: leaf_max,
+            r_min: leaf_min,
+            r_max: leaf_max,
+        }],
+        vec![GpuTri::default()],
+    )
+}
+
 /// Flattens `bvh` into GPU nodes (root at 0) and leaf-ordered triangles.
 pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
     let gpu_tris: Vec<GpuTri> = bvh
@@ -190,11 +207,24 @@ pub fn cpu_closest_hit_counted(
                 let p = bvh.primitive_indices[k as usize];
                 let tri = &tris[p as usize];
                 stats.triangle_tests += 1;
-                if let Some((t, _)) =
-                    sheared.intersect(tri.v0.into(), tri.v1.into(), tri.v2.into(), tmin, *t_best)
-                {
-                    *t_best = t;
-                    best = Some((t, p));
+                // Ties at exactly the same distance go to the lower triangle index, as in
+                // the shader, so the hit does not depend on the traversal order.
+                let hit = sheared.intersect(
+                    tri.v0.into(),
+                    tri.v1.into(),
+                    tri.v2.into(),
+                    tmin,
+                    t_best.next_up(),
+                );
+                if let Some((t, _)) = hit {
+                    let closer = match best {
+                        Some((tb, pb)) => t < tb || p < pb,
+                        None => t < *t_best,
+                    };
+                    if closer {
+                        *t_best = t;
+                        best = Some((t, p));
+                    }
                 }
             }
         };

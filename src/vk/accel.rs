@@ -23,11 +23,19 @@ impl Drop for AccelStructure {
     }
 }
 
-/// One triangle mesh as one BLAS, instanced once (identity transform) in a TLAS.
-pub struct TriangleAccel {
-    pub tlas: AccelStructure,
-    _blas: AccelStructure,
+/// One triangle mesh as a bottom-level structure, with the input buffers it was built
+/// from (kept alive with it).
+pub struct Blas {
+    pub accel: AccelStructure,
     _inputs: Vec<Buffer>,
+}
+
+/// A top-level structure over instances of [`Blas`]es, each with the identity transform
+/// and a custom index (the shader adds it to the primitive index, so triangles of all
+/// instances share one index space).
+pub struct Tlas {
+    pub accel: AccelStructure,
+    _instances: Buffer,
 }
 
 const AS_ALIGNMENT: u64 = 256;
@@ -130,17 +138,19 @@ fn build_one(
     Ok(out)
 }
 
-impl TriangleAccel {
-    /// Builds the BLAS over `positions`/`triangles` and a one-instance TLAS on the device.
+const INPUT_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::from_raw(
+    vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR.as_raw()
+        | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS.as_raw(),
+);
+
+impl Blas {
     pub fn build(
         ctx: &Arc<Context>,
         positions: &[[f32; 3]],
         triangles: &[[u32; 3]],
     ) -> Result<Self, VkError> {
-        let usage = vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR
-            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
-        let vb = Buffer::from_slice(ctx, "blas vertices", positions, usage)?;
-        let ib = Buffer::from_slice(ctx, "blas indices", triangles, usage)?;
+        let vb = Buffer::from_slice(ctx, "blas vertices", positions, INPUT_USAGE)?;
+        let ib = Buffer::from_slice(ctx, "blas indices", triangles, INPUT_USAGE)?;
         let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
             .vertex_format(vk::Format::R32G32B32_SFLOAT)
             .vertex_data(vk::DeviceOrHostAddressConstKHR {
@@ -156,39 +166,56 @@ impl TriangleAccel {
             .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
             .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
             .flags(vk::GeometryFlagsKHR::OPAQUE);
-        let blas = build_one(
+        let accel = build_one(
             ctx,
             "blas",
             vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
             geom,
             triangles.len() as u32,
         )?;
+        Ok(Blas {
+            accel,
+            _inputs: vec![vb, ib],
+        })
+    }
+}
 
-        let instance = vk::AccelerationStructureInstanceKHR {
-            transform: vk::TransformMatrixKHR {
-                matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
-            },
-            instance_custom_index_and_mask: vk::Packed24_8::new(0, 0xff),
-            instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(
-                0,
-                vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,
-            ),
-            acceleration_structure_reference: vk::AccelerationStructureReferenceKHR {
-                device_handle: blas.address,
-            },
-        };
-        // SAFETY: AccelerationStructureInstanceKHR is a plain repr(C) struct of 64 bytes.
-        let bytes: &[u8] = unsafe {
-            std::slice::from_raw_parts(
-                (&instance as *const vk::AccelerationStructureInstanceKHR).cast::<u8>(),
-                std::mem::size_of::<vk::AccelerationStructureInstanceKHR>(),
-            )
-        };
-        let instances = Buffer::from_slice(ctx, "tlas instances", bytes, usage)?;
+impl Tlas {
+    /// Instances `(blas, custom index)`; the custom index is 24 bits.
+    pub fn build(ctx: &Arc<Context>, instances: &[(&Blas, u32)]) -> Result<Self, VkError> {
+        let mut bytes: Vec<u8> = Vec::with_capacity(instances.len() * 64);
+        for &(blas, index) in instances {
+            if index >= 1 << 24 {
+                return Err(VkError::Other(format!(
+                    "instance custom index {index} does not fit in 24 bits"
+                )));
+            }
+            let instance = vk::AccelerationStructureInstanceKHR {
+                transform: vk::TransformMatrixKHR {
+                    matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+                },
+                instance_custom_index_and_mask: vk::Packed24_8::new(index, 0xff),
+                instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(
+                    0,
+                    vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,
+                ),
+                acceleration_structure_reference: vk::AccelerationStructureReferenceKHR {
+                    device_handle: blas.accel.address,
+                },
+            };
+            // SAFETY: AccelerationStructureInstanceKHR is a plain repr(C) struct of 64 bytes.
+            bytes.extend_from_slice(unsafe {
+                std::slice::from_raw_parts(
+                    (&instance as *const vk::AccelerationStructureInstanceKHR).cast::<u8>(),
+                    std::mem::size_of::<vk::AccelerationStructureInstanceKHR>(),
+                )
+            });
+        }
+        let buf = Buffer::from_slice(ctx, "tlas instances", &bytes, INPUT_USAGE)?;
         let inst_data = vk::AccelerationStructureGeometryInstancesDataKHR::default()
             .array_of_pointers(false)
             .data(vk::DeviceOrHostAddressConstKHR {
-                device_address: instances.device_address(),
+                device_address: buf.device_address(),
             });
         let geom = vk::AccelerationStructureGeometryKHR::default()
             .geometry_type(vk::GeometryTypeKHR::INSTANCES)
@@ -196,17 +223,16 @@ impl TriangleAccel {
                 instances: inst_data,
             })
             .flags(vk::GeometryFlagsKHR::OPAQUE);
-        let tlas = build_one(
+        let accel = build_one(
             ctx,
             "tlas",
             vk::AccelerationStructureTypeKHR::TOP_LEVEL,
             geom,
-            1,
+            instances.len() as u32,
         )?;
-        Ok(TriangleAccel {
-            tlas,
-            _blas: blas,
-            _inputs: vec![vb, ib, instances],
+        Ok(Tlas {
+            accel,
+            _instances: buf,
         })
     }
 }

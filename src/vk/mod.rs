@@ -8,7 +8,7 @@ pub mod memory;
 pub mod pipeline;
 pub mod profiler;
 
-pub use accel::{AccelStructure, TriangleAccel};
+pub use accel::{AccelStructure, Blas, Tlas};
 pub use context::{Context, ContextOptions, DeviceInfo, ValidationLog};
 pub use memory::{Buffer, Image, MemoryKind};
 pub use pipeline::{BindingKind, ComputePipeline};

@@ -1,0 +1,72 @@
+// One BVH level's traversal, included once per level by trace.glsl with
+// TRACE_NODES / TRACE_TRIS (its buffers), TRACE_LEAF / TRACE_BVH (function names) and
+// TRACE_INST (the level's instance index) defined. No include guard on purpose.
+void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
+    for (uint i = first; i < first + count; ++i) {
+        BvhTri tri = TRACE_TRIS[i];
+        precise vec3 a = tri.v0.xyz - r.o;
+        precise vec3 b = tri.v1.xyz - r.o;
+        precise vec3 c = tri.v2.xyz - r.o;
+        precise float ax = a[r.kx] - r.s.x * a[r.kz];
+        precise float ay = a[r.ky] - r.s.y * a[r.kz];
+        precise float bx = b[r.kx] - r.s.x * b[r.kz];
+        precise float by = b[r.ky] - r.s.y * b[r.kz];
+        precise float cx = c[r.kx] - r.s.x * c[r.kz];
+        precise float cy = c[r.ky] - r.s.y * c[r.kz];
+        precise float u = cx * by - cy * bx;
+        precise float v = ax * cy - ay * cx;
+        precise float w = bx * ay - by * ax;
+        if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) continue;
+        precise float det = u + v + w;
+        if (det == 0.0) continue;
+        precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
+        precise float t = tt / det;
+        // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
+        // triangle index, so the result does not depend on the traversal order.
+        uint prim = floatBitsToUint(tri.v0.w);
+        if (t >= tmin && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim))) {
+            h.t = t;
+            h.prim = prim;
+            h.bary = vec2(v / det, w / det);
+            h.inst = TRACE_INST;
+        }
+    }
+}
+
+void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
+    // Each pushed node keeps its entry distance, so a node farther than a hit found
+    // meanwhile is dropped on pop without loading it.
+    uint stack[TRACE_STACK];
+    float stack_t[TRACE_STACK];
+    int sp = 0;
+    uint node = 0u;
+    while (true) {
+        BvhNode n = TRACE_NODES[node];
+        float nl, nr;
+        bool hl = trace_box(n.l_min.xyz, n.l_max.xyz, o, inv_d, tmin, h.t, nl);
+        bool hr = trace_box(n.r_min.xyz, n.r_max.xyz, o, inv_d, tmin, h.t, nr);
+        uint lc = floatBitsToUint(n.l_max.w);
+        uint rc = floatBitsToUint(n.r_max.w);
+        if (hl && lc > 0u) { TRACE_LEAF(floatBitsToUint(n.l_min.w), lc, tr, tmin, h); hl = false; }
+        if (hr && rc > 0u) { TRACE_LEAF(floatBitsToUint(n.r_min.w), rc, tr, tmin, h); hr = false; }
+        uint li = floatBitsToUint(n.l_min.w);
+        uint ri = floatBitsToUint(n.r_min.w);
+        if (hl && hr) {
+            uint near = nl <= nr ? li : ri;
+            uint far = nl <= nr ? ri : li;
+            if (sp < TRACE_STACK) { stack[sp] = far; stack_t[sp] = max(nl, nr); ++sp; }
+            node = near;
+        } else if (hl) {
+            node = li;
+        } else if (hr) {
+            node = ri;
+        } else {
+            bool found = false;
+            while (sp > 0) {
+                --sp;
+                if (stack_t[sp] <= h.t) { node = stack[sp]; found = true; break; }
+            }
+            if (!found) break;
+        }
+    }
+}

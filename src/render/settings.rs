@@ -1,0 +1,58 @@
+//! Plain render settings: what the path tracer needs besides the scene, independent of
+//! the scene file (`scene::config` converts into these).
+
+pub use crate::scene::config::{LightSampling, SamplerKind};
+use crate::scene::config::{MaterialConfig, RenderConfig, SceneConfig};
+
+/// The object's rough conductor (GGX, Kulla-Conty energy compensation optional).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// GGX alpha.
+    pub alpha: f32,
+    /// Complex index of refraction at the camera's wavelength.
+    pub ior_n: f32,
+    pub ior_k: f32,
+    pub energy_compensation: bool,
+}
+
+impl From<&MaterialConfig> for Material {
+    fn from(m: &MaterialConfig) -> Self {
+        Material {
+            alpha: m.alpha,
+            ior_n: m.ior_n,
+            ior_k: m.ior_k,
+            energy_compensation: m.energy_compensation,
+        }
+    }
+}
+
+/// Sampling of one image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    pub spp: u32,
+    /// Samples per pixel per dispatch (one graph each).
+    pub batch_spp: u32,
+    pub max_bounces: u32,
+    pub seed: u32,
+    pub sampler: SamplerKind,
+    pub material: Material,
+}
+
+impl RenderSettings {
+    pub fn new(r: &RenderConfig, material: &MaterialConfig) -> Self {
+        RenderSettings {
+            spp: r.spp,
+            batch_spp: r.batch_spp,
+            max_bounces: r.max_bounces,
+            seed: r.seed,
+            sampler: r.sampler,
+            material: material.into(),
+        }
+    }
+}
+
+impl From<&SceneConfig> for RenderSettings {
+    fn from(cfg: &SceneConfig) -> Self {
+        RenderSettings::new(&cfg.render, &cfg.material)
+    }
+}

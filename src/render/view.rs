@@ -1,0 +1,246 @@
+//! One image of a [`GpuScene`]: the camera, the light on it (a second trace level over
+//! the scene's shared acceleration structure), the accumulation buffer and the
+//! annotation targets. `record_batch` adds one batch of samples to a render graph.
+
+use ash::vk;
+
+use super::RenderError;
+use super::annotate::{Annotation, AnnotationTargets, record_annotate};
+use super::gpu_scene::GpuScene;
+use super::settings::{LightSampling, RenderSettings};
+use super::tracer::PathTracer;
+use crate::gpu_interface::{PathParams, PathPush, PathTraceBinding as B, TILE, TileBlock};
+use crate::graph::Graph;
+use crate::scene::Camera;
+use crate::scene::assemble::{LightGeometry, ViewSetup};
+use crate::trace::{TraceScene, scramble_multiplier};
+use crate::vk::{Buffer, MemoryKind, Profiler};
+
+/// The image's tiles and how many dispatches cover them (a device allows only so many
+/// workgroups per dispatch: 65,535 on lavapipe).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tiling {
+    pub tiles_x: u32,
+    pub tiles: u32,
+    pub mult: u32,
+    pub max_groups: u32,
+}
+
+impl Tiling {
+    pub fn new(width: u32, height: u32, max_groups: u32) -> Tiling {
+        let tiles_x = width.div_ceil(TILE);
+        let tiles = tiles_x * height.div_ceil(TILE);
+        Tiling {
+            tiles_x,
+            tiles,
+            mult: scramble_multiplier(tiles),
+            max_groups: max_groups.max(1),
+        }
+    }
+
+    /// (tile block, workgroup count) of each dispatch, in order.
+    pub fn dispatches(&self) -> impl Iterator<Item = (TileBlock, u32)> + '_ {
+        (0..self.tiles)
+            .step_by(self.max_groups as usize)
+            .map(|base| {
+                let block = TileBlock {
+                    tiles_x: self.tiles_x,
+                    mult: self.mult,
+                    group_base: base,
+                    tile_count: self.tiles,
+                };
+                (block, self.max_groups.min(self.tiles - base))
+            })
+    }
+}
+
+/// The camera as the shaders take it.
+pub fn camera_block(cam: &Camera) -> crate::gpu_interface::CameraBlock {
+    crate::gpu_interface::CameraBlock {
+        eye: cam.eye.extend(0.0).into(),
+        right: (cam.right * cam.tan_half_w).extend(0.0).into(),
+        up: (cam.up * cam.tan_half_h).extend(0.0).into(),
+        forward: cam.forward.extend(0.0).into(),
+    }
+}
+
+/// A view being rendered.
+pub struct View<'s> {
+    scene: &'s GpuScene,
+    trace: TraceScene,
+    lights: Buffer,
+    params: Buffer,
+    accum: Buffer,
+    annotation: Option<(AnnotationTargets, u32)>,
+    camera: Camera,
+    tiling: Tiling,
+}
+
+impl<'s> View<'s> {
+    /// Sets up `setup` on `scene`; `annotate_grid`: also label the image, with this many
+    /// coverage rays per pixel side.
+    pub fn new(
+        tracer: &PathTracer,
+        scene: &'s GpuScene,
+        setup: &ViewSetup,
+        settings: &RenderSettings,
+        annotate_grid: Option<u32>,
+        profiler: Option<&Profiler>,
+    ) -> Result<View<'s>, RenderError> {
+        let ctx = &tracer.ctx;
+        let cam = &setup.camera;
+        let (width, height) = (cam.width, cam.height);
+        let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let light = &setup.light;
+        let trace = TraceScene::layered(ctx, scene.geometry.clone(), &light.tris, profiler)?;
+        let light_words: Vec<[u32; 2]> = if light.lights.is_empty() {
+            vec![[0, 0]] // a binding may not be empty; light_count = 0 keeps it unread
+        } else {
+            light
+                .lights
+                .iter()
+                .map(|&(t, c)| [t, c.to_bits()])
+                .collect()
+        };
+        let params = path_params(scene, cam, light, settings);
+        let annotation = match annotate_grid {
+            Some(grid) => Some((AnnotationTargets::new(ctx, width, height)?, grid)),
+            None => None,
+        };
+        let usage = storage | vk::BufferUsageFlags::TRANSFER_DST;
+        let n = width as u64 * height as u64;
+        Ok(View {
+            scene,
+            trace,
+            lights: Buffer::from_slice(ctx, "lights", &light_words, storage)?,
+            params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
+            accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
+            annotation,
+            camera: *cam,
+            tiling: Tiling::new(width, height, ctx.info.max_workgroup_count[0]),
+        })
+    }
+
+    /// Adds samples `start .. start + count` to `g`; the first batch (start 0) clears the
+    /// accumulation and runs the annotation pass.
+    pub fn record_batch<'a>(
+        &'a self,
+        tracer: &'a PathTracer,
+        g: &mut Graph<'a>,
+        start: u32,
+        count: u32,
+    ) {
+        let off = tracer.backend_bindings();
+        let refs = self.trace.import(g);
+        let (headers, texels) = self.scene.map_buffers();
+        let geo = g.import(self.trace.shade_tris());
+        let ltris = g.import(self.trace.second_shade_tris());
+        let mats = g.import(&self.scene.materials);
+        let lts = g.import(&self.lights);
+        let en = g.import(&tracer.energy);
+        let pr = g.import(&self.params);
+        let mut acc = g.import(&self.accum);
+        let mh = g.import(headers);
+        let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(&texels[k]));
+        if start == 0 {
+            g.fill("clear radiance", &mut acc, 0);
+            if let Some((targets, grid)) = &self.annotation {
+                let labels = g.import(&self.scene.labels);
+                let size = (self.camera.width, self.camera.height);
+                let (mut ids, mut cov) = (g.import(&targets.ids), g.import(&targets.coverage));
+                let cam = camera_block(&self.camera);
+                record_annotate(
+                    g,
+                    &tracer.annotate,
+                    &refs,
+                    off,
+                    &labels,
+                    (&mut ids, &mut cov),
+                    &cam,
+                    size,
+                    *grid,
+                    &self.tiling,
+                );
+            }
+        }
+        for (tiles, groups) in self.tiling.dispatches() {
+            let push = PathPush {
+                sample_start: start,
+                sample_count: count,
+                tiles,
+                ..Default::default()
+            };
+            refs.bind(g.dispatch("path trace", &tracer.path, [groups, 1, 1]))
+                .read(B::Geometry.at(off), &geo)
+                .read(B::Materials.at(off), &mats)
+                .read(B::Lights.at(off), &lts)
+                .read(B::Energy.at(off), &en)
+                .read(B::Params.at(off), &pr)
+                .read_write(B::Accum.at(off), &mut acc)
+                .read(B::FaceMaps.at(off), &mh)
+                .read(B::SlopesA.at(off), &ma)
+                .read(B::SlopesB.at(off), &mb)
+                .read(B::SlopesC.at(off), &mc)
+                .read(B::LightGeometry.at(off), &ltris)
+                .push(&push)
+                .submit();
+        }
+    }
+
+    /// Mean radiance per pixel after `spp` samples, and the annotation if asked for.
+    pub fn read(&self, spp: u32) -> Result<(Vec<f32>, Option<Annotation>), RenderError> {
+        let sum: Vec<f32> = self.accum.read()?;
+        let inv = 1.0 / spp as f32;
+        let annotation = match &self.annotation {
+            Some((targets, _)) => Some(targets.read()?),
+            None => None,
+        };
+        Ok((sum.iter().map(|v| v * inv).collect(), annotation))
+    }
+
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+}
+
+/// The path tracer's parameter block for one view.
+fn path_params(
+    scene: &GpuScene,
+    cam: &Camera,
+    light: &LightGeometry,
+    s: &RenderSettings,
+) -> PathParams {
+    let m = &s.material;
+    let fresnel = super::bsdf::Fresnel::Conductor {
+        n: m.ior_n,
+        k: m.ior_k,
+    };
+    let one_ring = matches!(light.ring_segments, [a, t] if a > 0 && t > 0 && a * t == light.lights.len() as u32);
+    PathParams {
+        cam: camera_block(cam),
+        width: cam.width,
+        height: cam.height,
+        max_bounces: s.max_bounces,
+        seed: s.seed,
+        alpha: m.alpha,
+        ior_n: m.ior_n,
+        ior_k: m.ior_k,
+        f_avg: fresnel.average(),
+        comp: m.energy_compensation as u32,
+        light_count: light.lights.len() as u32,
+        sample_gen: s.sampler as u32,
+        // Not one ring of equal segments: uniform by area.
+        light_sampling: if one_ring {
+            light.sampling as u32
+        } else {
+            LightSampling::Uniform as u32
+        },
+        table_albedo: scene.table_albedo,
+        radiance: light.radiance,
+        light_area: light.area,
+        light_first: scene.triangle_count,
+        ring_segments: light.ring_segments[0],
+        segment_tris: light.ring_segments[1],
+        ..Default::default()
+    }
+}
