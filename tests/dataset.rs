@@ -105,7 +105,7 @@ impl ImageRenderer for OrthoLabelTestDouble {
                             + 0.1 * l.face as f32
                             + 0.3 * (l.class > 0) as u8 as f32
                             + 0.05 * jitter
-                            + 0.2 * req.roughness;
+                            + 0.2 * req.alpha;
                     }
                 }
             }
@@ -441,6 +441,50 @@ fn splits_keep_instances_together_with_ratios_and_label_balance() {
 }
 
 #[test]
+fn paper_job_uses_the_papers_roughness_and_spiral_exit_lines() {
+    let job = Job::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/paper-dataset.toml"
+    )))
+    .unwrap();
+    assert_eq!(job.material.roughness, Some([0.05, 0.3]));
+    assert_eq!(job.material.alpha, None);
+    let spirals: Vec<_> = job
+        .finishes
+        .iter()
+        .filter(|f| f.texture_type() == "spiral")
+        .collect();
+    assert_eq!(spirals.len(), 4);
+    for f in spirals {
+        let p: synosis::texture::MilledParams =
+            toml::Value::Table(f.params.clone()).try_into().unwrap();
+        assert!(p.spiral_exit_line, "{}", f.name);
+    }
+}
+
+#[test]
+fn roughness_is_appleseed_r_and_alpha_is_ggx_alpha() {
+    let base = job_text(1, 1);
+    let params = |text: &str| {
+        let job = Job::parse(text, "job", Path::new(".")).unwrap();
+        let plan = dataset::expand(&job);
+        dataset::plan::instance_params(&job, &plan.instances[0])
+    };
+    let r = params(&base.replace(
+        "[texture]",
+        "[material]\nroughness = [0.05, 0.3]\n[texture]",
+    ));
+    let a = params(&base.replace("[texture]", "[material]\nalpha = [0.05, 0.3]\n[texture]"));
+    let d = params(&base);
+    // Same draw, two readings: alpha = r^2 for `roughness`, the draw itself for `alpha`.
+    assert!((0.05..=0.3).contains(&a.alpha));
+    assert!((r.alpha - a.alpha * a.alpha).abs() < 1e-12, "{r:?} {a:?}");
+    assert!((r.roughness - a.alpha).abs() < 1e-12);
+    // No [material]: the paper's roughness.
+    assert_eq!(d, r);
+}
+
+#[test]
 fn bad_job_files_fail_before_rendering_naming_the_field() {
     let tmp = tempfile::tempdir().unwrap();
     std::fs::write(tmp.path().join("defects.toml"), DEFECT_SPEC).unwrap();
@@ -508,6 +552,17 @@ fn bad_job_files_fail_before_rendering_naming_the_field() {
         (
             good.replace("spec = \"defects.toml\"", "spec = \"missing.toml\""),
             "missing.toml",
+        ),
+        (
+            good.replace(
+                "[texture]",
+                "[material]\nroughness = [0.1, 0.2]\nalpha = [0.01, 0.04]\n[texture]",
+            ),
+            "material.roughness / material.alpha",
+        ),
+        (
+            good.replace("[texture]", "[material]\nroughness = [0.3, 0.1]\n[texture]"),
+            "material.roughness[1]",
         ),
     ];
     let before = listing(tmp.path());
@@ -1258,4 +1313,154 @@ fn shard_settings_from_the_environment_are_resolved_or_refused() {
             .unwrap_err()
             .contains("together")
     );
+}
+
+/// A measurement named in a job: a milled finish is moment matched to it (after plane
+/// levelling), a sandblasted finish synthesises from it; a missing file or a clash with
+/// `exemplar` / `params.moments` fails naming the fields.
+#[test]
+fn measured_height_maps_drive_the_finishes() {
+    use synosis::dataset::texture_bridge::ModuleTextures;
+    use synosis::texture::{
+        FormRemoval, HeightMap, SandblastParams, XyzUnit, generate_sandblasted, load_measurement,
+        write_exr_height,
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    // A tilted plane (removed by levelling) plus bumps of Sq about 1.4 um.
+    let mut m = HeightMap::new(96, 96, 2.0);
+    for j in 0..96 {
+        for i in 0..96 {
+            let bumps = 2.0 * (i as f32 * 0.7).sin() * (j as f32 * 0.45).cos();
+            m.data[j * 96 + i] = 40.0 + 0.5 * i as f32 - 0.3 * j as f32 + bumps;
+        }
+    }
+    write_exr_height(&m, &tmp.path().join("scan.exr")).unwrap();
+    let text = r#"
+seed = 1
+[render]
+width = 8
+height = 8
+spp = 1
+bounces = 1
+[texture]
+size_px = 64
+spacing_um = 4.0
+[[object]]
+name = "o"
+mesh = "testbody-b"
+defective = 0
+defect_free = 1
+[[finish]]
+name = "parallel-m"
+kind = "milled"
+textures = 1
+params = { head_diameter_mm = 0.2, radial_depth = 0.5, delta_mm = 0.02 }
+measurement = { path = "scan.exr", exr_spacing_um = 2.0 }
+[[finish]]
+name = "sandblasted-m"
+kind = "sandblasted"
+textures = 1
+params = { patch_size = 32, overlap = 16 }
+measurement = { path = "scan.exr", exr_spacing_um = 2.0 }
+"#;
+    let job = Job::parse(text, "job", tmp.path()).unwrap();
+    let levelled = load_measurement(
+        &tmp.path().join("scan.exr"),
+        XyzUnit::M,
+        2.0,
+        FormRemoval::Plane,
+    )
+    .unwrap();
+    let target = levelled.moments();
+    assert!(
+        target.mean_um.abs() < 1e-3 && (target.sq_um - 1.0).abs() < 0.1,
+        "{target:?}"
+    );
+    let mut src = ModuleTextures::default();
+    // Milled: the same map as with the levelled measurement's moments given by hand.
+    let got = src.make(&job.finishes[0], 0, 5, 64, 4.0).unwrap();
+    let mut by_hand = job.finishes[0].clone();
+    by_hand.measurement = None;
+    let mut moments = toml::Table::new();
+    moments.insert("mean_um".into(), toml::Value::Float(target.mean_um));
+    moments.insert("sq_um".into(), toml::Value::Float(target.sq_um));
+    by_hand
+        .params
+        .insert("moments".into(), toml::Value::Table(moments));
+    let want = ModuleTextures::default()
+        .make(&by_hand, 0, 5, 64, 4.0)
+        .unwrap();
+    assert_eq!(got.data, want.data);
+    // Sandblasted: synthesised from the levelled measurement.
+    let got = src.make(&job.finishes[1], 0, 9, 64, 4.0).unwrap();
+    let p = SandblastParams {
+        patch_size: 32,
+        overlap: 16,
+        ..Default::default()
+    };
+    let want = generate_sandblasted(&levelled, &p, 64, 64, 4.0, 9, &synosis::texture::NoProgress)
+        .unwrap()
+        .slopes();
+    assert_eq!(got.data, want.data);
+    // Errors name the fields.
+    for (bad, want) in [
+        (
+            text.replace("path = \"scan.exr\", exr", "path = \"nope.exr\", exr"),
+            "finish[0].measurement.path",
+        ),
+        (
+            text.replace(
+                "params = { patch_size = 32, overlap = 16 }",
+                "params = { patch_size = 32, overlap = 16 }\nexemplar = { pressure_bar = 6.0 }",
+            ),
+            "finish[1].exemplar / finish[1].measurement",
+        ),
+        (
+            text.replace(
+                "delta_mm = 0.02 }",
+                "delta_mm = 0.02, moments = { mean_um = 0.0, sq_um = 1.0 } }",
+            ),
+            "finish[0].params.moments / finish[0].measurement",
+        ),
+    ] {
+        let e = Job::parse(&bad, "job", tmp.path()).unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
+
+/// The realism report of a rendered folder: one page with every finish, example PNGs
+/// beside it, and kept counts equal to the manifest's.
+#[test]
+fn realism_report_summarises_a_dataset_folder() {
+    use synosis::dataset::report::{folder_entries, write_report};
+    let f = fixture(2, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let entries = folder_entries(&out).unwrap();
+    assert_eq!(entries.len(), f.prep.plan.items.len());
+    let rdir = out.join("report");
+    let reports = write_report(&out, &f.prep.job, &entries, 2, &rdir).unwrap();
+    assert_eq!(reports.len(), f.prep.job.finishes.len());
+    let html = std::fs::read_to_string(rdir.join("report.html")).unwrap();
+    for r in &reports {
+        assert!(html.contains(&r.name));
+        assert_eq!(r.examples.len(), 2);
+        for e in &r.examples {
+            assert!(rdir.join(e).is_file(), "{e}");
+            assert!(html.contains(e.as_str()));
+        }
+        let want: Vec<(u8, bool)> = entries
+            .iter()
+            .filter(|e| e.finish == r.name)
+            .flat_map(|e| e.defects.iter().map(|d| (d.class, d.kept)))
+            .collect();
+        for class in [1u8, 2] {
+            let n = want.iter().filter(|d| d.0 == class).count();
+            let k = want.iter().filter(|d| d.0 == class && d.1).count();
+            assert_eq!(r.kept(class), (k, n));
+        }
+        let pixels: u64 = r.histogram.iter().sum();
+        assert!(pixels > 0 && r.p01_p99.0 <= r.p01_p99.1);
+    }
+    assert!(html.contains("<svg") && !html.contains("src=\"http"));
 }

@@ -127,7 +127,8 @@ fn paper_spec_imprint_is_watertight_labelled_and_reapplies_to_the_mirror() {
     assert_eq!(set.defects.len(), 12);
     let out = imprint(&b, &set).unwrap();
     check_imprinted(&b, &set, &out);
-    // Material was removed, not added (no rims in the paper spec).
+    // Net material was removed: scratches only remove, and a dent's rim (as high as the
+    // dent is deep, over 1 ... 1.5 semi-axes) adds 0.625 pi a b c against the pit's 0.667.
     assert!(volume(&out) < volume(&b));
     // The same face-local set on the mirror body.
     let m = testbody(Variant::M);
@@ -169,6 +170,7 @@ fn dents_only(text: &str) -> DefectSpec {
 
 #[test]
 fn dents_have_the_specified_depth_diameter_and_volume() {
+    // The pit alone (rims off; `a_rim_raises_material_around_the_dent` checks the rim).
     let b = testbody(Variant::B);
     let spec = dents_only(
         r#"
@@ -178,12 +180,14 @@ fn dents_have_the_specified_depth_diameter_and_volume() {
         diameter_mm = [0.2, 1.0]
         elongation = [1, 4]
         depth = [0.2, 1.0]
+        rim_height = 0
         [[dent]]
         name = "tiny"
         quantity = 4
         diameter_mm = 0.02
         elongation = [1, 2]
         depth = [0.05, 0.2]
+        rim_height = 0
         "#,
     );
     let set = sample_defects(&b, &spec, 3).unwrap();
@@ -509,4 +513,46 @@ fn a_curvy_scratch_removes_the_volume_of_its_path_length() {
         "length from volume {measured} vs path {}",
         s.length_mm
     );
+}
+
+/// Planar regions (scene::regions) of a defected mesh are those of the undefected one:
+/// same ids, planes, frames, centres and areas; every defect triangle is in the region
+/// of its face.
+#[test]
+fn planar_regions_survive_the_imprint() {
+    use synosis::scene::regions::{RegionTolerance, planar_regions, region_per_triangle};
+    let b = testbody(Variant::B);
+    let tol = RegionTolerance::default();
+    let before = planar_regions(&b, &tol);
+    let set = sample_defects(&b, &DefectSpec::paper(), 3).unwrap();
+    let out = imprint(&b, &set).unwrap();
+    let after = planar_regions(&out, &tol);
+    assert_eq!(after.len(), before.len());
+    for (x, y) in before.iter().zip(&after) {
+        assert_eq!((x.id, x.face), (y.id, y.face));
+        assert!((x.normal - y.normal).length() < 1e-5);
+        assert!((x.u - y.u).length() < 1e-5 && (x.v - y.v).length() < 1e-5);
+        assert!(
+            (x.centre - y.centre).length() < 1e-3,
+            "{} {}",
+            x.centre,
+            y.centre
+        );
+        assert!(
+            (x.area - y.area).abs() < 1e-4 * x.area,
+            "{} {}",
+            x.area,
+            y.area
+        );
+    }
+    let per = region_per_triangle(&out, &after);
+    let mut defect_tris = 0;
+    for (t, l) in out.labels.iter().enumerate() {
+        assert_ne!(per[t], u32::MAX);
+        if l.class != 0 {
+            defect_tris += 1;
+            assert_eq!(after[per[t] as usize].face, l.face);
+        }
+    }
+    assert!(defect_tris > 0);
 }

@@ -15,6 +15,22 @@ fn shipped_paper_spec_equals_the_built_in_default() {
         .chain(spec.scratch.iter().map(|s| s.quantity))
         .collect();
     assert_eq!(q, vec![5, 3, 2, 2]);
+    // Dents carry the paper's measured rim (peak as high as the dent is deep), also when
+    // a spec file leaves `rim_height` out.
+    assert!(
+        spec.dent
+            .iter()
+            .all(|d| d.rim_height.min == 1.0 && d.rim_height.max == 1.0)
+    );
+    let dflt = DefectSpec::from_toml_str(
+        "[[dent]]\nname = \"d\"\nquantity = 1\ndiameter_mm = 0.1\nelongation = 1\ndepth = 0.1\n",
+        "spec.toml",
+    )
+    .unwrap();
+    assert_eq!(
+        (dflt.dent[0].rim_height.min, dflt.dent[0].rim_height.max),
+        (1.0, 1.0)
+    );
 }
 
 fn err(text: &str) -> String {

@@ -211,6 +211,46 @@ fn milled_spiral_peaks_at_rho_and_delta() {
     }
 }
 
+/// The paper's variation sets must give visibly different instances: the centre jitter
+/// (Sigma_c, a standard deviation by the paper's 3-sigma rule) keeps crisp feed marks at
+/// delta at the paper's default and blurs them at the set's larger values, while the
+/// path spacing rho stays.
+#[test]
+fn centre_jitter_varies_the_feed_marks_and_keeps_the_path() {
+    let strength = |center_noise: f64| {
+        let p = MilledParams {
+            head_diameter_mm: 2.0,
+            radial_depth: 0.5,
+            delta_mm: 0.09,
+            center_noise,
+            ..Default::default()
+        };
+        let s = 4.0;
+        let m = generate_milled(&p, 480, 240, s, 12, &NoProgress).unwrap();
+        let dpx = p.delta_mm * 1000.0 / s;
+        let line = spectral_period(&rows(&m), 0.6 * dpx, 1.6 * dpx).1;
+        // Across the path: the rho peak of the autocorrelation.
+        let s = 10.0;
+        let rho_px = p.rho_mm() * 1000.0 / s;
+        let m = generate_milled(&p, 160, 400, s, 11, &NoProgress).unwrap();
+        let a = acf(&cols(&m, 4), (1.4 * rho_px) as usize);
+        let k = peak(&a, (0.6 * rho_px) as usize, (1.4 * rho_px) as usize);
+        assert!(
+            (k as f64 - rho_px).abs() <= 0.03 * rho_px + 1.0,
+            "center_noise {center_noise}: rho peak at {k} px, rho = {rho_px:.1} px"
+        );
+        line
+    };
+    let s: Vec<f64> = [0.01, 0.2, 0.4, 0.8].iter().map(|&c| strength(c)).collect();
+    eprintln!("delta line / band median at center_noise 0.01, 0.2, 0.4, 0.8: {s:.1?}");
+    assert!(s[0] > 10.0, "the default shows crisp feed marks: {s:?}");
+    assert!(
+        s.windows(2).all(|w| w[1] < w[0]),
+        "jitter must blur monotonically: {s:?}"
+    );
+    assert!(s[3] < 0.3 * s[0], "the largest set value blurs them: {s:?}");
+}
+
 #[test]
 fn milled_is_deterministic_and_moment_matched() {
     let p = MilledParams::default();

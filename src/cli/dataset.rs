@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use synosis::dataset::{self, RunOptions, Shard, gpu::GpuRenderer, texture_bridge::ModuleTextures};
 
@@ -47,6 +47,29 @@ enum Cmd {
     Check {
         /// The job file (TOML, docs/dataset.md).
         job: PathBuf,
+    },
+    /// Write the realism report (HTML + PNGs) of a rendered dataset folder.
+    Report {
+        /// A rendered dataset folder.
+        dir: PathBuf,
+        /// Report folder (default DIR/report).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Example images per finish.
+        #[arg(long, default_value_t = 4)]
+        examples: usize,
+    },
+    /// Render N images per finish of a job (defective instances first) into --out and
+    /// write their realism report (OUT/report/report.html): a look before the full run.
+    Preview {
+        /// The job file (TOML, docs/dataset.md).
+        job: PathBuf,
+        /// Images per finish.
+        #[arg(long, default_value_t = 2)]
+        per_finish: usize,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
     },
 }
 
@@ -131,6 +154,54 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             println!("{}", serde_json::to_string_pretty(&e)?);
             Ok(())
         }
+        Cmd::Report { dir, out, examples } => {
+            let job_path = dir.join("job.toml");
+            let text = std::fs::read_to_string(&job_path)
+                .with_context(|| format!("reading {}", job_path.display()))?;
+            let job = dataset::Job::parse_stored(&text, &job_path.display().to_string())?;
+            let entries = dataset::report::folder_entries(&dir)?;
+            if entries.is_empty() {
+                bail!("{}: no finished images (no manifest lines)", dir.display());
+            }
+            let out = out.unwrap_or_else(|| dir.join("report"));
+            let reports = dataset::report::write_report(&dir, &job, &entries, examples, &out)?;
+            print_report(&reports, &out);
+            Ok(())
+        }
+        Cmd::Preview {
+            job,
+            per_finish,
+            out,
+        } => {
+            let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
+            let items = dataset::report::preview_items(&prep, per_finish);
+            let mut renderer = gpu_renderer()?;
+            let mut textures = ModuleTextures::default();
+            let mut entries = Vec::new();
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            for (k, &index) in items.iter().enumerate() {
+                eprintln!("preview: image {index} ({}/{})", k + 1, items.len());
+                entries.push(dataset::render_one(
+                    &prep,
+                    index,
+                    &out,
+                    &mut renderer,
+                    &mut textures,
+                )?);
+            }
+            let mut lines = String::new();
+            for e in &entries {
+                lines.push_str(&serde_json::to_string(e)?);
+                lines.push('\n');
+            }
+            std::fs::write(out.join("preview.jsonl"), lines)?;
+            std::fs::write(out.join("job.toml"), &prep.job_text)?;
+            let rdir = out.join("report");
+            let reports =
+                dataset::report::write_report(&out, &prep.job, &entries, per_finish, &rdir)?;
+            print_report(&reports, &rdir);
+            Ok(())
+        }
         Cmd::Check { job } => {
             let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
             let count =
@@ -202,4 +273,24 @@ fn run_job(a: RunArgs) -> Result<()> {
         }
     );
     Ok(())
+}
+
+fn print_report(reports: &[dataset::report::FinishReport], out: &std::path::Path) {
+    println!("finish\timages\tgrey_p1\tgrey_p99\trho_peak_db\tdents_kept\tscratches_kept");
+    for r in reports {
+        let mut db: Vec<f64> = r.texture.iter().map(|t| t.1.peak_over_floor_db).collect();
+        db.sort_by(f64::total_cmp);
+        let (dk, dn) = r.kept(1);
+        let (sk, sn) = r.kept(2);
+        println!(
+            "{}\t{}\t{}\t{}\t{}\t{dk}/{dn}\t{sk}/{sn}",
+            r.name,
+            r.images,
+            r.p01_p99.0,
+            r.p01_p99.1,
+            db.get(db.len() / 2)
+                .map_or("-".into(), |d| format!("{d:.1}"))
+        );
+    }
+    eprintln!("report: {}", out.join("report.html").display());
 }

@@ -109,7 +109,7 @@ impl ImageRenderer for GpuRenderer {
             req.spp,
             req.bounces,
             req.seed,
-            req.roughness,
+            req.alpha,
         )?;
         let view = parse_view(&cfg.camera.view).map_err(|e| e.to_string())?;
         let profiler = Profiler::new();

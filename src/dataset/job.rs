@@ -63,17 +63,41 @@ pub struct RenderSettings {
     pub bounces: i64,
 }
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+/// The object material's roughness, drawn uniformly per object instance from a range
+/// given in one of two conventions: `roughness` (appleseed / Disney r, GGX alpha = r^2;
+/// the paper's convention, since its renderer is appleseed) or `alpha` (GGX alpha
+/// itself). Exactly one may be given; neither means the paper's `roughness = [0.05, 0.3]`.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSettings {
-    /// GGX alpha drawn uniformly per object instance from [min, max].
-    pub roughness: [f64; 2],
+    /// Roughness r in [min, max], drawn uniformly; alpha = r^2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roughness: Option<[f64; 2]>,
+    /// GGX alpha in [min, max], drawn uniformly.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<[f64; 2]>,
 }
 
-impl Default for MaterialSettings {
-    fn default() -> Self {
-        MaterialSettings {
-            roughness: [0.05, 0.3],
+/// The paper's roughness range (appleseed r): "we uniformly sample the material
+/// roughness parameter from the range [0.05, 0.3]".
+pub const PAPER_ROUGHNESS: [f64; 2] = [0.05, 0.3];
+
+/// Which convention a drawn range is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RoughnessConvention {
+    /// appleseed / Disney r: alpha = r^2.
+    Roughness,
+    /// GGX alpha.
+    Alpha,
+}
+
+impl MaterialSettings {
+    /// The range and its convention (the paper's roughness when neither is given).
+    pub fn range(&self) -> ([f64; 2], RoughnessConvention) {
+        match (self.roughness, self.alpha) {
+            (_, Some(a)) => (a, RoughnessConvention::Alpha),
+            (Some(r), None) => (r, RoughnessConvention::Roughness),
+            (None, None) => (PAPER_ROUGHNESS, RoughnessConvention::Roughness),
         }
     }
 }
@@ -204,6 +228,40 @@ pub struct Finish {
     /// Sandblasted only: the stand-in exemplar's fields (e.g. pressure_bar).
     #[serde(default)]
     pub exemplar: Option<toml::Table>,
+    /// A measured height map of this finish (Alicona xyz or EXR): a sandblasted finish
+    /// synthesises from it (instead of the stand-in exemplar), a milled one is moment
+    /// matched to its mean and Sq (instead of the default). docs/dataset.md.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measurement: Option<MeasurementRef>,
+}
+
+/// A measured height map named in a job.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementRef {
+    /// `.xyz` / `.txt` / `.asc` (Alicona ASCII x y z) or `.exr` (one channel, um),
+    /// relative to the job file.
+    pub path: String,
+    /// Unit of the xyz coordinates: "m" (Alicona's default), "mm" or "um".
+    #[serde(default = "default_xyz_unit")]
+    pub unit: crate::texture::XyzUnit,
+    /// Pixel spacing of an EXR measurement, um (xyz files carry their own).
+    #[serde(default = "default_exr_spacing")]
+    pub exr_spacing_um: f64,
+    /// Form removal before use: "none" (mean), "plane" (default) or "quadratic".
+    #[serde(default)]
+    pub form: crate::texture::FormRemoval,
+    /// `path` resolved against the job file's folder.
+    #[serde(skip)]
+    pub resolved: PathBuf,
+}
+
+fn default_xyz_unit() -> crate::texture::XyzUnit {
+    crate::texture::XyzUnit::M
+}
+
+fn default_exr_spacing() -> f64 {
+    1.75
 }
 
 impl Finish {
@@ -267,6 +325,7 @@ impl Job {
         })?;
         job.base_dir = base_dir.to_path_buf();
         job.origin = origin.to_string();
+        job.resolve_measurements();
         job.validate()?;
         Ok(job)
     }
@@ -279,6 +338,7 @@ impl Job {
             message: e.to_string(),
         })?;
         job.origin = origin.to_string();
+        job.resolve_measurements();
         job.check(false)?;
         Ok(job)
     }
@@ -293,6 +353,20 @@ impl Job {
             toml::to_string(&j).ok()
         };
         strip(self).is_some() && strip(self) == strip(other)
+    }
+
+    fn resolve_measurements(&mut self) {
+        let base = self.base_dir.clone();
+        for f in &mut self.finishes {
+            if let Some(m) = &mut f.measurement {
+                let p = Path::new(&m.path);
+                m.resolved = if p.is_absolute() {
+                    p.to_path_buf()
+                } else {
+                    base.join(p)
+                };
+            }
+        }
     }
 
     fn field(&self, field: impl Into<String>, value: impl ToString, allowed: &str) -> DatasetError {
@@ -358,9 +432,20 @@ impl Job {
                 return Err(self.field(format!("views[{i}]"), format!("{v:?}"), "listed twice"));
             }
         }
-        let [lo, hi] = self.material.roughness;
-        self.real("material.roughness[0]", lo, 0.001, 1.0)?;
-        self.real("material.roughness[1]", hi, lo, 1.0)?;
+        if let (Some(r), Some(a)) = (self.material.roughness, self.material.alpha) {
+            return Err(self.field(
+                "material.roughness / material.alpha",
+                format!("{r:?} / {a:?}"),
+                "give one of them: `roughness` (appleseed/Disney r, alpha = r^2) or `alpha` (GGX alpha)",
+            ));
+        }
+        let ([lo, hi], conv) = self.material.range();
+        let key = match conv {
+            RoughnessConvention::Roughness => "material.roughness",
+            RoughnessConvention::Alpha => "material.alpha",
+        };
+        self.real(&format!("{key}[0]"), lo, 0.001, 1.0)?;
+        self.real(&format!("{key}[1]"), hi, lo, 1.0)?;
         self.real(
             "mapping.rotation_deg",
             self.mapping.rotation_deg,
@@ -436,6 +521,38 @@ impl Job {
                     format!("{s:?}"),
                     "\"paper\", \"none\" or a table of value sets",
                 ));
+            }
+            if let Some(m) = &f.measurement {
+                self.real(
+                    &format!("{p}.measurement.exr_spacing_um"),
+                    m.exr_spacing_um,
+                    0.001,
+                    1.0e4,
+                )?;
+                if f.kind == FinishKind::Sandblasted && f.exemplar.is_some() {
+                    return Err(self.field(
+                        format!("{p}.exemplar / {p}.measurement"),
+                        "both set",
+                        "give one: the stand-in `exemplar` or a `measurement`",
+                    ));
+                }
+                if f.kind == FinishKind::Milled && f.params.contains_key("moments") {
+                    return Err(self.field(
+                        format!("{p}.params.moments / {p}.measurement"),
+                        "both set",
+                        "give one: the measurement's moments are the target",
+                    ));
+                }
+                if check_files && !m.resolved.is_file() {
+                    return Err(self.field(
+                        format!("{p}.measurement.path"),
+                        format!("{:?}", m.path),
+                        &format!(
+                            "an existing .xyz/.txt/.asc or .exr file ({} not found)",
+                            m.resolved.display()
+                        ),
+                    ));
+                }
             }
             super::textures::validate_finish(f)
                 .map_err(|msg| self.field(p.clone(), &f.name, &msg))?;

@@ -13,6 +13,7 @@ pub mod lock;
 pub mod plan;
 pub mod post;
 pub mod renderer;
+pub mod report;
 pub mod runner;
 pub mod seed;
 pub mod shard_env;

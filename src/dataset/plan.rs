@@ -8,7 +8,7 @@
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::job::{Job, parse_view};
+use super::job::{Job, RoughnessConvention, parse_view};
 use super::seed::{derive, name, tag};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -102,6 +102,9 @@ pub struct FaceChoice {
 /// Per-instance random choices, all from the instance seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct InstanceParams {
+    /// GGX alpha of the object's material.
+    pub alpha: f64,
+    /// The same as appleseed / Disney roughness r = sqrt(alpha).
     pub roughness: f64,
     pub faces: Vec<FaceChoice>,
 }
@@ -213,15 +216,19 @@ pub fn expand(job: &Job) -> Plan {
     Plan { instances, items }
 }
 
-/// The random choices of one instance: roughness, and per inspected face its texture
+/// The random choices of one instance: material roughness (GGX alpha and r), and per inspected face its texture
 /// instance, rotation and translation.
 pub fn instance_params(job: &Job, inst: &InstancePlan) -> InstanceParams {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(inst.seed);
-    let [lo, hi] = job.material.roughness;
-    let roughness = if hi > lo {
+    let ([lo, hi], conv) = job.material.range();
+    let drawn = if hi > lo {
         rng.random_range(lo..=hi)
     } else {
         lo
+    };
+    let alpha = match conv {
+        RoughnessConvention::Roughness => drawn * drawn,
+        RoughnessConvention::Alpha => drawn,
     };
     let n = job.finishes[inst.finish].textures.max(1) as u32;
     let rot = job.mapping.rotation_deg;
@@ -250,7 +257,11 @@ pub fn instance_params(job: &Job, inst: &InstancePlan) -> InstanceParams {
             }
         })
         .collect();
-    InstanceParams { roughness, faces }
+    InstanceParams {
+        alpha,
+        roughness: alpha.sqrt(),
+        faces,
+    }
 }
 
 /// The face a view looks at.

@@ -8,7 +8,7 @@ use crate::scene::Mesh;
 use crate::scene::config::SceneConfig;
 
 /// The scene configuration the GPU renderer renders one image with, validated: `base`
-/// with the request's view, size, samples, bounces, seed and roughness. `dataset check`
+/// with the request's view, size, samples, bounces, seed and GGX alpha. `dataset check`
 /// and `dataset run` (before the first image) run it for every instance and view, so a job
 /// that passes the check does not fail on these settings later. Errors name the job's
 /// field (`render.bounces`, not the scene file's `render.max_bounces`).
@@ -21,7 +21,7 @@ pub fn render_config(
     spp: u32,
     bounces: u32,
     seed: u64,
-    roughness: f32,
+    alpha: f32,
 ) -> Result<SceneConfig, String> {
     let job_names = |e: crate::scene::config::ConfigError| {
         e.to_string()
@@ -29,7 +29,7 @@ pub fn render_config(
             .replace("--width", "render.width")
             .replace("--height", "render.height")
             .replace("camera.view", "views")
-            .replace("material.alpha", "material.roughness")
+            .replace("material.alpha", "material.alpha (GGX alpha, roughness^2)")
     };
     let mut cfg = base.clone();
     cfg.camera.view = view.to_string();
@@ -38,7 +38,7 @@ pub fn render_config(
     cfg.render.max_bounces = bounces;
     // The shader takes a 32-bit seed: fold the 64-bit one.
     cfg.render.seed = (seed ^ (seed >> 32)) as u32;
-    cfg.material.alpha = roughness;
+    cfg.material.alpha = alpha;
     cfg.validate().map_err(job_names)?;
     Ok(cfg)
 }
@@ -72,8 +72,8 @@ pub struct ImageRequest<'a> {
     pub mesh_key: u64,
     /// Viewpoint name, e.g. "A20" (face A, 20 degrees from its normal, aimed at its centre).
     pub view: &'a str,
-    /// GGX alpha of the aluminium.
-    pub roughness: f32,
+    /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
+    pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,
     pub width: u32,
     pub height: u32,

@@ -224,6 +224,9 @@ pub struct ManifestEntry {
     pub instance: String,
     pub label: Label,
     pub defect_set: Option<usize>,
+    /// GGX alpha of the object's material.
+    pub alpha: f64,
+    /// appleseed / Disney roughness r = sqrt(alpha).
     pub roughness: f64,
     pub face_textures: Vec<FaceChoice>,
     pub seed: u64,
@@ -741,7 +744,7 @@ impl<'p> Ctx<'p> {
                 None => inst.object as u64,
             },
             view,
-            roughness: params.roughness as f32,
+            alpha: params.alpha as f32,
             face_textures,
             width: job.render.width as u32,
             height: job.render.height as u32,
@@ -781,6 +784,7 @@ impl<'p> Ctx<'p> {
             instance: inst.id.clone(),
             label: inst.label,
             defect_set: inst.defect_set,
+            alpha: params.alpha,
             roughness: params.roughness,
             face_textures: params.faces,
             seed: item.seed,

@@ -61,11 +61,29 @@ pub fn validate(f: &Finish) -> Result<(), String> {
     }
 }
 
-/// Textures from `crate::texture`; keeps one stand-in exemplar per sandblasted finish
-/// (the "measurement" all its texture instances are synthesised from).
+/// Textures from `crate::texture`; keeps one exemplar per sandblasted finish (its
+/// measurement, or the stand-in) and one loaded measurement per finish.
 #[derive(Default)]
 pub struct ModuleTextures {
     exemplars: HashMap<String, Arc<HeightMap>>,
+    measurements: HashMap<String, Arc<HeightMap>>,
+}
+
+impl ModuleTextures {
+    /// The finish's measurement, form-removed (loaded once per finish).
+    fn measurement(&mut self, f: &Finish) -> Result<Option<Arc<HeightMap>>, String> {
+        let Some(m) = &f.measurement else {
+            return Ok(None);
+        };
+        if let Some(h) = self.measurements.get(&f.name) {
+            return Ok(Some(h.clone()));
+        }
+        let h = crate::texture::load_measurement(&m.resolved, m.unit, m.exr_spacing_um, m.form)
+            .map_err(|e| format!("measurement: {e}"))?;
+        let h = Arc::new(h);
+        self.measurements.insert(f.name.clone(), h.clone());
+        Ok(Some(h))
+    }
 }
 
 impl TextureSource for ModuleTextures {
@@ -79,7 +97,10 @@ impl TextureSource for ModuleTextures {
     ) -> Result<TextureMap, String> {
         let height = match f.kind {
             FinishKind::Milled => {
-                let (base, var) = milled(f)?;
+                let (mut base, var) = milled(f)?;
+                if let Some(m) = self.measurement(f)? {
+                    base.moments = m.moments();
+                }
                 let p = match var {
                     Variation::None => base,
                     Variation::Sets(v) => {
@@ -94,6 +115,11 @@ impl TextureSource for ModuleTextures {
                 let (p, ex) = sandblasted(f)?;
                 let exemplar = match self.exemplars.get(&f.name) {
                     Some(e) => e.clone(),
+                    None if f.measurement.is_some() => {
+                        let e = self.measurement(f)?.unwrap_or_else(|| unreachable!());
+                        self.exemplars.insert(f.name.clone(), e.clone());
+                        e
+                    }
                     None => {
                         // One exemplar per finish, seeded by its name (not the job seed):
                         // it stands in for a measurement of the real surface.

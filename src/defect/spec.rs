@@ -48,7 +48,7 @@ impl Range {
 /// A dent kind: an ellipsoidal pit. `diameter_mm` is the major axis of the footprint
 /// ellipse, the minor axis is `diameter / elongation`; `depth` is a fraction of the
 /// diameter (depth_mm = depth * diameter_mm). Optional raised rim: `rim_height` is a
-/// fraction of the dent's depth (measured dents: about 1), `rim_width` a fraction of the
+/// fraction of the dent's depth (default 1: the paper's measured dent), `rim_width` a fraction of the
 /// semi-axes (the rim spans normalised radius 1 ... 1 + rim_width).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -60,7 +60,7 @@ pub struct DentSpec {
     pub depth: Range,
     #[serde(default = "default_rotation")]
     pub rotation_deg: Range,
-    #[serde(default = "zero_range")]
+    #[serde(default = "default_rim_height")]
     pub rim_height: Range,
     #[serde(default = "default_rim_width")]
     pub rim_width: f64,
@@ -108,8 +108,11 @@ pub struct DefectSpec {
 fn default_rotation() -> Range {
     Range::new(0.0, 180.0)
 }
-fn zero_range() -> Range {
-    Range::new(0.0, 0.0)
+/// The paper's dent measurement: "a dig with a peak and a valley of about 150 um in
+/// height and depth with respect to the undamaged surface level": rim as high as the
+/// dent is deep.
+fn default_rim_height() -> Range {
+    Range::new(1.0, 1.0)
 }
 fn default_rim_width() -> f64 {
     0.5
@@ -154,7 +157,7 @@ impl DefectSpec {
                     elongation: Range::new(1.0, 2.0),
                     depth: Range::new(0.05, 0.2),
                     rotation_deg: default_rotation(),
-                    rim_height: zero_range(),
+                    rim_height: default_rim_height(),
                     rim_width: default_rim_width(),
                 },
                 DentSpec {
@@ -164,7 +167,7 @@ impl DefectSpec {
                     elongation: Range::new(1.0, 4.0),
                     depth: Range::new(0.2, 1.0),
                     rotation_deg: default_rotation(),
-                    rim_height: zero_range(),
+                    rim_height: default_rim_height(),
                     rim_width: default_rim_width(),
                 },
             ],

@@ -265,6 +265,57 @@ mod tests {
         assert_eq!(f16_bits(0.0), 0);
     }
 
+    /// dh/dx (map x) of the grooves of one scene file at `points` on face `face`.
+    fn groove_slopes(
+        cfg: &crate::scene::config::SceneConfig,
+        face: crate::scene::mesh::FaceId,
+        points: &[Vec3],
+    ) -> Vec<f32> {
+        let mesh = crate::scene::testbody(crate::scene::Variant::B);
+        let frames = crate::scene::face_frames(&mesh);
+        let maps = crate::scene::assemble::texture_maps(&cfg.texture, &frames).expect("maps");
+        let (h, t) = pack(&maps, &frames, 1 << 27).expect("pack");
+        points
+            .iter()
+            .map(|&p| lookup(&h[face as usize], &t[face as usize - 1], p)[0])
+            .collect()
+    }
+
+    #[test]
+    fn offsets_move_grooves_by_the_offset_on_their_face_only() {
+        use crate::scene::mesh::FACE_A;
+        let mut cfg = crate::scene::config::SceneConfig::parse(
+            "[texture]\nkind = \"test-grooves\"\nspacing_um = 10.0\ngroove_period_mm = 1.2\n\
+             rotation_deg = [30.0, 0.0, 0.0]\n",
+        )
+        .expect("cfg");
+        let mesh = crate::scene::testbody(crate::scene::Variant::B);
+        let frames = crate::scene::face_frames(&mesh);
+        let fa = *frames.iter().find(|f| f.face == FACE_A).expect("A");
+        let ax = fa.u * 30f32.to_radians().cos() + fa.v * 30f32.to_radians().sin();
+        // Points along the grooves' direction of variation (map x) around A's centre.
+        let points: Vec<Vec3> = (0..24)
+            .map(|i| fa.centre + ax * (i as f32 * 0.05 - 0.6))
+            .collect();
+        let base = groove_slopes(&cfg, FACE_A, &points);
+        // Offset (0.5, 0) along u on the 30-degree face: the grooves move by
+        // 0.5 cos 30 = 0.433 mm along map x, so the slope at p + 0.433 ax is the old one at p.
+        cfg.texture.offset_mm[0] = [0.5, 0.0];
+        let shift = 0.5 * 30f32.to_radians().cos();
+        let moved: Vec<Vec3> = points.iter().map(|&p| p + ax * shift).collect();
+        for (s, b) in groove_slopes(&cfg, FACE_A, &moved).iter().zip(&base) {
+            assert!((s - b).abs() < 0.01, "offset A: {s} vs {b}");
+        }
+        // An offset on face B leaves face A's grooves where they were.
+        cfg.texture.offset_mm[0] = [0.0, 0.0];
+        cfg.texture.offset_mm[1] = [3.0, -2.0];
+        assert_eq!(
+            groove_slopes(&cfg, FACE_A, &points),
+            base,
+            "offset B moved A"
+        );
+    }
+
     #[test]
     fn grooves_reach_their_max_slope() {
         let m = SlopeMap::test_grooves(2.0, 10.0, 0.5, 60.0);

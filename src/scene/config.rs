@@ -71,12 +71,16 @@ impl Default for ObjectConfig {
 pub const AL_N_550: f32 = 0.958;
 pub const AL_K_550: f32 = 6.69;
 
-/// The object's rough conductor.
+/// The object's rough conductor. Its roughness is given either as `alpha` (GGX alpha,
+/// Walter 2007) or as `roughness` (appleseed / Disney convention r, alpha = r^2), never
+/// both; [`MaterialConfig::alpha`] is always the GGX alpha the renderer uses.
 #[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(try_from = "MaterialRaw")]
 pub struct MaterialConfig {
-    /// GGX alpha (roughness squared convention is NOT used: alpha itself), (0, 1].
+    /// GGX alpha, (0, 1]; `roughness^2` when the file gave `roughness`.
     pub alpha: f32,
+    /// The roughness r the file gave (alpha = r^2), if it used that convention, (0, 1].
+    pub roughness: Option<f32>,
     /// Real part of the complex index of refraction, (0, 10].
     pub ior_n: f32,
     /// Imaginary part (extinction coefficient), [0, 20].
@@ -89,10 +93,47 @@ impl Default for MaterialConfig {
     fn default() -> Self {
         MaterialConfig {
             alpha: 0.15,
+            roughness: None,
             ior_n: AL_N_550,
             ior_k: AL_K_550,
             energy_compensation: true,
         }
+    }
+}
+
+/// `[material]` as written: `alpha` and `roughness` are both optional, at most one given.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct MaterialRaw {
+    alpha: Option<f32>,
+    roughness: Option<f32>,
+    ior_n: Option<f32>,
+    ior_k: Option<f32>,
+    energy_compensation: Option<bool>,
+}
+
+impl TryFrom<MaterialRaw> for MaterialConfig {
+    type Error = String;
+    fn try_from(r: MaterialRaw) -> Result<Self, String> {
+        let d = MaterialConfig::default();
+        let alpha = match (r.alpha, r.roughness) {
+            (Some(a), Some(rough)) => {
+                return Err(format!(
+                    "material: both `alpha` = {a} and `roughness` = {rough} given; give one \
+                     (`roughness` is appleseed's / Disney's r with alpha = r^2, `alpha` is GGX alpha)"
+                ));
+            }
+            (Some(a), None) => a,
+            (None, Some(rough)) => rough * rough,
+            (None, None) => d.alpha,
+        };
+        Ok(MaterialConfig {
+            alpha,
+            roughness: r.roughness,
+            ior_n: r.ior_n.unwrap_or(d.ior_n),
+            ior_k: r.ior_k.unwrap_or(d.ior_k),
+            energy_compensation: r.energy_compensation.unwrap_or(d.energy_compensation),
+        })
     }
 }
 
@@ -432,6 +473,16 @@ impl SceneConfig {
             range_f(field, o.position_mm[i], -1e6, 1e6, false, "[-1e6, 1e6] mm")?;
         }
         let m = &self.material;
+        if let Some(r) = m.roughness {
+            range_f(
+                "material.roughness",
+                r,
+                0.0,
+                1.0,
+                true,
+                "(0, 1] (alpha = r^2)",
+            )?;
+        }
         range_f("material.alpha", m.alpha, 0.0, 1.0, true, "(0, 1]")?;
         range_f("material.ior_n", m.ior_n, 0.0, 10.0, true, "(0, 10]")?;
         range_f("material.ior_k", m.ior_k, 0.0, 20.0, false, "[0, 20]")?;
@@ -635,6 +686,33 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("fov"), "{e}");
+    }
+
+    #[test]
+    fn roughness_or_alpha() {
+        let c = SceneConfig::parse("[material]\nroughness = 0.3\n").expect("roughness");
+        assert!((c.material.alpha - 0.09).abs() < 1e-7);
+        assert_eq!(c.material.roughness, Some(0.3));
+        let c = SceneConfig::parse("[material]\nalpha = 0.3\n").expect("alpha");
+        assert_eq!(c.material.alpha, 0.3);
+        assert_eq!(c.material.roughness, None);
+        let c = SceneConfig::parse("[material]\nior_k = 5.0\n").expect("neither");
+        assert_eq!(c.material.alpha, MaterialConfig::default().alpha);
+        let e = SceneConfig::parse("[material]\nalpha = 0.1\nroughness = 0.3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`alpha`") && e.contains("`roughness`"), "{e}");
+        let e = SceneConfig::parse("[material]\nroughness = 1.5\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("material.roughness") && e.contains("(0, 1]"),
+            "{e}"
+        );
+        let e = SceneConfig::parse("[material]\nshine = 1.5\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("shine"), "{e}");
     }
 
     #[test]

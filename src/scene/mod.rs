@@ -13,3 +13,5 @@ pub use camera::Camera;
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
 pub use testbody::{FaceFrame, Variant, face_frames, testbody};
+pub mod regions;
+pub use regions::{PlanarRegion, RegionTolerance, planar_regions};

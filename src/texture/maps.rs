@@ -163,20 +163,25 @@ impl SlopeMap {
 
     /// Parallel sinusoidal grooves running along the map's y axis:
     /// h(x) = A sin(2 pi x / period), with A chosen so the steepest slope is
-    /// `max_slope_deg`. Covers `extent_mm` x `extent_mm`. A test pattern, not a finish.
+    /// `max_slope_deg` and x measured from the **map centre** (so the pattern at the
+    /// centre does not depend on the map's size, and a map moved by an offset moves its
+    /// grooves by exactly that offset). Covers `extent_mm` x `extent_mm`. A test pattern,
+    /// not a finish.
     pub fn test_grooves(
         extent_mm: f32,
         spacing_um: f64,
         period_mm: f32,
         max_slope_deg: f32,
     ) -> SlopeMap {
-        let n = ((extent_mm as f64 * 1000.0 / spacing_um).ceil() as usize).max(1);
+        // An even texel count puts texel corners on the map centre for every extent, so a
+        // bigger map (a farther offset elsewhere) samples the grooves at the same points.
+        let n = ((extent_mm as f64 * 1000.0 / spacing_um / 2.0).ceil() as usize).max(1) * 2;
         let smax = max_slope_deg.to_radians().tan();
         let k = std::f64::consts::TAU / (period_mm as f64 * 1000.0);
         let mut data = vec![[0.0f32; 2]; n * n];
         for y in 0..n {
             for x in 0..n {
-                let xu = (x as f64 + 0.5) * spacing_um;
+                let xu = (x as f64 + 0.5 - 0.5 * n as f64) * spacing_um;
                 // dh/dx = A k cos(k x) with A k = tan(max slope).
                 data[y * n + x] = [(smax as f64 * (k * xu).cos()) as f32, 0.0];
             }

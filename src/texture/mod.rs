@@ -23,7 +23,10 @@ pub mod sandblast;
 pub use error::{Result, TextureError};
 pub use io::{preview, write_exr_height, write_normal_png16, write_preview_png};
 pub use maps::{HeightMap, Moments, SlopeMap, normal_from_slope};
-pub use measurement::{XyzUnit, load_height_map, read_exr, read_xyz};
+pub use measurement::{
+    FormRemoval, MIN_VALID_FRACTION, XyzUnit, load_height_map, load_measurement, read_exr,
+    read_xyz, remove_form,
+};
 pub use milling::{
     MILLED_DEFAULT_MOMENTS, MilledParams, MilledVariation, ToolPath, generate_milled,
 };

@@ -75,7 +75,9 @@ pub struct MilledParams {
     /// conf: divisor of all standard deviations (3-sigma rule). Paper: 3.
     pub conf: f64,
     /// Sigma_c factor: centre jitter standard deviation = factor * delta / conf, mm, >= 0
-    /// (the paper writes (Sigma_c)_ii = factor * delta / conf). Paper: 0.01.
+    /// (the paper writes (Sigma_c)_ii = factor * delta / conf; by its 3-sigma rule
+    /// factor * delta is the jitter's range). Paper: 0.01 (0.3 um); its variation set
+    /// reaches 0.8 (24 um, a quarter of delta), which blurs the feed marks.
     pub center_noise: f64,
     /// epsilon: fraction of rings whose order is changed, in [0, 1]. Paper: 0.01.
     pub flip_fraction: f64,
@@ -115,8 +117,10 @@ pub struct MilledParams {
     pub noise_lambda: f64,
     /// tau: mean sine frequency in cycles per ring turn (Poisson), >= 0. Paper: 50.
     pub noise_tau: f64,
-    /// RMS of the ring noise N_k relative to a unit indentation depth, >= 0. The paper
-    /// gives no amplitude; 0.05 keeps the noise visible but below the tilt variation.
+    /// Amplitude of each of the lambda_k noise sines of N_k, relative to a unit
+    /// indentation depth, >= 0; the noise RMS is amplitude * sqrt(lambda_k / 2), so it
+    /// grows with lambda. The paper gives no amplitude; 0.01 gives an RMS of 0.05 at the
+    /// paper's lambda = 50 (visible, below the tilt variation).
     pub noise_amplitude: f64,
     /// a_min, a_max: interaction weight at the ring's back ~ U(a_min, a_max). Paper: 0, 0.3.
     pub a_min: f64,
@@ -170,7 +174,7 @@ impl Default for MilledParams {
             lh_outer_sigma: 0.5,
             noise_lambda: 50.0,
             noise_tau: 50.0,
-            noise_amplitude: 0.05,
+            noise_amplitude: 0.01,
             a_min: 0.0,
             a_max: 0.3,
             b_min: 0.1,

@@ -53,8 +53,10 @@ pub(super) fn sample_rings(
     seed: u64,
 ) -> (Vec<Ring>, Vec<f32>) {
     let conf = p.conf;
-    // (Sigma_c)_ii = factor * delta / conf is linear in a length, so it is read as a
-    // standard deviation in mm (a variance would scale with delta^2); see docs/texture.md.
+    // (Sigma_c)_ii = factor * delta / conf follows the paper's 3-sigma rule ("standard
+    // deviations were chosen ... such that the desired ranges are obtained. Hence
+    // conf = 3"): factor * delta is the range, / conf the standard deviation in mm. A
+    // variance would be (range / conf)^2. See docs/texture.md.
     let sd_c = p.center_noise * p.delta_mm / conf;
     let normal = |m: f64, s: f64| Gauss(m, s / conf);
     let d_wm = normal(p.w_minus_mean_mm, p.w_minus_sigma_mm);
@@ -159,8 +161,9 @@ pub(super) fn sample_rings(
 
 /// Noise N_k over the ring angle: lambda_k ~ P(lambda) sines with integer frequencies
 /// tau ~ P(tau) (cycles per turn, so the ring closes) and phases ~ U(-pi, pi), tabulated
-/// by one inverse FFT. Normalised by sqrt(lambda_k / 2) so its RMS is 1; the amplitude
-/// is applied in the raster loop.
+/// by one inverse FFT. Each sine has unit amplitude (the paper's sum, not renormalised),
+/// so the noise RMS is sqrt(lambda_k / 2) and grows with lambda; the per-sine amplitude
+/// `noise_amplitude` is applied in the raster loop.
 fn ring_noise(
     p: &MilledParams,
     rng: &mut rand_pcg::Pcg64Mcg,
@@ -195,7 +198,44 @@ fn ring_noise(
         spec[tau % n] += Complex32::from_polar(1.0, xi);
     }
     planner.plan_fft_inverse(n).process(&mut spec);
-    let norm = 1.0 / (lambda as f32 / 2.0).sqrt();
-    let table = spec.iter().map(|c| c.im * norm).collect();
+    let table = spec.iter().map(|c| c.im).collect();
     (table, p.noise_amplitude as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// RMS of the ring noise (per unit sine amplitude) averaged over many rings.
+    fn mean_rms(lambda: f64) -> f64 {
+        let p = MilledParams {
+            noise_lambda: lambda,
+            ..Default::default()
+        };
+        let mut planner = FftPlanner::new();
+        let mut sum = 0.0;
+        let n = 200;
+        for k in 0..n {
+            let mut rng = stream(3, 7, k);
+            let (table, amp) = ring_noise(&p, &mut rng, &mut planner);
+            assert_eq!(amp, p.noise_amplitude as f32);
+            let ms = table.iter().map(|&v| (v as f64).powi(2)).sum::<f64>() / table.len() as f64;
+            sum += ms.sqrt();
+        }
+        sum / n as f64
+    }
+
+    /// The paper's lambda set {30, 50, 70} must change the noise: lambda_k unit sines
+    /// have an RMS of sqrt(lambda_k / 2) (no renormalisation).
+    #[test]
+    fn ring_noise_grows_with_lambda() {
+        for lambda in [30.0, 50.0, 70.0] {
+            let rms = mean_rms(lambda);
+            let want = (lambda / 2.0).sqrt();
+            assert!(
+                (rms / want - 1.0).abs() < 0.05,
+                "lambda {lambda}: rms {rms}, want {want}"
+            );
+        }
+    }
 }

@@ -1,0 +1,593 @@
+//! The realism report (`synosis dataset report DIR`, `synosis dataset preview JOB`): one
+//! self-contained HTML page (inline SVG charts, PNG examples beside it) with, per finish,
+//! example images with their labels overlaid, the intensity histogram of the object's
+//! pixels, the milling marks' visibility in the image spectrum, and the defects'
+//! visibility distribution with the fraction the filter kept. docs/dataset.md, "Realism
+//! report".
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use rustfft::FftPlanner;
+use rustfft::num_complex::Complex32;
+
+use super::error::{DatasetError, Result};
+use super::job::{FinishKind, Job};
+use super::post::PostStep;
+use super::runner::ManifestEntry;
+use crate::scene::config::CameraConfig;
+
+/// Visibility histogram: bins of this width (visibility units, fraction of 255).
+const VIS_BIN: f64 = 0.01;
+const VIS_BINS: usize = 30;
+
+/// The milling marks in one image: power of the image spectrum at the projected tool
+/// path spacing against the noise floor.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureVisibility {
+    /// Projected path spacing rho on the image, pixels (at normal view; the tilted view
+    /// shortens it by down to cos(angle) along the tilt).
+    pub rho_px: f64,
+    /// Crop side used for the spectrum, pixels.
+    pub crop: usize,
+    /// Largest radially averaged power in the band of rho over the median power of the
+    /// band from 1.5 x its highest frequency to Nyquist (the noise floor), in dB.
+    pub peak_over_floor_db: f64,
+}
+
+/// Everything the report shows for one finish.
+#[derive(Clone, Debug, Default)]
+pub struct FinishReport {
+    pub name: String,
+    pub kind: Option<FinishKind>,
+    pub images: usize,
+    /// Object pixels of the post-processed images per grey level.
+    pub histogram: Vec<u64>,
+    /// 1st and 99th percentile of the object's grey levels.
+    pub p01_p99: (u8, u8),
+    /// Milled finishes: per image (index, visibility).
+    pub texture: Vec<(usize, TextureVisibility)>,
+    /// Per defect: class, visibility, kept.
+    pub defects: Vec<(u8, f64, bool)>,
+    /// Example PNGs (relative to the report).
+    pub examples: Vec<String>,
+}
+
+impl FinishReport {
+    /// Kept / all defects of a class (1 dent, 2 scratch).
+    pub fn kept(&self, class: u8) -> (usize, usize) {
+        let all: Vec<&(u8, f64, bool)> = self.defects.iter().filter(|d| d.0 == class).collect();
+        (all.iter().filter(|d| d.2).count(), all.len())
+    }
+}
+
+fn read_gray(dir: &Path, rel: &str) -> Result<(usize, usize, Vec<u8>)> {
+    let path = dir.join(rel);
+    let img = image::open(&path)
+        .map_err(|e| DatasetError::io(&path, std::io::Error::other(e)))?
+        .into_luma8();
+    let (w, h) = img.dimensions();
+    Ok((w as usize, h as usize, img.into_raw()))
+}
+
+/// The spectrum measure of [`TextureVisibility`] on the pixels of `face` in `image`.
+/// The crop is the largest square of side 2^k (16 ..= 512) around the face's pixel
+/// centroid that lies at least 98 % on the face; the crop is levelled (best-fit plane
+/// removed, so smooth shading does not leak into low frequencies), Hann-windowed and
+/// transformed; non-face pixels take the crop's face mean. None if no crop fits or the
+/// band of rho lies outside the crop's frequencies.
+pub fn texture_visibility(
+    w: usize,
+    h: usize,
+    image: &[u8],
+    faces: &[u8],
+    face: u8,
+    rho_px: f64,
+    cos_tilt: f64,
+) -> Option<TextureVisibility> {
+    let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0usize);
+    for y in 0..h {
+        for x in 0..w {
+            if faces[y * w + x] == face {
+                sx += x as f64;
+                sy += y as f64;
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    let (cx, cy) = ((sx / n as f64) as i64, (sy / n as f64) as i64);
+    let mut side = 512usize;
+    let crop = loop {
+        if side < 16 {
+            return None;
+        }
+        let (x0, y0) = (cx - side as i64 / 2, cy - side as i64 / 2);
+        if x0 >= 0 && y0 >= 0 && x0 as usize + side <= w && y0 as usize + side <= h {
+            let on = (0..side * side)
+                .filter(|k| faces[(y0 as usize + k / side) * w + x0 as usize + k % side] == face)
+                .count();
+            if on as f64 >= 0.98 * (side * side) as f64 {
+                break (x0 as usize, y0 as usize);
+            }
+        }
+        side /= 2;
+    };
+    let n = side;
+    let mut m = crate::texture::HeightMap::new(n, n, 1.0);
+    for y in 0..n {
+        for x in 0..n {
+            let k = (crop.1 + y) * w + crop.0 + x;
+            m.data[y * n + x] = if faces[k] == face {
+                image[k] as f32
+            } else {
+                f32::NAN
+            };
+        }
+    }
+    crate::texture::remove_form(&mut m, crate::texture::FormRemoval::Plane);
+    let hann = |i: usize| 0.5 - 0.5 * (std::f32::consts::TAU * i as f32 / n as f32).cos();
+    let mut buf: Vec<Complex32> = (0..n * n)
+        .map(|k| Complex32::new(m.data[k] * hann(k % n) * hann(k / n), 0.0))
+        .collect();
+    let fft = FftPlanner::new().plan_fft_forward(n);
+    for row in buf.chunks_mut(n) {
+        fft.process(row);
+    }
+    let mut col = vec![Complex32::new(0.0, 0.0); n];
+    for x in 0..n {
+        for y in 0..n {
+            col[y] = buf[y * n + x];
+        }
+        fft.process(&mut col);
+        for y in 0..n {
+            buf[y * n + x] = col[y];
+        }
+    }
+    // Radially averaged power per integer radius (cycles per crop).
+    let half = n / 2;
+    let mut sum = vec![0.0f64; half + 1];
+    let mut cnt = vec![0usize; half + 1];
+    for y in 0..n {
+        for x in 0..n {
+            let fx = if x <= half {
+                x as f64
+            } else {
+                x as f64 - n as f64
+            };
+            let fy = if y <= half {
+                y as f64
+            } else {
+                y as f64 - n as f64
+            };
+            let r = (fx * fx + fy * fy).sqrt().round() as usize;
+            if r <= half {
+                sum[r] += buf[y * n + x].norm_sqr() as f64;
+                cnt[r] += 1;
+            }
+        }
+    }
+    let p: Vec<f64> = sum
+        .iter()
+        .zip(&cnt)
+        .map(|(s, c)| s / (*c).max(1) as f64)
+        .collect();
+    // Band of rho: periods from 0.9 cos(tilt) rho to 1.1 rho.
+    let r_lo = (n as f64 / (1.1 * rho_px)).floor().max(1.0) as usize;
+    let r_hi = (n as f64 / (0.9 * cos_tilt * rho_px)).ceil() as usize;
+    let f_lo = ((1.5 * r_hi as f64).ceil() as usize).max(r_hi + 1);
+    if r_hi >= half || f_lo + 2 > half {
+        return None;
+    }
+    let peak = p[r_lo..=r_hi].iter().cloned().fold(0.0, f64::max);
+    let mut floor: Vec<f64> = p[f_lo..=half].to_vec();
+    floor.sort_by(f64::total_cmp);
+    let med = floor[floor.len() / 2].max(1e-30);
+    Some(TextureVisibility {
+        rho_px,
+        crop: n,
+        peak_over_floor_db: 10.0 * (peak.max(1e-30) / med).log10(),
+    })
+}
+
+/// Pixel footprint on a face at normal view, mm: the default camera's pitch (scaled to
+/// the image width, as `--width` keeps the sensor size) times distance / focal length.
+pub fn pixel_mm(width: u32) -> f64 {
+    let c = CameraConfig::default();
+    c.pixel_um as f64 * 1e-3 * (c.width as f64 / width.max(1) as f64) * c.working_distance_mm as f64
+        / c.focal_mm as f64
+}
+
+/// Builds the report of the images in `entries` (files under `dir`) into `out_dir`
+/// (`report.html` plus example PNGs). Returns the per-finish numbers.
+pub fn write_report(
+    dir: &Path,
+    job: &Job,
+    entries: &[ManifestEntry],
+    examples_per_finish: usize,
+    out_dir: &Path,
+) -> Result<Vec<FinishReport>> {
+    std::fs::create_dir_all(out_dir).map_err(|e| DatasetError::io(out_dir, e))?;
+    let threshold = job.postprocess.iter().find_map(|s| match s {
+        PostStep::VisibilityFilter { threshold } => Some(*threshold),
+        _ => None,
+    });
+    let mut by_finish: BTreeMap<String, FinishReport> = BTreeMap::new();
+    for f in &job.finishes {
+        by_finish.insert(
+            f.name.clone(),
+            FinishReport {
+                name: f.name.clone(),
+                kind: Some(f.kind),
+                histogram: vec![0; 256],
+                ..Default::default()
+            },
+        );
+    }
+    let mut sorted: Vec<&ManifestEntry> = entries.iter().collect();
+    // Defective images first as examples.
+    sorted.sort_by_key(|e| (e.defects.is_empty(), e.index));
+    for e in sorted {
+        let Some(fr) = by_finish.get_mut(&e.finish) else {
+            continue;
+        };
+        let base = Path::new(&e.image).parent().unwrap_or(Path::new("."));
+        let (w, h, img) = read_gray(dir, &e.image)?;
+        let (_, _, object) = read_gray(dir, &base.join("object.png").to_string_lossy())?;
+        let (_, _, faces) = read_gray(dir, &e.faces)?;
+        let (_, _, mask) = read_gray(dir, &base.join("mask.png").to_string_lossy())?;
+        fr.images += 1;
+        for (v, o) in img.iter().zip(&object) {
+            if *o > 0 {
+                fr.histogram[*v as usize] += 1;
+            }
+        }
+        for d in &e.defects {
+            fr.defects.push((d.class, d.visibility, d.kept));
+        }
+        let finish = job.finishes.iter().find(|f| f.name == e.finish);
+        if let Some(f) = finish.filter(|f| f.kind == FinishKind::Milled)
+            && let Ok(p) =
+                toml::Value::Table(f.params.clone()).try_into::<crate::texture::MilledParams>()
+            && let Some((face, deg)) = super::job::parse_view(&e.viewpoint)
+        {
+            let rho_px = p.rho_mm() / pixel_mm(e.width);
+            if let Some(t) =
+                texture_visibility(w, h, &img, &faces, face, rho_px, deg.to_radians().cos())
+            {
+                fr.texture.push((e.index, t));
+            }
+        }
+        if fr.examples.len() < examples_per_finish {
+            let name = format!("{}-{}.png", sanitize(&e.finish), e.id);
+            let mut rgb = image::RgbImage::new(w as u32, h as u32);
+            for (k, px) in rgb.pixels_mut().enumerate() {
+                let g = img[k] as f32;
+                *px = match mask[k] {
+                    1 => image::Rgb([(0.5 * g + 127.0) as u8, (0.5 * g) as u8, (0.5 * g) as u8]),
+                    2 => image::Rgb([
+                        (0.5 * g) as u8,
+                        (0.5 * g + 60.0) as u8,
+                        (0.5 * g + 127.0) as u8,
+                    ]),
+                    _ => image::Rgb([img[k]; 3]),
+                };
+            }
+            let path = out_dir.join(&name);
+            rgb.save(&path)
+                .map_err(|err| DatasetError::io(&path, std::io::Error::other(err)))?;
+            fr.examples.push(name);
+        }
+    }
+    for fr in by_finish.values_mut() {
+        fr.p01_p99 = percentiles(&fr.histogram);
+    }
+    let reports: Vec<FinishReport> = job
+        .finishes
+        .iter()
+        .filter_map(|f| by_finish.remove(&f.name))
+        .collect();
+    let html = render_html(job, &reports, threshold);
+    let path = out_dir.join("report.html");
+    crate::util::write_atomic(&path, html.as_bytes()).map_err(|e| DatasetError::io(&path, e))?;
+    Ok(reports)
+}
+
+fn sanitize(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+fn percentiles(hist: &[u64]) -> (u8, u8) {
+    let total: u64 = hist.iter().sum();
+    if total == 0 {
+        return (0, 0);
+    }
+    let at = |q: f64| {
+        let target = (q * total as f64).ceil().max(1.0) as u64;
+        let mut acc = 0;
+        for (v, c) in hist.iter().enumerate() {
+            acc += c;
+            if acc >= target {
+                return v as u8;
+            }
+        }
+        255
+    };
+    (at(0.01), at(0.99))
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// Bars as an inline SVG (values scaled to the tallest), with an optional vertical line.
+fn svg_bars(values: &[f64], w: f64, h: f64, line_at: Option<f64>, label: &str) -> String {
+    let max = values.iter().cloned().fold(0.0, f64::max).max(1e-30);
+    let bw = w / values.len().max(1) as f64;
+    let mut s = format!(
+        "<svg width=\"{w}\" height=\"{}\" xmlns=\"http://www.w3.org/2000/svg\"><rect width=\"{w}\" height=\"{h}\" fill=\"#f4f4f4\"/>",
+        h + 14.0
+    );
+    for (i, v) in values.iter().enumerate() {
+        let bh = h * v / max;
+        let _ = write!(
+            s,
+            "<rect x=\"{:.2}\" y=\"{:.2}\" width=\"{:.2}\" height=\"{:.2}\" fill=\"#446\"/>",
+            i as f64 * bw,
+            h - bh,
+            bw.max(0.5),
+            bh
+        );
+    }
+    if let Some(x) = line_at {
+        let _ = write!(
+            s,
+            "<line x1=\"{0:.1}\" x2=\"{0:.1}\" y1=\"0\" y2=\"{h}\" stroke=\"#c00\"/>",
+            x * w
+        );
+    }
+    let _ = write!(
+        s,
+        "<text x=\"0\" y=\"{}\" font-size=\"11\">{}</text></svg>",
+        h + 12.0,
+        esc(label)
+    );
+    s
+}
+
+fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> String {
+    let mut s = String::from(
+        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>synosis realism report</title>\
+         <style>body{font-family:sans-serif;margin:1em}td,th{padding:2px 8px;text-align:right}\
+         img{max-width:420px;margin:2px}h2{margin-top:1.5em}</style></head><body>",
+    );
+    let _ = write!(
+        s,
+        "<h1>Realism report</h1><p>Job {}: {} x {} px, {} spp. Per finish: examples \
+         (dents red, scratches blue), the object's grey-level histogram, the milling marks' \
+         spectral peak at the projected path spacing rho over the noise floor, and the \
+         defects' visibility (|mean inside - mean of the ring| / 255) with the filter's \
+         threshold {}.</p>",
+        esc(&job.origin),
+        job.render.width,
+        job.render.height,
+        job.render.spp,
+        threshold.map_or("(none)".into(), |t| format!("{t}"))
+    );
+    s.push_str(
+        "<table><tr><th>finish</th><th>images</th><th>grey p1..p99</th><th>rho peak / floor (dB, median)</th>\
+         <th>dents kept</th><th>scratches kept</th></tr>",
+    );
+    for r in reports {
+        let tex = median_db(&r.texture).map_or("-".into(), |d| format!("{d:.1}"));
+        let (dk, dn) = r.kept(1);
+        let (sk, sn) = r.kept(2);
+        let _ = write!(
+            s,
+            "<tr><td style=\"text-align:left\"><a href=\"#{}\">{}</a></td><td>{}</td><td>{}..{}</td><td>{}</td><td>{dk}/{dn}</td><td>{sk}/{sn}</td></tr>",
+            sanitize(&r.name),
+            esc(&r.name),
+            r.images,
+            r.p01_p99.0,
+            r.p01_p99.1,
+            tex
+        );
+    }
+    s.push_str("</table>");
+    for r in reports {
+        let _ = write!(s, "<h2 id=\"{}\">{}</h2>", sanitize(&r.name), esc(&r.name));
+        for e in &r.examples {
+            let _ = write!(s, "<a href=\"{0}\"><img src=\"{0}\"></a>", esc(e));
+        }
+        let hist: Vec<f64> = r.histogram.iter().map(|&c| c as f64).collect();
+        s.push_str("<p>");
+        s.push_str(&svg_bars(
+            &hist,
+            512.0,
+            100.0,
+            None,
+            &format!(
+                "object grey levels 0..255 (p1 {}, p99 {})",
+                r.p01_p99.0, r.p01_p99.1
+            ),
+        ));
+        let mut vis = vec![0.0; VIS_BINS];
+        for d in &r.defects {
+            vis[((d.1 / VIS_BIN) as usize).min(VIS_BINS - 1)] += 1.0;
+        }
+        s.push(' ');
+        s.push_str(&svg_bars(
+            &vis,
+            300.0,
+            100.0,
+            threshold.map(|t| t / (VIS_BIN * VIS_BINS as f64)),
+            &format!(
+                "defect visibility 0..{:.2} (red: threshold)",
+                VIS_BIN * VIS_BINS as f64
+            ),
+        ));
+        s.push_str("</p>");
+        let (dk, dn) = r.kept(1);
+        let (sk, sn) = r.kept(2);
+        let _ = write!(
+            s,
+            "<p>Kept by the filter: dents {dk} of {dn}, scratches {sk} of {sn}.</p>"
+        );
+        if !r.texture.is_empty() {
+            s.push_str("<p>Milling marks (spectral peak at rho over the noise floor): ");
+            for (i, t) in &r.texture {
+                let _ = write!(
+                    s,
+                    "image {i}: {:.1} dB (rho {:.0} px, crop {}); ",
+                    t.peak_over_floor_db, t.rho_px, t.crop
+                );
+            }
+            s.push_str("</p>");
+        }
+    }
+    s.push_str("</body></html>\n");
+    s
+}
+
+fn median_db(t: &[(usize, TextureVisibility)]) -> Option<f64> {
+    let mut v: Vec<f64> = t.iter().map(|x| x.1.peak_over_floor_db).collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied()
+}
+
+/// The images of a dataset folder: `manifest.jsonl`, else the shard manifests, else
+/// `preview.jsonl` (written by `dataset preview`).
+pub fn folder_entries(dir: &Path) -> Result<Vec<ManifestEntry>> {
+    let manifest = dir.join("manifest.jsonl");
+    if manifest.is_file() {
+        return super::runner::read_manifest(&manifest, false);
+    }
+    let mut out = Vec::new();
+    let mdir = dir.join("manifests");
+    if mdir.is_dir() {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&mdir)
+            .map_err(|e| DatasetError::io(&mdir, e))?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "jsonl"))
+            .collect();
+        files.sort();
+        for f in files {
+            out.extend(super::runner::read_manifest(&f, false)?);
+        }
+    }
+    let preview = dir.join("preview.jsonl");
+    if out.is_empty() && preview.is_file() {
+        out = super::runner::read_manifest(&preview, false)?;
+    }
+    Ok(out)
+}
+
+/// Items for a preview: per finish, up to `n` images, defective instances first, the
+/// views cycling so the sample shows several of them.
+pub fn preview_items(prep: &super::runner::Prepared, n: usize) -> Vec<usize> {
+    let plan = &prep.plan;
+    let views = prep.job.views.len().max(1);
+    let mut out = Vec::new();
+    for fi in 0..prep.job.finishes.len() {
+        let mut picked = 0;
+        let mut k = 0usize;
+        let insts: Vec<usize> = {
+            let mut v: Vec<usize> = (0..plan.instances.len())
+                .filter(|&i| plan.instances[i].finish == fi)
+                .collect();
+            v.sort_by_key(|&i| (plan.instances[i].defect_set.is_none(), i));
+            v
+        };
+        while picked < n && k < insts.len() * views {
+            let inst = insts[k % insts.len()];
+            let view = (k / insts.len() + k) % views;
+            if let Some(item) = plan
+                .items
+                .iter()
+                .find(|it| it.instance == inst && it.view == view)
+                && !out.contains(&item.index)
+            {
+                out.push(item.index);
+                picked += 1;
+            }
+            k += 1;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stripes of period rho on a face: a clear peak; the same face with noise only (or
+    /// stripes at another period): none.
+    #[test]
+    fn spectrum_peak_at_rho_against_the_floor() {
+        let (w, h) = (300usize, 260usize);
+        let faces: Vec<u8> = (0..w * h)
+            .map(|k| {
+                if (20..280).contains(&(k % w)) && (10..250).contains(&(k / w)) {
+                    1
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let mut rng = 12345u64;
+        let mut noise = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 20.0
+        };
+        let img = |period: f64, amp: f64, noise: &mut dyn FnMut() -> f64| -> Vec<u8> {
+            (0..w * h)
+                .map(|k| {
+                    let (x, y) = ((k % w) as f64, (k / w) as f64);
+                    let u = x * 0.96 + y * 0.28; // stripes turned by 16 degrees
+                    (120.0 + amp * (std::f64::consts::TAU * u / period).sin() + noise())
+                        .clamp(0.0, 255.0) as u8
+                })
+                .collect()
+        };
+        let stripes = img(20.0, 15.0, &mut noise);
+        let t = texture_visibility(w, h, &stripes, &faces, 1, 20.0, 1.0).expect("crop");
+        assert_eq!(t.crop, 128);
+        assert!(t.peak_over_floor_db > 20.0, "{t:?}");
+        let flat = img(20.0, 0.0, &mut noise);
+        let t0 = texture_visibility(w, h, &flat, &faces, 1, 20.0, 1.0).expect("crop");
+        assert!(t0.peak_over_floor_db < 6.0, "{t0:?}");
+        let other = img(7.0, 15.0, &mut noise);
+        let t1 = texture_visibility(w, h, &other, &faces, 1, 20.0, 1.0).expect("crop");
+        assert!(t1.peak_over_floor_db < 6.0, "{t1:?}");
+        // No face pixels: nothing to measure.
+        assert!(texture_visibility(w, h, &stripes, &faces, 2, 20.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn percentiles_of_a_histogram() {
+        let mut h = vec![0u64; 256];
+        h[10] = 1;
+        h[100] = 98;
+        h[200] = 1;
+        assert_eq!(percentiles(&h), (10, 100));
+        h[200] = 2;
+        assert_eq!(percentiles(&h), (100, 200));
+    }
+}
