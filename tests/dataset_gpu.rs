@@ -2,39 +2,19 @@
 //! validation layers on: the smoke job's first images render, the annotation agrees
 //! with the view, and the labels are consistent with the radiance.
 
+mod common;
+
 use synosis::dataset::gpu::GpuRenderer;
-use synosis::dataset::texture_bridge::ModuleTextures;
-use synosis::dataset::{self, RunOptions, Shard};
+use synosis::dataset::{self, Shard};
 use synosis::trace::AccelChoice;
 
 fn smoke(accel: AccelChoice, name: &str) {
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/scenes/smoke-dataset.toml"
-    ))
-    .unwrap()
-    .replace("width = 64", "width = 32")
-    .replace("height = 48", "height = 24")
-    .replace("spp = 4", "spp = 1");
-    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
-    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
     // Both backends are required: tools/setup installs lavapipe with ray query.
     let mut r = GpuRenderer::new(accel, true).unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
     let out = tmp.path().join(name);
     // Shard 0 of 4: the first instance's two views.
-    let rep = dataset::run(
-        &prep,
-        &out,
-        &mut r,
-        &mut ModuleTextures::default(),
-        RunOptions {
-            shard: Shard { index: 0, count: 4 },
-            fail_after: None,
-            progress: None,
-        },
-    )
-    .unwrap();
+    let rep = common::run_small_smoke(&mut r, &out, Shard { index: 0, count: 4 });
     assert_eq!(rep.rendered, 4);
     let entries = dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
     // The smoke job keeps defects through the visibility filter, so its labels are not

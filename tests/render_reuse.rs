@@ -2,40 +2,20 @@
 //! the GPU scene (acceleration structure, materials, labels) once per run of images of
 //! the same mesh, not once per image. Its own test binary: the counters are per process.
 
+mod common;
+
 use synosis::dataset::gpu::GpuRenderer;
-use synosis::dataset::texture_bridge::ModuleTextures;
-use synosis::dataset::{self, RunOptions, Shard};
+use synosis::dataset::{self, Shard};
 use synosis::render::{GpuScene, PathTracer};
 use synosis::trace::AccelChoice;
 
 #[test]
 fn a_job_builds_pipelines_once_and_each_mesh_once() {
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/scenes/smoke-dataset.toml"
-    ))
-    .unwrap()
-    .replace("width = 64", "width = 32")
-    .replace("height = 48", "height = 24")
-    .replace("spp = 4", "spp = 1");
-    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
-    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
     let (tracers0, scenes0) = (PathTracer::built_count(), GpuScene::built_count());
     let mut r = GpuRenderer::new(AccelChoice::Software, true).unwrap();
     let out = tmp.path().join("out");
-    let rep = dataset::run(
-        &prep,
-        &out,
-        &mut r,
-        &mut ModuleTextures::default(),
-        RunOptions {
-            shard: Shard { index: 0, count: 1 },
-            fail_after: None,
-            progress: None,
-        },
-    )
-    .unwrap();
+    let rep = common::run_small_smoke(&mut r, &out, Shard { index: 0, count: 1 });
     assert_eq!(rep.rendered, 16);
     // Images of one mesh come one after the other: the views of a defective instance,
     // and every defect-free instance of a finish (the plain test body).

@@ -35,3 +35,30 @@ pub fn assert_clean(ctx: &Context) {
         errors.join("\n")
     );
 }
+
+/// Runs shard `shard` of the smoke job (scenes/smoke-dataset.toml) made smaller (32 x 24,
+/// 1 spp) with `renderer` into `out`.
+pub fn run_small_smoke(
+    renderer: &mut dyn synosis::dataset::ImageRenderer,
+    out: &std::path::Path,
+    shard: synosis::dataset::Shard,
+) -> synosis::dataset::RunReport {
+    use synosis::dataset::{self, RunOptions};
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/smoke-dataset.toml"
+    ))
+    .unwrap()
+    .replace("width = 64", "width = 32")
+    .replace("height = 48", "height = 24")
+    .replace("spp = 4", "spp = 1");
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
+    let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+    let opts = RunOptions {
+        shard,
+        fail_after: None,
+        progress: None,
+    };
+    dataset::run(&prep, out, renderer, &mut textures, opts).unwrap()
+}
