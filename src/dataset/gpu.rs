@@ -26,8 +26,8 @@ const FACE_OBJECT_OTHER: u8 = 4;
 pub struct GpuRenderer {
     ctx: Arc<Context>,
     tracer: PathTracer,
-    /// The GPU scene of the last mesh key, with the stage it was built from.
-    cached: Option<(u64, Stage, GpuScene)>,
+    /// The GPU scene of the last mesh key.
+    cached: Option<(u64, GpuScene)>,
     base: SceneConfig,
     stages: Vec<(String, f64)>,
 }
@@ -56,12 +56,12 @@ impl GpuRenderer {
 
 /// The GPU scene for `req`'s mesh: the cached one when the mesh key is the same.
 fn scene_for<'c>(
-    cached: &'c mut Option<(u64, Stage, GpuScene)>,
+    cached: &'c mut Option<(u64, GpuScene)>,
     tracer: &PathTracer,
     base: &SceneConfig,
     req: &ImageRequest,
     profiler: &Profiler,
-) -> Result<&'c mut (u64, Stage, GpuScene), String> {
+) -> Result<&'c mut GpuScene, String> {
     if cached.as_ref().map(|c| c.0) != Some(req.mesh_key) {
         *cached = None; // free the old scene before building the next
         let mut object = req.mesh.clone();
@@ -70,11 +70,11 @@ fn scene_for<'c>(
                 l.face = FACE_OBJECT_OTHER;
             }
         }
-        let stage = Stage::new(&object, base.object.position_mm, &base.table);
+        let stage = Stage::new(object, base.object.position_mm, &base.table);
         let scene = GpuScene::new(tracer, &stage, Some(profiler)).map_err(|e| e.to_string())?;
-        *cached = Some((req.mesh_key, stage, scene));
+        *cached = Some((req.mesh_key, scene));
     }
-    Ok(cached.as_mut().expect("just filled"))
+    Ok(&mut cached.as_mut().expect("just filled").1)
 }
 
 /// Each inspected face's texture: planar projection in the face frame, rotated, shifted
@@ -114,12 +114,13 @@ impl ImageRenderer for GpuRenderer {
         let view = parse_view(&cfg.camera.view).map_err(|e| e.to_string())?;
         let profiler = Profiler::new();
         let tracer = &self.tracer;
-        let (_, stage, scene) = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
+        let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
         scene
             .set_face_maps(tracer, &face_maps(req))
             .map_err(|e| e.to_string())?;
-        let setup =
-            ViewSetup::for_view(stage, view, &cfg.camera, &cfg.light).map_err(|e| e.to_string())?;
+        let (frames, first_light) = (scene.face_frames(), scene.triangle_count);
+        let setup = ViewSetup::for_view(frames, first_light, view, &cfg.camera, &cfg.light)
+            .map_err(|e| e.to_string())?;
         let opts = FrameOptions {
             annotate_grid: Some(DEFAULT_COVERAGE_GRID),
             profiler: Some(&profiler),

@@ -96,6 +96,11 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Frames of the stage's inspected faces (where views and slope maps are placed).
+    pub fn face_frames(&self) -> &[FaceFrame] {
+        &self.face_frames
+    }
+
     pub(crate) fn map_buffers(&self) -> (&Buffer, &[Buffer; 3]) {
         (&self.maps.headers, &self.maps.texels)
     }

@@ -62,15 +62,8 @@ pub fn trace_rays(
         storage,
         MemoryKind::Readback,
     )?;
+    // More groups than one dispatch allows: the graph refuses it (VkError::WorkgroupLimit).
     let groups = (rays.len() as u32).div_ceil(64);
-    let max_groups = ctx.info.max_workgroup_count[0];
-    if groups > max_groups {
-        return Err(VkError::Other(format!(
-            "{} rays exceed one dispatch ({} groups max)",
-            rays.len(),
-            max_groups
-        )));
-    }
     let push = HitsPush {
         count: rays.len() as u32,
         groups,

@@ -197,10 +197,6 @@ impl<'s> View<'s> {
         };
         Ok((sum.iter().map(|v| v * inv).collect(), annotation))
     }
-
-    pub fn camera(&self) -> &Camera {
-        &self.camera
-    }
 }
 
 /// The path tracer's parameter block for one view.

@@ -83,9 +83,9 @@ pub struct Stage {
 impl Stage {
     /// Puts a square table of `table.size_mm` under `object`, centred below `centre`
     /// (the object's position) at its height.
-    pub fn new(object: &Mesh, centre: [f32; 3], table: &TableConfig) -> Stage {
-        let face_frames = face_frames(object);
-        let mut mesh = object.clone();
+    pub fn new(object: Mesh, centre: [f32; 3], table: &TableConfig) -> Stage {
+        let face_frames = face_frames(&object);
+        let mut mesh = object;
         let mut materials = vec![MAT_CONDUCTOR; mesh.triangles.len()];
         let [ox, oy, oz] = centre;
         let hs = table.size_mm * 0.5;
@@ -174,20 +174,22 @@ pub struct ViewSetup {
 }
 
 impl ViewSetup {
-    /// The view `view` of the stage's face, with the ring light on the camera.
+    /// The view `view` of a face of a stage (given by its face frames), with the ring
+    /// light on the camera, its triangles numbered from `first_light` (the stage's
+    /// triangle count).
     pub fn for_view(
-        stage: &Stage,
+        face_frames: &[FaceFrame],
+        first_light: u32,
         view: View,
         camera: &CameraConfig,
         light: &LightConfig,
     ) -> Result<ViewSetup, AssembleError> {
-        let frame = stage
-            .face_frames
+        let frame = face_frames
             .iter()
             .find(|f| f.face == view.face)
             .ok_or(AssembleError::NoFace(face_name(view.face)))?;
         let camera = Camera::for_view(frame, view, camera);
-        let light = LightGeometry::ring(&camera, light, stage.mesh.triangles.len() as u32);
+        let light = LightGeometry::ring(&camera, light, first_light);
         Ok(ViewSetup { camera, light })
     }
 }
@@ -205,9 +207,16 @@ impl RenderScene {
     /// The scene `cfg` describes around `object` (already translated): table, the
     /// configured view, the ring light and the `[texture]` maps.
     pub fn assemble(object: &Mesh, cfg: &SceneConfig) -> Result<RenderScene, AssembleError> {
-        let stage = Stage::new(object, cfg.object.position_mm, &cfg.table);
+        let stage = Stage::new(object.clone(), cfg.object.position_mm, &cfg.table);
         let view = parse_view(&cfg.camera.view)?;
-        let view = ViewSetup::for_view(&stage, view, &cfg.camera, &cfg.light)?;
+        let first_light = stage.mesh.triangles.len() as u32;
+        let view = ViewSetup::for_view(
+            &stage.face_frames,
+            first_light,
+            view,
+            &cfg.camera,
+            &cfg.light,
+        )?;
         let face_maps = texture_maps(&cfg.texture, &stage.face_frames)?;
         Ok(RenderScene {
             stage,
