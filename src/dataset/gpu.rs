@@ -116,7 +116,7 @@ impl ImageRenderer for GpuRenderer {
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
         scene
-            .set_face_maps(tracer, &face_maps(req))
+            .set_face_maps(tracer, &face_maps(req), &req.placement)
             .map_err(|e| e.to_string())?;
         let (frames, first_light) = (scene.face_frames(), scene.triangle_count);
         let setup = ViewSetup::for_view(frames, first_light, view, &cfg.camera, &cfg.light)

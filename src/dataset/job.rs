@@ -109,6 +109,11 @@ pub struct MappingSettings {
     pub rotation_deg: f64,
     /// Texture translation per face, texture pixels, each axis drawn from [-t, t].
     pub translation_px: FaceTranslation,
+    /// "part" (default): every planar region of the object gets the finish (regions
+    /// other than A, B, C: one of the instance's three maps, rotation drawn from
+    /// [-rotation_deg, rotation_deg], offset over the whole map, maps repeated beyond
+    /// their edges); "faces": only A, B and C, each map clipped (before issue 11).
+    pub cover: crate::scene::assemble::Cover,
 }
 
 impl Default for MappingSettings {
@@ -116,6 +121,7 @@ impl Default for MappingSettings {
         MappingSettings {
             rotation_deg: 15.0,
             translation_px: FaceTranslation::default(),
+            cover: Default::default(),
         }
     }
 }

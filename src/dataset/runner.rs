@@ -23,6 +23,7 @@ use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
 use crate::render::pixels::{Exposure, quantise_units8};
+use crate::scene::assemble::Placement;
 use crate::scene::{Degenerates, Mesh, face_frames, import_mesh, testbody};
 
 /// A job with everything loaded and checked: meshes, defect sets, the plan.
@@ -746,6 +747,11 @@ impl<'p> Ctx<'p> {
             view,
             alpha: params.alpha as f32,
             face_textures,
+            placement: Placement {
+                cover: job.mapping.cover,
+                seed: derive(inst.seed, &[tag::REGIONS]),
+                rotation_range_deg: job.mapping.rotation_deg as f32,
+            },
             width: job.render.width as u32,
             height: job.render.height as u32,
             spp: job.render.spp as u32,
