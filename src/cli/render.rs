@@ -7,8 +7,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_scene};
+use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene};
 use synosis::render::pixels::Exposure;
+use synosis::scene::assemble::load_object_inspected;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::trace::{AccelChoice, resolve};
 use synosis::vk::{Context, ContextOptions, Profiler};
@@ -73,9 +74,24 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         cfg.camera.view = v.clone();
     }
     cfg.validate()?;
-    let object = profiler
-        .cpu("load object", || load_object(&cfg))
+    let (object, inspected) = profiler
+        .cpu("load object", || load_object_inspected(&cfg))
         .context("loading the object")?;
+    for f in &inspected {
+        eprintln!(
+            "inspect: face {} (id {} in faces.png) = {}: {} triangles, {:.1} mm^2{}",
+            synosis::scene::mesh::face_name(f.face),
+            f.face,
+            f.selector.describe(),
+            f.triangles,
+            f.area,
+            if f.regions.is_empty() {
+                String::new()
+            } else {
+                format!(", regions {:?}", f.regions)
+            }
+        );
+    }
     let scene = RenderScene::assemble(&object, &cfg)?;
     let tables = profiler.cpu("energy tables", EnergyTables::compute);
     let ctx = profiler.cpu("Vulkan init", || {

@@ -43,27 +43,57 @@ pub struct FaceMap {
     pub offset_mm: [f32; 2],
 }
 
-/// The configured object (built-in test body or glTF), translated to its position.
+/// The configured object (built-in test body or mesh file), its inspected faces chosen
+/// by `inspect`, translated to its position.
 pub fn load_object(scene: &SceneConfig) -> Result<Mesh, AssembleError> {
-    use super::{Degenerates, Variant, import_mesh, testbody};
+    Ok(load_object_inspected(scene)?.0)
+}
+
+/// As [`load_object`], with what each `inspect` entry selected (empty without `inspect`).
+pub fn load_object_inspected(
+    scene: &SceneConfig,
+) -> Result<(Mesh, Vec<super::inspect::InspectedFace>), AssembleError> {
+    use super::mesh_io::{GltfUnitDefault, load_mesh};
+    use super::{Degenerates, Variant, testbody};
     let cfg: &ObjectConfig = &scene.object;
-    let mut mesh = match (scene.effective_builtin(), &cfg.gltf) {
-        (Some("testbody-m"), _) => testbody(Variant::M),
-        (Some(_), _) => testbody(Variant::B),
-        (None, Some(path)) => import_mesh(path, Degenerates::Reject)?.mesh,
-        (None, None) => {
+    let mut mesh = match (scene.effective_builtin(), &cfg.path, &cfg.gltf) {
+        (Some("testbody-m"), _, _) => testbody(Variant::M),
+        (Some(_), _, _) => testbody(Variant::B),
+        (None, Some(path), _) => {
+            load_mesh(path, cfg.unit, GltfUnitDefault::Spec, Degenerates::Reject)?
+                .imported
+                .mesh
+        }
+        (None, None, Some(path)) => {
+            load_mesh(
+                path,
+                cfg.unit,
+                GltfUnitDefault::Millimetres,
+                Degenerates::Reject,
+            )?
+            .imported
+            .mesh
+        }
+        (None, None, None) => {
             return Err(ConfigError::Invalid {
                 field: "object",
-                message: "needs `gltf` (a path) or `builtin`".into(),
+                message: "needs `path` (a mesh file) or `builtin`".into(),
             }
             .into());
         }
+    };
+    let inspected = match &cfg.inspect {
+        Some(list) => {
+            let sel = super::inspect::parse(list)?;
+            super::inspect::apply(&mut mesh, &sel, &super::RegionTolerance::default())?
+        }
+        None => Vec::new(),
     };
     let t = Vec3::from(cfg.position_mm);
     for p in &mut mesh.positions {
         *p += t;
     }
-    Ok(mesh)
+    Ok((mesh, inspected))
 }
 
 /// The object on its table: everything about a scene that stays the same from one view

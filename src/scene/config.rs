@@ -49,7 +49,18 @@ pub struct SceneConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct ObjectConfig {
     /// glTF (.gltf/.glb) path, relative to the scene file. Exclusive with `builtin`.
+    /// The old key: read in millimetres unless `unit` says otherwise.
     pub gltf: Option<PathBuf>,
+    /// Mesh file (glTF/GLB, OBJ, STL or PLY), relative to the scene file; wins over
+    /// `builtin`, exclusive with `gltf`.
+    pub path: Option<PathBuf>,
+    /// Unit of the mesh file's coordinates ("mm", "m", "in"); default: the format's
+    /// (glTF metres, synosis' own glTF files and the `gltf` key millimetres; OBJ, STL,
+    /// PLY millimetres). docs/mesh-format.md.
+    pub unit: Option<crate::scene::mesh_io::MeshUnit>,
+    /// Inspected faces: labels, region ids or normal selectors (`scene::inspect`);
+    /// none = the labels A, B, C the mesh carries.
+    pub inspect: Option<Vec<crate::scene::inspect::InspectEntry>>,
     /// "testbody-b" or "testbody-m". Used when `gltf` is absent.
     pub builtin: Option<String>,
     /// Translation of the object, mm (the table follows in x and y).
@@ -60,6 +71,9 @@ impl Default for ObjectConfig {
     fn default() -> Self {
         ObjectConfig {
             gltf: None,
+            path: None,
+            unit: None,
+            inspect: None,
             builtin: Some("testbody-b".into()),
             position_mm: [0.0; 3],
         }
@@ -421,6 +435,12 @@ impl SceneConfig {
             let base = path.parent().unwrap_or(Path::new("."));
             cfg.object.gltf = Some(base.join(g));
         }
+        if let Some(g) = &cfg.object.path
+            && g.is_relative()
+        {
+            let base = path.parent().unwrap_or(Path::new("."));
+            cfg.object.path = Some(base.join(g));
+        }
         if let Some(t) = &cfg.texture.path
             && t.is_relative()
         {
@@ -443,7 +463,31 @@ impl SceneConfig {
     /// Checks every field against its documented range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let o = &self.object;
-        match (&o.gltf, &o.builtin) {
+        if let (Some(g), Some(p)) = (&o.gltf, &o.path) {
+            return Err(ConfigError::Invalid {
+                field: "object.path / object.gltf",
+                message: format!(
+                    "both given ({} and {}); give one (`gltf` is the old name of `path`)",
+                    p.display(),
+                    g.display()
+                ),
+            });
+        }
+        if let Some(p) = o.path.as_ref().or(o.gltf.as_ref()) {
+            let field = if o.path.is_some() {
+                "object.path"
+            } else {
+                "object.gltf"
+            };
+            crate::scene::mesh_io::MeshFormat::of(p).map_err(|e| ConfigError::Invalid {
+                field,
+                message: e.to_string(),
+            })?;
+        }
+        if let Some(list) = &o.inspect {
+            crate::scene::inspect::parse(list)?;
+        }
+        match (o.path.as_ref().or(o.gltf.as_ref()), &o.builtin) {
             (Some(_), Some(_)) => {
                 // `builtin` has a default, so only complain when both were written; the
                 // loader clears the default when gltf is given (see `effective_builtin`).
@@ -457,7 +501,7 @@ impl SceneConfig {
             (None, None) => {
                 return Err(ConfigError::Invalid {
                     field: "object",
-                    message: "needs `gltf` (a path) or `builtin`".into(),
+                    message: "needs `path` (a mesh file) or `builtin`".into(),
                 });
             }
             _ => {}
@@ -622,9 +666,10 @@ impl SceneConfig {
         Ok(())
     }
 
-    /// The built-in body to use, if any: `gltf` wins over the default `builtin`.
+    /// The built-in body to use, if any: `path` (or `gltf`) wins over the default
+    /// `builtin`.
     pub fn effective_builtin(&self) -> Option<&str> {
-        if self.object.gltf.is_some() {
+        if self.object.gltf.is_some() || self.object.path.is_some() {
             None
         } else {
             self.object.builtin.as_deref()
