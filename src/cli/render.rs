@@ -34,7 +34,7 @@ pub struct RenderArgs {
     /// Trace backend (overrides SYNOSIS_ACCEL, which overrides render.accel).
     #[arg(long, value_enum)]
     accel: Option<AccelChoice>,
-    /// Viewpoint, e.g. A20 (overrides camera.view).
+    /// Viewpoint, e.g. A20 (overrides camera.view and any look_at / matrix / opencv pose).
     #[arg(long)]
     view: Option<String>,
     /// Write a 16-bit PNG instead of 8-bit.
@@ -72,6 +72,10 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if let Some(v) = &a.view {
         parse_view(v).context("--view")?;
         cfg.camera.view = v.clone();
+        // --view replaces any pose the file gives.
+        cfg.camera.look_at = None;
+        cfg.camera.matrix = None;
+        cfg.camera.opencv = None;
     }
     cfg.validate()?;
     let (object, inspected) = profiler
@@ -143,7 +147,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     println!(
         "{} view {}: {}x{}, {} spp ({:?} sampler, {:?} light sampling, texture {}), {} bounces, {} in {:.1} s (GPU {:.0} ms), mean radiance {:.4}",
         a.scene.display(),
-        cfg.camera.view,
+        cfg.camera.describe_pose(),
         w,
         h,
         cfg.render.spp,

@@ -9,8 +9,8 @@ use glam::Vec3;
 
 use super::camera::{Camera, ring_light};
 use super::config::{
-    CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, SceneConfig, TableConfig,
-    TextureConfig, View, parse_view,
+    CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, Pose, SceneConfig,
+    TableConfig, TextureConfig, View,
 };
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
 use super::testbody::{FaceFrame, face_frames};
@@ -224,6 +224,26 @@ impl ViewSetup {
     }
 }
 
+impl ViewSetup {
+    /// The camera at `pose` (a face-relative view or a free pose) with the ring light on
+    /// it; the view's face must have a frame.
+    pub fn for_pose(
+        face_frames: &[FaceFrame],
+        first_light: u32,
+        pose: &Pose,
+        camera: &CameraConfig,
+        light: &LightConfig,
+    ) -> Result<ViewSetup, AssembleError> {
+        if let Pose::View(view) = pose {
+            return ViewSetup::for_view(face_frames, first_light, *view, camera, light);
+        }
+        let camera =
+            Camera::for_pose(face_frames, pose, camera).expect("a free pose needs no face frame");
+        let light = LightGeometry::ring(&camera, light, first_light);
+        Ok(ViewSetup { camera, light })
+    }
+}
+
 /// A whole scene file's scene: stage, view and slope maps.
 #[derive(Clone, Debug)]
 pub struct RenderScene {
@@ -238,12 +258,12 @@ impl RenderScene {
     /// configured view, the ring light and the `[texture]` maps.
     pub fn assemble(object: &Mesh, cfg: &SceneConfig) -> Result<RenderScene, AssembleError> {
         let stage = Stage::new(object.clone(), cfg.object.position_mm, &cfg.table);
-        let view = parse_view(&cfg.camera.view)?;
+        let pose = cfg.camera.pose()?;
         let first_light = stage.mesh.triangles.len() as u32;
-        let view = ViewSetup::for_view(
+        let view = ViewSetup::for_pose(
             &stage.face_frames,
             first_light,
-            view,
+            &pose,
             &cfg.camera,
             &cfg.light,
         )?;

@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::config::{CameraConfig, LightConfig, View};
+use super::config::{CameraConfig, LightConfig, Pose, View};
 use super::testbody::FaceFrame;
 
 /// The camera (one type for every pass): a pinhole with eye, orthonormal
@@ -49,6 +49,41 @@ impl Camera {
             tan_half_h: (cam.height as f64 * pitch_mm * 0.5 / cam.focal_mm as f64) as f32,
             width: cam.width,
             height: cam.height,
+        }
+    }
+
+    /// The camera at a pose: a face-relative view of `frames` (as [`Camera::for_view`]), or
+    /// a free pose (eye, unit forward, unit up orthogonal to it), with the intrinsics of
+    /// `cam`. `None` when the view's face has no frame.
+    pub fn for_pose(frames: &[FaceFrame], pose: &Pose, cam: &CameraConfig) -> Option<Camera> {
+        match *pose {
+            Pose::View(view) => frames
+                .iter()
+                .find(|f| f.face == view.face)
+                .map(|f| Camera::for_view(f, view, cam)),
+            Pose::Free { eye, forward, up } => {
+                // The intrinsics (and whatever else `for_view` derives from `cam`) from
+                // the view code path, so both kinds of pose share them; then the pose.
+                let frame = FaceFrame {
+                    face: 1,
+                    centre: Vec3::ZERO,
+                    normal: Vec3::Z,
+                    u: Vec3::X,
+                    v: Vec3::Y,
+                    half_size: glam::Vec2::ONE,
+                    area: 1.0,
+                };
+                let view = View {
+                    face: 1,
+                    angle_deg: 0.0,
+                };
+                let mut c = Camera::for_view(&frame, view, cam);
+                c.eye = eye.as_vec3();
+                c.forward = forward.as_vec3();
+                c.right = forward.cross(up).normalize().as_vec3();
+                c.up = up.as_vec3();
+                Some(c)
+            }
         }
     }
 
