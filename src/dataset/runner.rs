@@ -111,19 +111,25 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
 fn check_render_settings(job: &Job, plan: &Plan) -> Result<()> {
     let base = crate::scene::config::SceneConfig::default();
     let r = &job.render;
-    let mut cases: Vec<(&str, f64)> = Vec::new();
+    let viewpoints = job.viewpoints();
+    let mut cases = Vec::new();
     for (k, inst) in plan.instances.iter().enumerate() {
         let rough = plan::instance_params(job, inst).roughness;
         if k == 0 {
-            cases.extend(job.views.iter().map(|v| (v.as_str(), rough)));
-        } else {
-            cases.push((job.views[0].as_str(), rough));
+            cases.extend(viewpoints.iter().map(|v| (v, rough)));
+        } else if let Some(v) = viewpoints.first() {
+            cases.push((v, rough));
         }
     }
-    for (view, rough) in cases {
+    for (vp, rough) in cases {
+        let (view, pose) = match vp {
+            super::job::Viewpoint::View(v) => (v.as_str(), None),
+            super::job::Viewpoint::Pose(p) => (p.name.as_str(), Some(*p)),
+        };
         super::renderer::render_config(
             &base,
             view,
+            pose,
             r.width as u32,
             r.height as u32,
             r.spp as u32,
@@ -217,6 +223,10 @@ pub struct ManifestEntry {
     pub image: String,
     pub faces: String,
     pub viewpoint: String,
+    /// The free pose of a `[[pose]]` viewpoint (none for face-relative views, whose
+    /// name is the view).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<super::job::JobPose>,
     pub finish: String,
     pub texture_type: String,
     pub split: Split,
@@ -736,8 +746,15 @@ impl<'p> Ctx<'p> {
             });
         }
         stage("textures", &mut stages);
-        let view = &job.views[item.view];
+        let viewpoints = job.viewpoints();
+        let vp = &viewpoints[item.view];
+        let view = &vp.name().to_string();
+        let pose = match vp {
+            super::job::Viewpoint::Pose(p) => Some(*p),
+            super::job::Viewpoint::View(_) => None,
+        };
         let req = ImageRequest {
+            pose,
             mesh: &mesh,
             mesh_key: match inst.defect_set {
                 Some(_) => (1u64 << 32) | item.instance as u64,
@@ -777,6 +794,7 @@ impl<'p> Ctx<'p> {
             image: rel("image.png"),
             faces: rel("faces.png"),
             viewpoint: view.clone(),
+            pose: pose.cloned(),
             finish: finish.name.clone(),
             texture_type: finish.texture_type(),
             split: inst.split,

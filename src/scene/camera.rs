@@ -30,10 +30,17 @@ impl Camera {
     /// centre, tilted by `angle` from the face normal towards the face's `u` axis (the
     /// up-slope direction, so tilted views look down rather than up from the table), and
     /// aims at the centre. Image up is the tilted `u`.
+    /// A non-zero azimuth turns the tilt direction (and the image up) about the normal,
+    /// from `u` towards `v`.
     pub fn for_view(face: &FaceFrame, view: View, cam: &CameraConfig) -> Camera {
         let th = (view.angle_deg as f64).to_radians();
         let n = face.normal.as_dvec3();
-        let u = face.u.as_dvec3();
+        let u = if view.azimuth_deg == 0.0 {
+            face.u.as_dvec3()
+        } else {
+            let az = (view.azimuth_deg as f64).to_radians();
+            face.u.as_dvec3() * az.cos() + face.v.as_dvec3() * az.sin()
+        };
         let dir = n * th.cos() + u * th.sin();
         let up = (u * th.cos() - n * th.sin()).normalize();
         let forward = -dir.normalize();
@@ -76,6 +83,7 @@ impl Camera {
                 let view = View {
                     face: 1,
                     angle_deg: 0.0,
+                    azimuth_deg: 0.0,
                 };
                 let mut c = Camera::for_view(&frame, view, cam);
                 c.eye = eye.as_vec3();

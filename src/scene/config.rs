@@ -541,20 +541,35 @@ impl Default for TextureConfig {
     }
 }
 
-/// A parsed viewpoint: face id (1..=3) and angle from the normal, degrees.
+/// A parsed viewpoint: face id (1..=3), angle from the normal and azimuth about it,
+/// degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct View {
     pub face: crate::scene::mesh::FaceId,
     pub angle_deg: f32,
+    /// Direction of the tilt about the face normal, from the face's `u` towards `v`,
+    /// degrees, [-360, 360]; 0 (the default, "A20") tilts towards `u`.
+    pub azimuth_deg: f32,
 }
 
-/// Parses "A20", "B0", "C10" (face letter, then degrees in [0, 89]).
+/// Parses "A20", "B0", "C10" (face letter, then degrees in [0, 89]), optionally with an
+/// azimuth: "A20@45" (degrees in [-360, 360]).
 pub fn parse_view(s: &str) -> Result<View, ConfigError> {
     let bad = || ConfigError::Invalid {
         field: "camera.view",
         message: format!(
-            "{s:?} is not a view: expected a face letter A, B or C and an angle in degrees [0, 89], e.g. \"A20\""
+            "{s:?} is not a view: expected a face letter A, B or C and an angle in degrees [0, 89], e.g. \"A20\", optionally an azimuth in degrees [-360, 360] after '@', e.g. \"A20@45\""
         ),
+    };
+    let (s, azimuth_deg) = match s.split_once('@') {
+        Some((v, az)) => {
+            let az: f32 = az.parse().map_err(|_| bad())?;
+            if !(az.is_finite() && (-360.0..=360.0).contains(&az)) {
+                return Err(bad());
+            }
+            (v, az)
+        }
+        None => (s, 0.0),
     };
     let mut chars = s.chars();
     let face = match chars.next() {
@@ -570,6 +585,7 @@ pub fn parse_view(s: &str) -> Result<View, ConfigError> {
     Ok(View {
         face,
         angle_deg: angle,
+        azimuth_deg,
     })
 }
 
@@ -994,5 +1010,8 @@ mod tests {
         assert_eq!(parse_view("C0").unwrap().angle_deg, 0.0);
         assert!(parse_view("A90").is_err());
         assert!(parse_view("A").is_err());
+        let v = parse_view("B12.5@-30").unwrap();
+        assert_eq!((v.face, v.angle_deg, v.azimuth_deg), (2, 12.5, -30.0));
+        assert!(parse_view("A10@400").is_err() && parse_view("A10@").is_err());
     }
 }
