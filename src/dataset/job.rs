@@ -411,8 +411,17 @@ impl Finish {
 #[serde(deny_unknown_fields)]
 pub struct Object {
     pub name: String,
-    /// "testbody-b", "testbody-m", or a glTF path (relative to the job file).
+    /// "testbody-b", "testbody-m", or a mesh file (glTF/GLB, OBJ, STL, PLY; relative to
+    /// the job file).
     pub mesh: String,
+    /// Unit of the mesh file ("mm", "m", "in"); default millimetres for every format
+    /// (glTF included, as job meshes were always read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<crate::scene::MeshUnit>,
+    /// Inspected faces as in a scene's `[object] inspect` (labels, region ids, normals);
+    /// default the mesh's own labels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inspect: Option<Vec<crate::scene::inspect::InspectEntry>>,
     /// Finishes this object is made in; default all, in job order.
     #[serde(default)]
     pub finishes: Option<Vec<String>>,
@@ -751,10 +760,28 @@ impl Job {
                     }
                 }
             }
+            if let Some(list) = &o.inspect {
+                crate::scene::inspect::parse(list).map_err(|e| {
+                    self.field(
+                        format!("{p}.inspect"),
+                        "",
+                        &e.to_string().replace("object.inspect: ", ""),
+                    )
+                })?;
+            }
+            if builtin_variant(&o.mesh).is_none() {
+                crate::scene::MeshFormat::of(Path::new(&o.mesh)).map_err(|_| {
+                    self.field(
+                        format!("{p}.mesh"),
+                        format!("{:?}", o.mesh),
+                        "\"testbody-b\", \"testbody-m\" or a .gltf, .glb, .obj, .stl or .ply file",
+                    )
+                })?;
+            }
             if check_files && builtin_variant(&o.mesh).is_none() {
                 let path = self.resolve(&o.mesh);
                 if !path.is_file() {
-                    return Err(self.field(format!("{p}.mesh"), format!("{:?}", o.mesh), &format!("\"testbody-b\", \"testbody-m\" or an existing glTF file ({} not found)", path.display())));
+                    return Err(self.field(format!("{p}.mesh"), format!("{:?}", o.mesh), &format!("\"testbody-b\", \"testbody-m\" or an existing mesh file ({} not found)", path.display())));
                 }
             }
         }

@@ -23,7 +23,7 @@ use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
 use crate::render::pixels::{Exposure, quantise_units8};
-use crate::scene::{Degenerates, Mesh, face_frames, import_mesh, testbody};
+use crate::scene::{Degenerates, Mesh, face_frames, testbody};
 
 /// A job with everything loaded and checked: meshes, defect sets, the plan.
 pub struct Prepared {
@@ -50,14 +50,31 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
         let mesh = match builtin_variant(&o.mesh) {
             Some(v) => testbody(v),
             None => {
-                import_mesh(&job.resolve(&o.mesh), Degenerates::Drop)
-                    .map_err(|source| DatasetError::Mesh {
-                        object: o.name.clone(),
-                        source,
-                    })?
-                    .mesh
+                crate::scene::load_mesh(
+                    &job.resolve(&o.mesh),
+                    o.unit,
+                    crate::scene::GltfUnitDefault::Millimetres,
+                    Degenerates::Drop,
+                )
+                .map_err(|source| DatasetError::Mesh {
+                    object: o.name.clone(),
+                    source,
+                })?
+                .imported
+                .mesh
             }
         };
+        let mut mesh = mesh;
+        if let Some(list) = &o.inspect {
+            let field = |e: crate::scene::config::ConfigError| DatasetError::Field {
+                file: job.origin.clone(),
+                field: format!("object[{i}].inspect"),
+                value: String::new(),
+                allowed: e.to_string().replace("object.inspect: ", ""),
+            };
+            let sel = crate::scene::inspect::parse(list).map_err(field)?;
+            crate::scene::inspect::apply(&mut mesh, &sel, &Default::default()).map_err(field)?;
+        }
         check_texture_cover(&job, i, &mesh)?;
         meshes.push(mesh);
     }

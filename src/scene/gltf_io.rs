@@ -44,7 +44,7 @@ pub enum MeshError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("{path}: unsupported extension (use .gltf or .glb)")]
+    #[error("{path}: unsupported extension for writing (use .gltf, .glb or .stl)")]
     Extension { path: PathBuf },
     #[error("{path}: unsupported mesh format (allowed: .gltf, .glb, .obj, .stl, .ply)")]
     Format { path: PathBuf },

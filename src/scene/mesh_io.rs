@@ -168,6 +168,34 @@ pub fn load_mesh(
     })
 }
 
+/// Writes `mesh` by its extension: glTF/GLB with labels (`export_mesh`), or binary STL
+/// (geometry only, facet normals from the winding), atomically. Millimetres.
+pub fn write_mesh(mesh: &Mesh, path: &Path) -> Result<(), MeshError> {
+    match MeshFormat::of(path)? {
+        MeshFormat::Gltf => super::gltf_io::export_mesh(mesh, path),
+        MeshFormat::Stl => {
+            let tris: Vec<stl_io::Triangle> = (0..mesh.triangles.len())
+                .map(|t| stl_io::Triangle {
+                    normal: stl_io::Normal::new(mesh.area_normal(t).normalize_or_zero().to_array()),
+                    vertices: mesh.corners(t).map(|p| stl_io::Vertex::new(p.to_array())),
+                })
+                .collect();
+            let mut bytes = Vec::new();
+            stl_io::write_stl(&mut bytes, tris.iter()).map_err(|source| MeshError::Write {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            crate::util::write_atomic(path, &bytes).map_err(|source| MeshError::Write {
+                path: path.to_path_buf(),
+                source,
+            })
+        }
+        _ => Err(MeshError::Extension {
+            path: path.to_path_buf(),
+        }),
+    }
+}
+
 fn parse_err(path: &Path, format: MeshFormat, reason: impl ToString) -> MeshError {
     MeshError::Parse {
         path: path.to_path_buf(),
