@@ -100,6 +100,7 @@ fn face_textures_reach_the_image() {
     let mesh = synosis::scene::testbody(synosis::scene::Variant::B);
     let render = |r: &mut GpuRenderer, textures: Vec<FaceTexture>| {
         let req = ImageRequest {
+            pose: None,
             mesh: &mesh,
             mesh_key: 1,
             view: "A0",
@@ -189,6 +190,7 @@ rim_width = 0.5
     let (w, h) = (64usize, 48usize);
     for view in ["A0", "A20"] {
         let req = ImageRequest {
+            pose: None,
             mesh: &mesh,
             mesh_key: 1,
             view,

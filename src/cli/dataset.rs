@@ -215,7 +215,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
                 count(dataset::Split::Val),
                 count(dataset::Split::Test),
                 prep.defect_sets.len(),
-                prep.job.views.len()
+                prep.job.viewpoints().len()
             );
             Ok(())
         }

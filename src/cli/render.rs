@@ -7,8 +7,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_scene};
+use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene};
 use synosis::render::pixels::Exposure;
+use synosis::scene::assemble::load_object_inspected;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::trace::{AccelChoice, resolve};
 use synosis::vk::{Context, ContextOptions, Profiler};
@@ -33,7 +34,7 @@ pub struct RenderArgs {
     /// Trace backend (overrides SYNOSIS_ACCEL, which overrides render.accel).
     #[arg(long, value_enum)]
     accel: Option<AccelChoice>,
-    /// Viewpoint, e.g. A20 (overrides camera.view).
+    /// Viewpoint, e.g. A20 (overrides camera.view and any look_at / matrix / opencv pose).
     #[arg(long)]
     view: Option<String>,
     /// Write a 16-bit PNG instead of 8-bit.
@@ -71,11 +72,30 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if let Some(v) = &a.view {
         parse_view(v).context("--view")?;
         cfg.camera.view = v.clone();
+        // --view replaces any pose the file gives.
+        cfg.camera.look_at = None;
+        cfg.camera.matrix = None;
+        cfg.camera.opencv = None;
     }
     cfg.validate()?;
-    let object = profiler
-        .cpu("load object", || load_object(&cfg))
+    let (object, inspected) = profiler
+        .cpu("load object", || load_object_inspected(&cfg))
         .context("loading the object")?;
+    for f in &inspected {
+        eprintln!(
+            "inspect: face {} (id {} in faces.png) = {}: {} triangles, {:.1} mm^2{}",
+            synosis::scene::mesh::face_name(f.face),
+            f.face,
+            f.selector.describe(),
+            f.triangles,
+            f.area,
+            if f.regions.is_empty() {
+                String::new()
+            } else {
+                format!(", regions {:?}", f.regions)
+            }
+        );
+    }
     let scene = RenderScene::assemble(&object, &cfg)?;
     let tables = profiler.cpu("energy tables", EnergyTables::compute);
     let ctx = profiler.cpu("Vulkan init", || {
@@ -127,7 +147,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     println!(
         "{} view {}: {}x{}, {} spp ({:?} sampler, {:?} light sampling, texture {}), {} bounces, {} in {:.1} s (GPU {:.0} ms), mean radiance {:.4}",
         a.scene.display(),
-        cfg.camera.view,
+        cfg.camera.describe_pose(),
         w,
         h,
         cfg.render.spp,

@@ -1,4 +1,5 @@
-//! `synosis testbody`: writes the built-in test body (variant B or its mirror M).
+//! `synosis testbody`: writes the built-in test body (variant B or its mirror M) or the
+//! example flange.
 
 use std::path::PathBuf;
 
@@ -10,25 +11,27 @@ use synosis::scene::testbody::{Variant, testbody};
 pub enum VariantArg {
     B,
     M,
+    /// The example flange (bore, bolt holes, chamfer; docs/testbody.md).
+    Flange,
 }
 
 #[derive(Args)]
 pub struct TestbodyArgs {
-    /// Which body: b (base) or m (its mirror image across x = 0).
+    /// Which body: b (base), m (its mirror image across x = 0) or flange.
     #[arg(long, value_enum, default_value = "b")]
     pub variant: VariantArg,
-    /// Output file (.glb or .gltf).
+    /// Output file (.glb, .gltf or .stl; STL carries no labels).
     #[arg(long)]
     pub out: PathBuf,
 }
 
 pub fn run(a: TestbodyArgs) -> anyhow::Result<()> {
-    let variant = match a.variant {
-        VariantArg::B => Variant::B,
-        VariantArg::M => Variant::M,
+    let mesh = match a.variant {
+        VariantArg::B => testbody(Variant::B),
+        VariantArg::M => testbody(Variant::M),
+        VariantArg::Flange => synosis::scene::flange(&Default::default()),
     };
-    let mesh = testbody(variant);
-    synosis::scene::export_mesh(&mesh, &a.out)
+    synosis::scene::write_mesh(&mesh, &a.out)
         .with_context(|| format!("writing the test body to {}", a.out.display()))?;
     println!(
         "wrote {} ({} triangles)",

@@ -12,7 +12,7 @@ use crate::render::energy::EnergyTables;
 use crate::render::slope::FaceMap;
 use crate::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
 use crate::scene::assemble::{Stage, ViewSetup};
-use crate::scene::config::{SceneConfig, parse_view};
+use crate::scene::config::SceneConfig;
 use crate::scene::mesh::FACE_OTHER;
 use crate::trace::{AccelChoice, resolve};
 use crate::vk::{Context, ContextOptions, Profiler};
@@ -106,6 +106,7 @@ impl ImageRenderer for GpuRenderer {
         let cfg = super::renderer::render_config(
             &self.base,
             req.view,
+            req.pose,
             req.width,
             req.height,
             req.spp,
@@ -113,7 +114,7 @@ impl ImageRenderer for GpuRenderer {
             req.seed,
             req.alpha,
         )?;
-        let view = parse_view(&cfg.camera.view).map_err(|e| e.to_string())?;
+        let pose = cfg.camera.pose().map_err(|e| e.to_string())?;
         let profiler = Profiler::new();
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
@@ -121,7 +122,7 @@ impl ImageRenderer for GpuRenderer {
             .set_face_maps(tracer, &face_maps(req), &req.placement)
             .map_err(|e| e.to_string())?;
         let (frames, first_light) = (scene.face_frames(), scene.triangle_count);
-        let setup = ViewSetup::for_view(frames, first_light, view, &cfg.camera, &cfg.light)
+        let setup = ViewSetup::for_pose(frames, first_light, &pose, &cfg.camera, &cfg.light)
             .map_err(|e| e.to_string())?;
         let opts = FrameOptions {
             annotate_grid: Some(DEFAULT_COVERAGE_GRID),

@@ -24,6 +24,12 @@ pub struct Job {
     /// Viewpoint names "<face><degrees>", e.g. "A20". Default: [`PAPER_VIEWS`].
     #[serde(default = "default_views")]
     pub views: Vec<String>,
+    /// Free camera poses (`[[pose]]`), after the views and the plan's views.
+    #[serde(default, rename = "pose", skip_serializing_if = "Vec::is_empty")]
+    pub poses: Vec<JobPose>,
+    /// Generated face-relative views (`plan = { cone = {..}, ring = {..} }`), after `views`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<ViewPlan>,
     #[serde(default)]
     pub material: MaterialSettings,
     #[serde(default)]
@@ -52,6 +58,136 @@ pub struct Job {
 
 fn default_views() -> Vec<String> {
     PAPER_VIEWS.iter().map(|s| s.to_string()).collect()
+}
+
+/// A free camera pose of a job (`[[pose]]`): a name (the manifest's `viewpoint`) and
+/// exactly one of `look_at`, `matrix`, `opencv` (as in a scene's `[camera]`).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct JobPose {
+    pub name: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub look_at: Option<crate::scene::config::LookAt>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matrix: Option<[[f64; 4]; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opencv: Option<crate::scene::config::OpenCvPose>,
+}
+
+impl JobPose {
+    /// Puts this pose on a scene camera (replacing any free pose it had).
+    pub fn apply(&self, cam: &mut crate::scene::config::CameraConfig) {
+        cam.look_at = self.look_at.clone();
+        cam.matrix = self.matrix;
+        cam.opencv = self.opencv.clone();
+    }
+}
+
+/// Generated views: a cone around a face normal and / or a ring of azimuths.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ViewPlan {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cone: Option<ConePlan>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ring: Option<RingPlan>,
+}
+
+/// `count` views of `face` filling the cone up to `max_tilt_deg` from its normal with
+/// equal solid angle per view: view k has cos(tilt) = 1 - (1 - cos max) k / (count - 1)
+/// (view 0 on the normal, the last at the maximum tilt) and azimuth k * 137.508 degrees
+/// (the golden angle), so the views spread evenly over the cap.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ConePlan {
+    pub face: String,
+    pub max_tilt_deg: f64,
+    pub count: i64,
+}
+
+/// `count` views of `face` at `tilt_deg` from its normal, azimuths
+/// `azimuth_deg + 360 k / count`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RingPlan {
+    pub face: String,
+    pub tilt_deg: f64,
+    pub count: i64,
+    #[serde(default)]
+    pub azimuth_deg: f64,
+}
+
+/// The golden angle, degrees: 360 (1 - 1 / phi).
+pub const GOLDEN_ANGLE_DEG: f64 = 137.50776405003785;
+
+/// Most views one plan may generate.
+const MAX_PLAN_VIEWS: i64 = 10_000;
+
+/// A generated view's name: "<face><tilt>@<azimuth>", both rounded to 0.001 degree
+/// (the name is the view: the renderer parses it back).
+fn plan_view_name(face: &str, tilt: f64, az: f64) -> String {
+    let r = |x: f64| {
+        let v = (x * 1000.0).round() / 1000.0;
+        if v == 0.0 { 0.0 } else { v }
+    };
+    let (t, a) = (r(tilt), r(az.rem_euclid(360.0)));
+    if a == 0.0 || a == 360.0 {
+        format!("{face}{t}")
+    } else {
+        format!("{face}{t}@{a}")
+    }
+}
+
+impl ViewPlan {
+    /// The generated view names, cone first.
+    pub fn views(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(c) = &self.cone {
+            let n = c.count.max(0);
+            let cmax = c.max_tilt_deg.to_radians().cos();
+            for k in 0..n {
+                let f = if n > 1 {
+                    k as f64 / (n - 1) as f64
+                } else {
+                    0.0
+                };
+                let tilt = (1.0 - (1.0 - cmax) * f)
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees();
+                let az = if k == 0 {
+                    0.0
+                } else {
+                    k as f64 * GOLDEN_ANGLE_DEG
+                };
+                out.push(plan_view_name(&c.face, tilt, az));
+            }
+        }
+        if let Some(r) = &self.ring {
+            for k in 0..r.count.max(0) {
+                let az = r.azimuth_deg + 360.0 * k as f64 / r.count as f64;
+                out.push(plan_view_name(&r.face, r.tilt_deg, az));
+            }
+        }
+        out
+    }
+}
+
+/// Where an image's camera is: a named face-relative view, or a free pose.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Viewpoint<'a> {
+    View(String),
+    Pose(&'a JobPose),
+}
+
+impl Viewpoint<'_> {
+    /// The name: the view ("A20", "A14.142@137.508") or the pose's name.
+    pub fn name(&self) -> &str {
+        match self {
+            Viewpoint::View(v) => v,
+            Viewpoint::Pose(p) => &p.name,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -290,8 +426,17 @@ impl Finish {
 #[serde(deny_unknown_fields)]
 pub struct Object {
     pub name: String,
-    /// "testbody-b", "testbody-m", or a glTF path (relative to the job file).
+    /// "testbody-b", "testbody-m", or a mesh file (glTF/GLB, OBJ, STL, PLY; relative to
+    /// the job file).
     pub mesh: String,
+    /// Unit of the mesh file ("mm", "m", "in"); default millimetres for every format
+    /// (glTF included, as job meshes were always read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<crate::scene::MeshUnit>,
+    /// Inspected faces as in a scene's `[object] inspect` (labels, region ids, normals);
+    /// default the mesh's own labels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inspect: Option<Vec<crate::scene::inspect::InspectEntry>>,
     /// Finishes this object is made in; default all, in job order.
     #[serde(default)]
     pub finishes: Option<Vec<String>>,
@@ -325,6 +470,28 @@ const MAX_INSTANCES: i64 = 100_000;
 const MAX_SIZE: i64 = 16_384;
 
 impl Job {
+    /// Every viewpoint of an object instance, in order: `views`, the plan's views, then
+    /// the `[[pose]]` entries.
+    pub fn viewpoints(&self) -> Vec<Viewpoint<'_>> {
+        let mut out: Vec<Viewpoint> = self.views.iter().cloned().map(Viewpoint::View).collect();
+        if let Some(p) = &self.plan {
+            out.extend(p.views().into_iter().map(Viewpoint::View));
+        }
+        out.extend(self.poses.iter().map(Viewpoint::Pose));
+        out
+    }
+
+    /// `views` defaults to the paper's nine only when the job has no plan and no poses:
+    /// whether it was written is read from the text.
+    fn default_views_only_alone(&mut self, text: &str) {
+        let written = toml::from_str::<toml::Table>(text)
+            .ok()
+            .is_some_and(|t| t.contains_key("views"));
+        if !written && (self.plan.is_some() || !self.poses.is_empty()) {
+            self.views.clear();
+        }
+    }
+
     /// Reads and validates a job file; relative paths become relative to its folder.
     pub fn load(path: &Path) -> Result<Job> {
         let text = crate::limits::read_text(path).map_err(|e| DatasetError::io(path, e))?;
@@ -340,6 +507,7 @@ impl Job {
         })?;
         job.base_dir = base_dir.to_path_buf();
         job.origin = origin.to_string();
+        job.default_views_only_alone(text);
         job.resolve_measurements();
         job.validate()?;
         Ok(job)
@@ -353,6 +521,7 @@ impl Job {
             message: e.to_string(),
         })?;
         job.origin = origin.to_string();
+        job.default_views_only_alone(text);
         job.resolve_measurements();
         job.check(false)?;
         Ok(job)
@@ -436,22 +605,7 @@ impl Job {
         }
         self.int("render.spp", r.spp, 1, 1 << 16)?;
         self.int("render.bounces", r.bounces, 1, 64)?;
-        if self.views.is_empty() {
-            return Err(self.field("views", "[]", "at least one view, e.g. \"A20\""));
-        }
-        let mut seen = BTreeSet::new();
-        for (i, v) in self.views.iter().enumerate() {
-            parse_view(v).ok_or_else(|| {
-                self.field(
-                    format!("views[{i}]"),
-                    format!("{v:?}"),
-                    "a face letter A, B or C then degrees from the normal in [0, 89], e.g. \"A20\"",
-                )
-            })?;
-            if !seen.insert(v.as_str()) {
-                return Err(self.field(format!("views[{i}]"), format!("{v:?}"), "listed twice"));
-            }
-        }
+        self.check_viewpoints()?;
         if let (Some(r), Some(a)) = (self.material.roughness, self.material.alpha) {
             return Err(self.field(
                 "material.roughness / material.alpha",
@@ -629,10 +783,28 @@ impl Job {
                     }
                 }
             }
+            if let Some(list) = &o.inspect {
+                crate::scene::inspect::parse(list).map_err(|e| {
+                    self.field(
+                        format!("{p}.inspect"),
+                        "",
+                        &e.to_string().replace("object.inspect: ", ""),
+                    )
+                })?;
+            }
+            if builtin_variant(&o.mesh).is_none() {
+                crate::scene::MeshFormat::of(Path::new(&o.mesh)).map_err(|_| {
+                    self.field(
+                        format!("{p}.mesh"),
+                        format!("{:?}", o.mesh),
+                        "\"testbody-b\", \"testbody-m\" or a .gltf, .glb, .obj, .stl or .ply file",
+                    )
+                })?;
+            }
             if check_files && builtin_variant(&o.mesh).is_none() {
                 let path = self.resolve(&o.mesh);
                 if !path.is_file() {
-                    return Err(self.field(format!("{p}.mesh"), format!("{:?}", o.mesh), &format!("\"testbody-b\", \"testbody-m\" or an existing glTF file ({} not found)", path.display())));
+                    return Err(self.field(format!("{p}.mesh"), format!("{:?}", o.mesh), &format!("\"testbody-b\", \"testbody-m\" or an existing mesh file ({} not found)", path.display())));
                 }
             }
         }
@@ -659,6 +831,86 @@ impl Job {
             step.validate(&types).map_err(|(f, v, allowed)| {
                 self.field(format!("postprocess[{i}].{f}"), v, &allowed)
             })?;
+        }
+        Ok(())
+    }
+
+    fn check_viewpoints(&self) -> Result<()> {
+        for (i, v) in self.views.iter().enumerate() {
+            parse_view(v).ok_or_else(|| {
+                self.field(
+                    format!("views[{i}]"),
+                    format!("{v:?}"),
+                    "a face letter A, B or C then degrees from the normal in [0, 89], e.g. \"A20\", optionally '@' and an azimuth in [-360, 360] degrees",
+                )
+            })?;
+        }
+        if let Some(p) = &self.plan {
+            if p.cone.is_none() && p.ring.is_none() {
+                return Err(self.field("plan", "{}", "give `cone` and / or `ring`"));
+            }
+            let face = |field: &str, f: &str| {
+                if ["A", "B", "C"].contains(&f) {
+                    Ok(())
+                } else {
+                    Err(self.field(field, format!("{f:?}"), "\"A\", \"B\" or \"C\""))
+                }
+            };
+            if let Some(c) = &p.cone {
+                face("plan.cone.face", &c.face)?;
+                self.real("plan.cone.max_tilt_deg", c.max_tilt_deg, 0.0, 89.0)?;
+                self.int("plan.cone.count", c.count, 1, MAX_PLAN_VIEWS)?;
+            }
+            if let Some(r) = &p.ring {
+                face("plan.ring.face", &r.face)?;
+                self.real("plan.ring.tilt_deg", r.tilt_deg, 0.0, 89.0)?;
+                self.int("plan.ring.count", r.count, 1, MAX_PLAN_VIEWS)?;
+                self.real("plan.ring.azimuth_deg", r.azimuth_deg, -360.0, 360.0)?;
+            }
+        }
+        for (i, p) in self.poses.iter().enumerate() {
+            let f = format!("pose[{i}]");
+            if p.name.trim().is_empty() || parse_view(&p.name).is_some() {
+                return Err(self.field(
+                    format!("{f}.name"),
+                    format!("{:?}", p.name),
+                    "a non-empty name that is not a view name like \"A20\"",
+                ));
+            }
+            let mut cam = crate::scene::config::CameraConfig::default();
+            p.apply(&mut cam);
+            if cam.free_pose_fields().is_empty() {
+                return Err(self.field(
+                    f,
+                    &p.name,
+                    "one of look_at, matrix, opencv (as in a scene's [camera])",
+                ));
+            }
+            cam.pose().map_err(|e| {
+                self.field(
+                    format!("{f} ({})", p.name),
+                    "",
+                    &e.to_string().replace("camera.", ""),
+                )
+            })?;
+        }
+        let all = self.viewpoints();
+        if all.is_empty() {
+            return Err(self.field(
+                "views",
+                "[]",
+                "at least one viewpoint: a view (e.g. \"A20\"), a plan or a [[pose]]",
+            ));
+        }
+        let mut seen = BTreeSet::new();
+        for v in &all {
+            if !seen.insert(v.name()) {
+                return Err(self.field(
+                    "views / plan / pose",
+                    format!("{:?}", v.name()),
+                    "every viewpoint name once (a plan's view equal to a listed view, or two poses of one name)",
+                ));
+            }
         }
         Ok(())
     }
@@ -716,8 +968,19 @@ pub fn builtin_variant(mesh: &str) -> Option<crate::scene::Variant> {
     }
 }
 
-/// A viewpoint name "A20": face id (1..=3) and degrees from the face normal in [0, 89].
+/// A viewpoint name "A20" (or "A20@45", with an azimuth in [-360, 360] degrees): face id
+/// (1..=3) and degrees from the face normal in [0, 89].
 pub fn parse_view(s: &str) -> Option<(u8, f64)> {
+    let s = match s.split_once('@') {
+        Some((v, az)) => {
+            let az: f64 = az.parse().ok()?;
+            if !(az.is_finite() && (-360.0..=360.0).contains(&az)) {
+                return None;
+            }
+            v
+        }
+        None => s,
+    };
     let mut chars = s.chars();
     let face = match chars.next()? {
         'A' => 1,

@@ -72,7 +72,7 @@ pub struct ItemPlan {
     pub index: usize,
     /// Index into [`Plan::instances`].
     pub instance: usize,
-    /// Index into the job's views.
+    /// Index into the job's viewpoints (`Job::viewpoints`: views, plan views, poses).
     pub view: usize,
     pub seed: u64,
 }
@@ -171,6 +171,11 @@ pub fn expand(job: &Job) -> Plan {
         derive(job.seed, &[tag::SPLIT, Label::DefectFree.key()]),
     );
     let sets = job.defect_sets().max(1);
+    let viewpoints: Vec<String> = job
+        .viewpoints()
+        .iter()
+        .map(|v| v.name().to_string())
+        .collect();
     let mut instances = Vec::new();
     let mut items = Vec::new();
     for (oi, o) in job.objects.iter().enumerate() {
@@ -198,7 +203,7 @@ pub fn expand(job: &Job) -> Plan {
                         split,
                         seed,
                     });
-                    for (vi, v) in job.views.iter().enumerate() {
+                    for (vi, v) in viewpoints.iter().enumerate() {
                         items.push(ItemPlan {
                             index: items.len(),
                             instance: inst,

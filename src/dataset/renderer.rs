@@ -16,6 +16,7 @@ use crate::scene::config::SceneConfig;
 pub fn render_config(
     base: &SceneConfig,
     view: &str,
+    pose: Option<&super::job::JobPose>,
     width: u32,
     height: u32,
     spp: u32,
@@ -32,7 +33,11 @@ pub fn render_config(
             .replace("material.alpha", "material.alpha (GGX alpha, roughness^2)")
     };
     let mut cfg = base.clone();
-    cfg.camera.view = view.to_string();
+    match pose {
+        // A free pose: the view name is the pose's, not a face-relative view.
+        Some(p) => p.apply(&mut cfg.camera),
+        None => cfg.camera.view = view.to_string(),
+    }
     cfg.set_resolution(width, height).map_err(job_names)?;
     cfg.render.spp = spp;
     cfg.render.max_bounces = bounces;
@@ -70,8 +75,11 @@ pub struct ImageRequest<'a> {
     /// Identifies `mesh`: equal keys mean the same mesh, so a renderer may keep its
     /// acceleration structure between the views of one object instance.
     pub mesh_key: u64,
-    /// Viewpoint name, e.g. "A20" (face A, 20 degrees from its normal, aimed at its centre).
+    /// Viewpoint name, e.g. "A20" (face A, 20 degrees from its normal, aimed at its centre;
+    /// "A20@45" turns the tilt 45 degrees about the normal), or a `[[pose]]`'s name.
     pub view: &'a str,
+    /// The free pose when the viewpoint is a `[[pose]]` (then `view` is only its name).
+    pub pose: Option<&'a super::job::JobPose>,
     /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
     pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,

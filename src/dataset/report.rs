@@ -501,7 +501,7 @@ pub fn folder_entries(dir: &Path) -> Result<Vec<ManifestEntry>> {
 /// views cycling so the sample shows several of them.
 pub fn preview_items(prep: &super::runner::Prepared, n: usize) -> Vec<usize> {
     let plan = &prep.plan;
-    let views = prep.job.views.len().max(1);
+    let views = prep.job.viewpoints().len().max(1);
     let mut out = Vec::new();
     for fi in 0..prep.job.finishes.len() {
         let mut picked = 0;

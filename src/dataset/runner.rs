@@ -24,7 +24,7 @@ use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
 use crate::render::pixels::{Exposure, quantise_units8};
 use crate::scene::assemble::Placement;
-use crate::scene::{Degenerates, Mesh, face_frames, import_mesh, testbody};
+use crate::scene::{Degenerates, Mesh, face_frames, testbody};
 
 /// A job with everything loaded and checked: meshes, defect sets, the plan.
 pub struct Prepared {
@@ -51,14 +51,31 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
         let mesh = match builtin_variant(&o.mesh) {
             Some(v) => testbody(v),
             None => {
-                import_mesh(&job.resolve(&o.mesh), Degenerates::Drop)
-                    .map_err(|source| DatasetError::Mesh {
-                        object: o.name.clone(),
-                        source,
-                    })?
-                    .mesh
+                crate::scene::load_mesh(
+                    &job.resolve(&o.mesh),
+                    o.unit,
+                    crate::scene::GltfUnitDefault::Millimetres,
+                    Degenerates::Drop,
+                )
+                .map_err(|source| DatasetError::Mesh {
+                    object: o.name.clone(),
+                    source,
+                })?
+                .imported
+                .mesh
             }
         };
+        let mut mesh = mesh;
+        if let Some(list) = &o.inspect {
+            let field = |e: crate::scene::config::ConfigError| DatasetError::Field {
+                file: job.origin.clone(),
+                field: format!("object[{i}].inspect"),
+                value: String::new(),
+                allowed: e.to_string().replace("object.inspect: ", ""),
+            };
+            let sel = crate::scene::inspect::parse(list).map_err(field)?;
+            crate::scene::inspect::apply(&mut mesh, &sel, &Default::default()).map_err(field)?;
+        }
         check_texture_cover(&job, i, &mesh)?;
         meshes.push(mesh);
     }
@@ -112,19 +129,25 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
 fn check_render_settings(job: &Job, plan: &Plan) -> Result<()> {
     let base = crate::scene::config::SceneConfig::default();
     let r = &job.render;
-    let mut cases: Vec<(&str, f64)> = Vec::new();
+    let viewpoints = job.viewpoints();
+    let mut cases = Vec::new();
     for (k, inst) in plan.instances.iter().enumerate() {
         let rough = plan::instance_params(job, inst).roughness;
         if k == 0 {
-            cases.extend(job.views.iter().map(|v| (v.as_str(), rough)));
-        } else {
-            cases.push((job.views[0].as_str(), rough));
+            cases.extend(viewpoints.iter().map(|v| (v, rough)));
+        } else if let Some(v) = viewpoints.first() {
+            cases.push((v, rough));
         }
     }
-    for (view, rough) in cases {
+    for (vp, rough) in cases {
+        let (view, pose) = match vp {
+            super::job::Viewpoint::View(v) => (v.as_str(), None),
+            super::job::Viewpoint::Pose(p) => (p.name.as_str(), Some(*p)),
+        };
         super::renderer::render_config(
             &base,
             view,
+            pose,
             r.width as u32,
             r.height as u32,
             r.spp as u32,
@@ -218,6 +241,10 @@ pub struct ManifestEntry {
     pub image: String,
     pub faces: String,
     pub viewpoint: String,
+    /// The free pose of a `[[pose]]` viewpoint (none for face-relative views, whose
+    /// name is the view).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<super::job::JobPose>,
     pub finish: String,
     pub texture_type: String,
     pub split: Split,
@@ -737,8 +764,15 @@ impl<'p> Ctx<'p> {
             });
         }
         stage("textures", &mut stages);
-        let view = &job.views[item.view];
+        let viewpoints = job.viewpoints();
+        let vp = &viewpoints[item.view];
+        let view = &vp.name().to_string();
+        let pose = match vp {
+            super::job::Viewpoint::Pose(p) => Some(*p),
+            super::job::Viewpoint::View(_) => None,
+        };
         let req = ImageRequest {
+            pose,
             mesh: &mesh,
             mesh_key: match inst.defect_set {
                 Some(_) => (1u64 << 32) | item.instance as u64,
@@ -783,6 +817,7 @@ impl<'p> Ctx<'p> {
             image: rel("image.png"),
             faces: rel("faces.png"),
             viewpoint: view.clone(),
+            pose: pose.cloned(),
             finish: finish.name.clone(),
             texture_type: finish.texture_type(),
             split: inst.split,

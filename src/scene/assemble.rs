@@ -9,8 +9,8 @@ use glam::Vec3;
 
 use super::camera::{Camera, ring_light};
 use super::config::{
-    CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, SceneConfig, TableConfig,
-    TextureConfig, View, parse_view,
+    CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, Pose, SceneConfig,
+    TableConfig, TextureConfig, View,
 };
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
 use super::regions::{RegionTolerance, planar_regions, region_per_triangle};
@@ -178,27 +178,57 @@ pub fn place_maps(
     Ok(out)
 }
 
-/// The configured object (built-in test body or glTF), translated to its position.
+/// The configured object (built-in test body or mesh file), its inspected faces chosen
+/// by `inspect`, translated to its position.
 pub fn load_object(scene: &SceneConfig) -> Result<Mesh, AssembleError> {
-    use super::{Degenerates, Variant, import_mesh, testbody};
+    Ok(load_object_inspected(scene)?.0)
+}
+
+/// As [`load_object`], with what each `inspect` entry selected (empty without `inspect`).
+pub fn load_object_inspected(
+    scene: &SceneConfig,
+) -> Result<(Mesh, Vec<super::inspect::InspectedFace>), AssembleError> {
+    use super::mesh_io::{GltfUnitDefault, load_mesh};
+    use super::{Degenerates, Variant, testbody};
     let cfg: &ObjectConfig = &scene.object;
-    let mut mesh = match (scene.effective_builtin(), &cfg.gltf) {
-        (Some("testbody-m"), _) => testbody(Variant::M),
-        (Some(_), _) => testbody(Variant::B),
-        (None, Some(path)) => import_mesh(path, Degenerates::Reject)?.mesh,
-        (None, None) => {
+    let mut mesh = match (scene.effective_builtin(), &cfg.path, &cfg.gltf) {
+        (Some("testbody-m"), _, _) => testbody(Variant::M),
+        (Some(_), _, _) => testbody(Variant::B),
+        (None, Some(path), _) => {
+            load_mesh(path, cfg.unit, GltfUnitDefault::Spec, Degenerates::Reject)?
+                .imported
+                .mesh
+        }
+        (None, None, Some(path)) => {
+            load_mesh(
+                path,
+                cfg.unit,
+                GltfUnitDefault::Millimetres,
+                Degenerates::Reject,
+            )?
+            .imported
+            .mesh
+        }
+        (None, None, None) => {
             return Err(ConfigError::Invalid {
                 field: "object",
-                message: "needs `gltf` (a path) or `builtin`".into(),
+                message: "needs `path` (a mesh file) or `builtin`".into(),
             }
             .into());
         }
+    };
+    let inspected = match &cfg.inspect {
+        Some(list) => {
+            let sel = super::inspect::parse(list)?;
+            super::inspect::apply(&mut mesh, &sel, &super::RegionTolerance::default())?
+        }
+        None => Vec::new(),
     };
     let t = Vec3::from(cfg.position_mm);
     for p in &mut mesh.positions {
         *p += t;
     }
-    Ok(mesh)
+    Ok((mesh, inspected))
 }
 
 /// The object on its table: everything about a scene that stays the same from one view
@@ -348,6 +378,26 @@ impl ViewSetup {
     }
 }
 
+impl ViewSetup {
+    /// The camera at `pose` (a face-relative view or a free pose) with the ring light on
+    /// it; the view's face must have a frame.
+    pub fn for_pose(
+        face_frames: &[FaceFrame],
+        first_light: u32,
+        pose: &Pose,
+        camera: &CameraConfig,
+        light: &LightConfig,
+    ) -> Result<ViewSetup, AssembleError> {
+        if let Pose::View(view) = pose {
+            return ViewSetup::for_view(face_frames, first_light, *view, camera, light);
+        }
+        let camera =
+            Camera::for_pose(face_frames, pose, camera).expect("a free pose needs no face frame");
+        let light = LightGeometry::ring(&camera, light, first_light);
+        Ok(ViewSetup { camera, light })
+    }
+}
+
 /// A whole scene file's scene: stage, view and slope maps.
 #[derive(Clone, Debug)]
 pub struct RenderScene {
@@ -365,12 +415,12 @@ impl RenderScene {
     /// configured view, the ring light and the `[texture]` maps.
     pub fn assemble(object: &Mesh, cfg: &SceneConfig) -> Result<RenderScene, AssembleError> {
         let stage = Stage::new(object.clone(), cfg.object.position_mm, &cfg.table);
-        let view = parse_view(&cfg.camera.view)?;
+        let pose = cfg.camera.pose()?;
         let first_light = stage.mesh.triangles.len() as u32;
-        let view = ViewSetup::for_view(
+        let view = ViewSetup::for_pose(
             &stage.face_frames,
             first_light,
-            view,
+            &pose,
             &cfg.camera,
             &cfg.light,
         )?;

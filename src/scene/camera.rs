@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::config::{CameraConfig, LightConfig, View};
+use super::config::{CameraConfig, LightConfig, Pose, View};
 use super::testbody::FaceFrame;
 
 /// The camera (one type for every pass): a pinhole with eye, orthonormal
@@ -30,10 +30,17 @@ impl Camera {
     /// centre, tilted by `angle` from the face normal towards the face's `u` axis (the
     /// up-slope direction, so tilted views look down rather than up from the table), and
     /// aims at the centre. Image up is the tilted `u`.
+    /// A non-zero azimuth turns the tilt direction (and the image up) about the normal,
+    /// from `u` towards `v`.
     pub fn for_view(face: &FaceFrame, view: View, cam: &CameraConfig) -> Camera {
         let th = (view.angle_deg as f64).to_radians();
         let n = face.normal.as_dvec3();
-        let u = face.u.as_dvec3();
+        let u = if view.azimuth_deg == 0.0 {
+            face.u.as_dvec3()
+        } else {
+            let az = (view.azimuth_deg as f64).to_radians();
+            face.u.as_dvec3() * az.cos() + face.v.as_dvec3() * az.sin()
+        };
         let dir = n * th.cos() + u * th.sin();
         let up = (u * th.cos() - n * th.sin()).normalize();
         let forward = -dir.normalize();
@@ -49,6 +56,42 @@ impl Camera {
             tan_half_h: (cam.height as f64 * pitch_mm * 0.5 / cam.focal_mm as f64) as f32,
             width: cam.width,
             height: cam.height,
+        }
+    }
+
+    /// The camera at a pose: a face-relative view of `frames` (as [`Camera::for_view`]), or
+    /// a free pose (eye, unit forward, unit up orthogonal to it), with the intrinsics of
+    /// `cam`. `None` when the view's face has no frame.
+    pub fn for_pose(frames: &[FaceFrame], pose: &Pose, cam: &CameraConfig) -> Option<Camera> {
+        match *pose {
+            Pose::View(view) => frames
+                .iter()
+                .find(|f| f.face == view.face)
+                .map(|f| Camera::for_view(f, view, cam)),
+            Pose::Free { eye, forward, up } => {
+                // The intrinsics (and whatever else `for_view` derives from `cam`) from
+                // the view code path, so both kinds of pose share them; then the pose.
+                let frame = FaceFrame {
+                    face: 1,
+                    centre: Vec3::ZERO,
+                    normal: Vec3::Z,
+                    u: Vec3::X,
+                    v: Vec3::Y,
+                    half_size: glam::Vec2::ONE,
+                    area: 1.0,
+                };
+                let view = View {
+                    face: 1,
+                    angle_deg: 0.0,
+                    azimuth_deg: 0.0,
+                };
+                let mut c = Camera::for_view(&frame, view, cam);
+                c.eye = eye.as_vec3();
+                c.forward = forward.as_vec3();
+                c.right = forward.cross(up).normalize().as_vec3();
+                c.up = up.as_vec3();
+                Some(c)
+            }
         }
     }
 

@@ -49,7 +49,18 @@ pub struct SceneConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct ObjectConfig {
     /// glTF (.gltf/.glb) path, relative to the scene file. Exclusive with `builtin`.
+    /// The old key: read in millimetres unless `unit` says otherwise.
     pub gltf: Option<PathBuf>,
+    /// Mesh file (glTF/GLB, OBJ, STL or PLY), relative to the scene file; wins over
+    /// `builtin`, exclusive with `gltf`.
+    pub path: Option<PathBuf>,
+    /// Unit of the mesh file's coordinates ("mm", "m", "in"); default: the format's
+    /// (glTF metres, synosis' own glTF files and the `gltf` key millimetres; OBJ, STL,
+    /// PLY millimetres). docs/mesh-format.md.
+    pub unit: Option<crate::scene::mesh_io::MeshUnit>,
+    /// Inspected faces: labels, region ids or normal selectors (`scene::inspect`);
+    /// none = the labels A, B, C the mesh carries.
+    pub inspect: Option<Vec<crate::scene::inspect::InspectEntry>>,
     /// "testbody-b" or "testbody-m". Used when `gltf` is absent.
     pub builtin: Option<String>,
     /// Translation of the object, mm (the table follows in x and y).
@@ -60,6 +71,9 @@ impl Default for ObjectConfig {
     fn default() -> Self {
         ObjectConfig {
             gltf: None,
+            path: None,
+            unit: None,
+            inspect: None,
             builtin: Some("testbody-b".into()),
             position_mm: [0.0; 3],
         }
@@ -218,6 +232,215 @@ pub struct CameraConfig {
     pub exposure: f32,
     /// Gain, (0, 1e6].
     pub gain: f32,
+    /// Pose instead of `view`: eye, target and up in scene mm (docs/scene-format.md).
+    pub look_at: Option<LookAt>,
+    /// Pose instead of `view`: 4 x 4 world-from-camera matrix, rows as written; the
+    /// camera looks down its -Z, +Y is the image's up (OpenGL axes).
+    pub matrix: Option<[[f64; 4]; 4]>,
+    /// Pose instead of `view`: OpenCV extrinsics, world-to-camera (x right, y down, z
+    /// forward): x_cam = R(rvec) x_world + tvec.
+    pub opencv: Option<OpenCvPose>,
+}
+
+/// `look_at = { eye = [..], target = [..], up = [0, 0, 1] }`, scene millimetres.
+#[derive(Clone, Debug, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LookAt {
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    /// Image up (made orthogonal to the view direction); default +Z.
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+/// OpenCV extrinsics: `rvec` a Rodrigues rotation vector (radians), `tvec` in mm.
+#[derive(Clone, Debug, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpenCvPose {
+    pub rvec: [f64; 3],
+    pub tvec: [f64; 3],
+}
+
+/// Where the camera is: a face-relative view, or a free pose (eye, unit forward, unit
+/// up orthogonal to it; scene mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pose {
+    View(View),
+    Free {
+        eye: glam::DVec3,
+        forward: glam::DVec3,
+        up: glam::DVec3,
+    },
+}
+
+/// Rodrigues: the rotation matrix (rows) of rotation vector `r` (axis * angle, radians).
+pub fn rodrigues(r: [f64; 3]) -> [[f64; 3]; 3] {
+    let v = glam::DVec3::from(r);
+    let th = v.length();
+    if th < 1e-300 {
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    let k = v / th;
+    let (s, c) = th.sin_cos();
+    let kk = |i: usize, j: usize| k[i] * k[j] * (1.0 - c);
+    [
+        [c + kk(0, 0), kk(0, 1) - s * k.z, kk(0, 2) + s * k.y],
+        [kk(1, 0) + s * k.z, c + kk(1, 1), kk(1, 2) - s * k.x],
+        [kk(2, 0) - s * k.y, kk(2, 1) + s * k.x, c + kk(2, 2)],
+    ]
+}
+
+const POSE_LIMIT: f64 = 1e6;
+
+impl CameraConfig {
+    /// The fields giving a free pose that are set (`look_at`, `matrix`, `opencv`).
+    pub fn free_pose_fields(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        if self.look_at.is_some() {
+            v.push("camera.look_at");
+        }
+        if self.matrix.is_some() {
+            v.push("camera.matrix");
+        }
+        if self.opencv.is_some() {
+            v.push("camera.opencv");
+        }
+        v
+    }
+
+    /// The camera's pose, checked: a free pose when one is given, else `view`.
+    pub fn pose(&self) -> Result<Pose, ConfigError> {
+        use glam::DVec3;
+        let fields = self.free_pose_fields();
+        if fields.len() > 1 {
+            return Err(ConfigError::Invalid {
+                field: "camera",
+                message: format!(
+                    "{} given; give exactly one of camera.view, camera.look_at, camera.matrix, camera.opencv",
+                    fields.join(" and ")
+                ),
+            });
+        }
+        let bad = |field: &'static str, message: String| ConfigError::Invalid { field, message };
+        let vec_ok = |v: [f64; 3]| v.iter().all(|c| c.is_finite() && c.abs() <= POSE_LIMIT);
+        if let Some(l) = &self.look_at {
+            for (name, v) in [("eye", l.eye), ("target", l.target), ("up", l.up)] {
+                if !vec_ok(v) {
+                    return Err(bad(
+                        "camera.look_at",
+                        format!("{name} = {v:?}: each coordinate finite, in [-1e6, 1e6] mm"),
+                    ));
+                }
+            }
+            let (eye, target) = (DVec3::from(l.eye), DVec3::from(l.target));
+            let d = target - eye;
+            if d.length() < 1e-6 {
+                return Err(bad(
+                    "camera.look_at",
+                    "eye and target coincide; allowed: at least 1e-6 mm apart".into(),
+                ));
+            }
+            let forward = d.normalize();
+            let up = DVec3::from(l.up);
+            let right = forward.cross(up);
+            if up.length() < 1e-12 || right.length() < 1e-6 * up.length() {
+                return Err(bad(
+                    "camera.look_at",
+                    format!(
+                        "up = {:?} is zero or parallel to target - eye; allowed: any direction not along the view",
+                        l.up
+                    ),
+                ));
+            }
+            let right = right.normalize();
+            return Ok(Pose::Free {
+                eye,
+                forward,
+                up: right.cross(forward).normalize(),
+            });
+        }
+        if let Some(m) = &self.matrix {
+            if !m
+                .iter()
+                .flatten()
+                .all(|c| c.is_finite() && c.abs() <= POSE_LIMIT)
+            {
+                return Err(bad(
+                    "camera.matrix",
+                    "every entry finite, in [-1e6, 1e6]".into(),
+                ));
+            }
+            if m[3] != [0.0, 0.0, 0.0, 1.0] {
+                return Err(bad(
+                    "camera.matrix",
+                    format!(
+                        "last row {:?}; allowed [0, 0, 0, 1] (a rigid transform)",
+                        m[3]
+                    ),
+                ));
+            }
+            let col = |j: usize| DVec3::new(m[0][j], m[1][j], m[2][j]);
+            let (x, y, z) = (col(0), col(1), col(2));
+            let ortho = [
+                x.dot(x) - 1.0,
+                y.dot(y) - 1.0,
+                z.dot(z) - 1.0,
+                x.dot(y),
+                y.dot(z),
+                z.dot(x),
+            ]
+            .iter()
+            .all(|e| e.abs() <= 1e-4);
+            if !ortho || x.cross(y).dot(z) <= 0.0 {
+                return Err(bad(
+                    "camera.matrix",
+                    "the upper 3 x 3 block must be a rotation (orthonormal within 1e-4, determinant +1)".into(),
+                ));
+            }
+            return Ok(Pose::Free {
+                eye: col(3),
+                forward: -z.normalize(),
+                up: y.normalize(),
+            });
+        }
+        if let Some(o) = &self.opencv {
+            if !o.rvec.iter().all(|c| c.is_finite() && c.abs() <= 1e3) {
+                return Err(bad(
+                    "camera.opencv",
+                    format!("rvec = {:?}: each finite, in [-1000, 1000] radians", o.rvec),
+                ));
+            }
+            if !vec_ok(o.tvec) {
+                return Err(bad(
+                    "camera.opencv",
+                    format!("tvec = {:?}: each finite, in [-1e6, 1e6] mm", o.tvec),
+                ));
+            }
+            let r = rodrigues(o.rvec);
+            let row = |i: usize| DVec3::from(r[i]);
+            let t = DVec3::from(o.tvec);
+            // eye = -R^T t; camera x, y, z axes in the world are R's rows.
+            let eye = -(row(0) * t.x + row(1) * t.y + row(2) * t.z);
+            return Ok(Pose::Free {
+                eye,
+                forward: row(2),
+                up: -row(1),
+            });
+        }
+        Ok(Pose::View(parse_view(&self.view)?))
+    }
+
+    /// The pose in words, for messages and logs: the view name or the free pose's field.
+    pub fn describe_pose(&self) -> String {
+        match self.free_pose_fields().first() {
+            Some(f) => f.trim_start_matches("camera.").to_string(),
+            None => self.view.clone(),
+        }
+    }
 }
 
 impl Default for CameraConfig {
@@ -231,6 +454,9 @@ impl Default for CameraConfig {
             view: "A20".into(),
             exposure: 1.0,
             gain: 1.0,
+            look_at: None,
+            matrix: None,
+            opencv: None,
         }
     }
 }
@@ -333,20 +559,35 @@ impl Default for TextureConfig {
     }
 }
 
-/// A parsed viewpoint: face id (1..=3) and angle from the normal, degrees.
+/// A parsed viewpoint: face id (1..=3), angle from the normal and azimuth about it,
+/// degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct View {
     pub face: crate::scene::mesh::FaceId,
     pub angle_deg: f32,
+    /// Direction of the tilt about the face normal, from the face's `u` towards `v`,
+    /// degrees, [-360, 360]; 0 (the default, "A20") tilts towards `u`.
+    pub azimuth_deg: f32,
 }
 
-/// Parses "A20", "B0", "C10" (face letter, then degrees in [0, 89]).
+/// Parses "A20", "B0", "C10" (face letter, then degrees in [0, 89]), optionally with an
+/// azimuth: "A20@45" (degrees in [-360, 360]).
 pub fn parse_view(s: &str) -> Result<View, ConfigError> {
     let bad = || ConfigError::Invalid {
         field: "camera.view",
         message: format!(
-            "{s:?} is not a view: expected a face letter A, B or C and an angle in degrees [0, 89], e.g. \"A20\""
+            "{s:?} is not a view: expected a face letter A, B or C and an angle in degrees [0, 89], e.g. \"A20\", optionally an azimuth in degrees [-360, 360] after '@', e.g. \"A20@45\""
         ),
+    };
+    let (s, azimuth_deg) = match s.split_once('@') {
+        Some((v, az)) => {
+            let az: f32 = az.parse().map_err(|_| bad())?;
+            if !(az.is_finite() && (-360.0..=360.0).contains(&az)) {
+                return Err(bad());
+            }
+            (v, az)
+        }
+        None => (s, 0.0),
     };
     let mut chars = s.chars();
     let face = match chars.next() {
@@ -362,6 +603,7 @@ pub fn parse_view(s: &str) -> Result<View, ConfigError> {
     Ok(View {
         face,
         angle_deg: angle,
+        azimuth_deg,
     })
 }
 
@@ -439,6 +681,12 @@ impl SceneConfig {
             let base = path.parent().unwrap_or(Path::new("."));
             cfg.object.gltf = Some(base.join(g));
         }
+        if let Some(g) = &cfg.object.path
+            && g.is_relative()
+        {
+            let base = path.parent().unwrap_or(Path::new("."));
+            cfg.object.path = Some(base.join(g));
+        }
         if let Some(t) = &cfg.texture.path
             && t.is_relative()
         {
@@ -454,6 +702,21 @@ impl SceneConfig {
             path: PathBuf::from("<text>"),
             message: e.to_string(),
         })?;
+        // `view` has a default, so whether it was written is read from the text.
+        let view_written = toml::from_str::<toml::Table>(text)
+            .ok()
+            .and_then(|t| t.get("camera").and_then(|c| c.get("view")).map(|_| ()))
+            .is_some();
+        let free = cfg.camera.free_pose_fields();
+        if view_written && !free.is_empty() {
+            return Err(ConfigError::Invalid {
+                field: "camera",
+                message: format!(
+                    "camera.view and {} given; give exactly one of camera.view, camera.look_at, camera.matrix, camera.opencv",
+                    free.join(" and ")
+                ),
+            });
+        }
         cfg.validate()?;
         Ok(cfg)
     }
@@ -461,7 +724,31 @@ impl SceneConfig {
     /// Checks every field against its documented range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let o = &self.object;
-        match (&o.gltf, &o.builtin) {
+        if let (Some(g), Some(p)) = (&o.gltf, &o.path) {
+            return Err(ConfigError::Invalid {
+                field: "object.path / object.gltf",
+                message: format!(
+                    "both given ({} and {}); give one (`gltf` is the old name of `path`)",
+                    p.display(),
+                    g.display()
+                ),
+            });
+        }
+        if let Some(p) = o.path.as_ref().or(o.gltf.as_ref()) {
+            let field = if o.path.is_some() {
+                "object.path"
+            } else {
+                "object.gltf"
+            };
+            crate::scene::mesh_io::MeshFormat::of(p).map_err(|e| ConfigError::Invalid {
+                field,
+                message: e.to_string(),
+            })?;
+        }
+        if let Some(list) = &o.inspect {
+            crate::scene::inspect::parse(list)?;
+        }
+        match (o.path.as_ref().or(o.gltf.as_ref()), &o.builtin) {
             (Some(_), Some(_)) => {
                 // `builtin` has a default, so only complain when both were written; the
                 // loader clears the default when gltf is given (see `effective_builtin`).
@@ -475,7 +762,7 @@ impl SceneConfig {
             (None, None) => {
                 return Err(ConfigError::Invalid {
                     field: "object",
-                    message: "needs `gltf` (a path) or `builtin`".into(),
+                    message: "needs `path` (a mesh file) or `builtin`".into(),
                 });
             }
             _ => {}
@@ -573,6 +860,7 @@ impl SceneConfig {
         range_f("camera.exposure", c.exposure, 0.0, 1e9, true, "(0, 1e9]")?;
         range_f("camera.gain", c.gain, 0.0, 1e6, true, "(0, 1e6]")?;
         parse_view(&c.view)?;
+        c.pose()?;
         let r = &self.render;
         range_u("render.spp", r.spp, 1, 1 << 20, "[1, 1048576]")?;
         range_u("render.max_bounces", r.max_bounces, 1, 64, "[1, 64]")?;
@@ -640,9 +928,10 @@ impl SceneConfig {
         Ok(())
     }
 
-    /// The built-in body to use, if any: `gltf` wins over the default `builtin`.
+    /// The built-in body to use, if any: `path` (or `gltf`) wins over the default
+    /// `builtin`.
     pub fn effective_builtin(&self) -> Option<&str> {
-        if self.object.gltf.is_some() {
+        if self.object.gltf.is_some() || self.object.path.is_some() {
             None
         } else {
             self.object.builtin.as_deref()
@@ -739,5 +1028,8 @@ mod tests {
         assert_eq!(parse_view("C0").unwrap().angle_deg, 0.0);
         assert!(parse_view("A90").is_err());
         assert!(parse_view("A").is_err());
+        let v = parse_view("B12.5@-30").unwrap();
+        assert_eq!((v.face, v.angle_deg, v.azimuth_deg), (2, 12.5, -30.0));
+        assert!(parse_view("A10@400").is_err() && parse_view("A10@").is_err());
     }
 }

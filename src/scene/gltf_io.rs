@@ -44,8 +44,16 @@ pub enum MeshError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("{path}: unsupported extension (use .gltf or .glb)")]
+    #[error("{path}: unsupported extension for writing (use .gltf, .glb or .stl)")]
     Extension { path: PathBuf },
+    #[error("{path}: unsupported mesh format (allowed: .gltf, .glb, .obj, .stl, .ply)")]
+    Format { path: PathBuf },
+    #[error("{path}: not a valid {format} file: {reason}")]
+    Parse {
+        path: PathBuf,
+        format: &'static str,
+        reason: String,
+    },
 }
 
 /// What to do with zero-area triangles on import.
@@ -62,6 +70,9 @@ pub enum Degenerates {
 pub struct Imported {
     pub mesh: Mesh,
     pub dropped_degenerate: usize,
+    /// glTF `asset.generator` (None for other formats or when absent): files synosis
+    /// wrote say "synosis <version>" and are in millimetres (docs/mesh-format.md).
+    pub generator: Option<String>,
 }
 
 #[derive(serde::Deserialize, Default)]
@@ -182,6 +193,19 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
             }
         }
     }
+    let generator = gltf.document.as_json().asset.generator.clone();
+    let mut imported = check_imported(path, mesh, degenerates)?;
+    imported.generator = generator;
+    Ok(imported)
+}
+
+/// The checks every importer ends with: triangles present, finite positions, and
+/// zero-area triangles refused (with the count and the first) or dropped.
+pub(crate) fn check_imported(
+    path: &Path,
+    mut mesh: Mesh,
+    degenerates: Degenerates,
+) -> Result<Imported, MeshError> {
     if mesh.triangles.is_empty() {
         return Err(MeshError::Empty {
             path: path.to_path_buf(),
@@ -215,6 +239,7 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
     Ok(Imported {
         mesh,
         dropped_degenerate,
+        generator: None,
     })
 }
 
