@@ -61,6 +61,18 @@ pub fn camera_block(cam: &Camera) -> crate::gpu_interface::CameraBlock {
         right: (cam.right * cam.tan_half_w).extend(0.0).into(),
         up: (cam.up * cam.tan_half_h).extend(0.0).into(),
         forward: cam.forward.extend(0.0).into(),
+        centre: [
+            cam.principal.x,
+            cam.principal.y,
+            cam.distortion.k3,
+            if cam.is_centred_pinhole() { 0.0 } else { 1.0 },
+        ],
+        dist: [
+            cam.distortion.k1,
+            cam.distortion.k2,
+            cam.distortion.p1,
+            cam.distortion.p2,
+        ],
     }
 }
 
