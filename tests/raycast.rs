@@ -257,15 +257,16 @@ fn distorted_camera_rays_match_the_cpu_model_on_both_backends() {
     let ctx = common::gpu();
     // The plane z = 0.2 x, far larger than the view.
     let plane = |x: f32, y: f32| Vec3::new(x, y, 0.2 * x);
-    let mut mesh = Mesh::default();
-    mesh.positions = vec![
-        plane(-200.0, -200.0),
-        plane(200.0, -200.0),
-        plane(200.0, 200.0),
-        plane(-200.0, 200.0),
-    ];
-    mesh.triangles = vec![[0, 1, 2], [0, 2, 3]];
-    mesh.labels = vec![TriLabel::default(); 2];
+    let mesh = Mesh {
+        positions: vec![
+            plane(-200.0, -200.0),
+            plane(200.0, -200.0),
+            plane(200.0, 200.0),
+            plane(-200.0, 200.0),
+        ],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        labels: vec![TriLabel::default(); 2],
+    };
     let k = Intrinsics {
         fx: 60.0,
         fy: 62.0,

@@ -138,7 +138,7 @@ pub fn exposure_time_s(
                 v = pick(None);
             }
             let p = percentile(&mut v, sensor.auto_percentile);
-            if !(p > 0.0) {
+            if p.is_nan() || p <= 0.0 {
                 return Err(SensorError::Invalid(format!(
                     "exposure = \"auto\": the {} percentile of the object's pixels is dark (no light reaches them); give `exposure = {{ ms = ... }}`",
                     sensor.auto_percentile

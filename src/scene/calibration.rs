@@ -296,7 +296,7 @@ impl Intrinsics {
                 let (x, y) = d.undistort(xd, yd);
                 let (x2, y2) = d.distort(x, y);
                 let err = ((x2 - xd) as f64 * self.fx).hypot((y2 - yd) as f64 * self.fy);
-                if !(err <= 1e-3) || !x.is_finite() || !y.is_finite() {
+                if err.is_nan() || err > 1e-3 || !x.is_finite() || !y.is_finite() {
                     return Err(format!(
                         "`distortion_coefficients` {d:?} cannot be inverted at pixel ({u:.1}, {v:.1}) (the distortion folds over inside the image); camera rays need a one-to-one distortion"
                     ));
