@@ -126,7 +126,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             let cap =
                 capture(&resp, &img.data, t, s, cfg.render.seed as u64).context("[sensor]")?;
             eprintln!(
-                "sensor: exposure {:.4} ms, {} bit",
+                "sensor: exposure {:.6} ms, {} bit",
                 cap.exposure_s * 1e3,
                 cap.bit_depth
             );

@@ -26,6 +26,10 @@ pub struct Camera {
     pub principal: Vec2,
     /// Lens distortion; zero = the ideal pinhole.
     pub distortion: Distortion,
+    /// Thin-lens aperture radius, mm (`focal_mm / (2 f_number)`); 0 = pinhole.
+    pub lens_radius_mm: f32,
+    /// Distance from the lens along `forward` to the plane in focus, mm.
+    pub focus_distance_mm: f32,
 }
 
 /// Vertical field of view of the raycast framing camera.
@@ -59,7 +63,13 @@ impl Camera {
             height: cam.height,
             principal: Vec2::ZERO,
             distortion: Distortion::default(),
+            lens_radius_mm: 0.0,
+            focus_distance_mm: cam.working_distance_mm,
         };
+        if let Some(n) = cam.f_number {
+            c.lens_radius_mm = (cam.focal_mm as f64 / (2.0 * n)) as f32;
+            c.focus_distance_mm = cam.focus_distance_mm.unwrap_or(cam.working_distance_mm);
+        }
         if let Some(k) = &cam.intrinsics {
             c = c.with_intrinsics(&k.scaled(cam.width, cam.height));
         }
@@ -106,6 +116,8 @@ impl Camera {
             height,
             principal: Vec2::ZERO,
             distortion: Distortion::default(),
+            lens_radius_mm: 0.0,
+            focus_distance_mm: 1.0,
         }
     }
 
@@ -151,6 +163,34 @@ impl Camera {
         let yd = (ny - self.principal.y) * self.tan_half_h;
         let (xu, yu) = self.distortion.undistort(xd, yd);
         (self.forward + xu * self.right - yu * self.up).normalize()
+    }
+
+    /// The thin lens's ray through image position (x, y) from aperture sample `u`
+    /// ([0, 1)^2, Shirley-Chiu concentric map onto the disc): origin and unit direction.
+    /// The pinhole ray meets the plane of focus; the ray leaves the lens point towards
+    /// that point. Same model as `camera_ray` in glsl/common/camera.glsl.
+    pub fn lens_ray(&self, x: f32, y: f32, u: Vec2) -> (Vec3, Vec3) {
+        let d = self.dir(x, y);
+        if self.lens_radius_mm <= 0.0 {
+            return (self.eye, d);
+        }
+        let focus = self.eye + d * (self.focus_distance_mm / d.dot(self.forward));
+        let o2 = 2.0 * u - Vec2::ONE;
+        let a = if o2 == Vec2::ZERO {
+            Vec2::ZERO
+        } else {
+            let (r, phi) = if o2.x.abs() > o2.y.abs() {
+                (o2.x, std::f32::consts::FRAC_PI_4 * (o2.y / o2.x))
+            } else {
+                (
+                    o2.y,
+                    std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o2.x / o2.y),
+                )
+            };
+            r * Vec2::new(phi.cos(), phi.sin())
+        } * self.lens_radius_mm;
+        let o = self.eye + a.x * self.right + a.y * self.up;
+        (o, (focus - o).normalize())
     }
 
     /// Image position (pixels, as [`Camera::dir`] takes them) of world point `p`, or

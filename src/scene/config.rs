@@ -234,6 +234,9 @@ pub struct CameraConfig {
     /// the image-plane irradiance of the `[sensor]` model.
     #[serde(deserialize_with = "f_number_or_inf")]
     pub f_number: Option<f64>,
+    /// Distance along the view axis to the plane in focus, mm, (0, 100000]; None: the
+    /// working distance (the aimed face centre). Used with `f_number`.
+    pub focus_distance_mm: Option<f32>,
 }
 
 /// `f_number`: a number, or "inf" (the pinhole: None).
@@ -470,6 +473,7 @@ impl Default for CameraConfig {
             calibration: None,
             intrinsics: None,
             f_number: None,
+            focus_distance_mm: None,
         }
     }
 }
@@ -853,6 +857,16 @@ impl SceneConfig {
                 range: "[0.5, 1000] or \"inf\" (pinhole)",
             });
         }
+        if let Some(f) = c.focus_distance_mm {
+            range_f(
+                "camera.focus_distance_mm",
+                f,
+                0.0,
+                1e5,
+                true,
+                "(0, 100000] mm",
+            )?;
+        }
         if let Some(s) = &self.sensor {
             s.validate()?;
             if c.f_number.is_none() {
@@ -1053,6 +1067,51 @@ mod tests {
         std::fs::write(&scene, "[camera]\ncalibration = \"missing.yaml\"\n").unwrap();
         let e = SceneConfig::load(&scene).unwrap_err().to_string();
         assert!(e.contains("missing.yaml"), "{e}");
+    }
+
+    #[test]
+    fn lens_and_sensor_fields_parse_and_check() {
+        let c = SceneConfig::parse("[camera]\nf_number = \"inf\"\n").unwrap();
+        assert_eq!(c.camera.f_number, None);
+        assert!(c.sensor.is_none());
+        let c = SceneConfig::parse(
+            "[camera]\nf_number = 8.0\nfocus_distance_mm = 80.0\n[sensor]\nexposure = { ms = 2.5 }\nbit_depth = 12\nblooming = \"vertical\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.camera.f_number, Some(8.0));
+        let s = c.sensor.unwrap();
+        assert_eq!(s.exposure, ExposureSetting::Fixed { ms: 2.5 });
+        assert_eq!((s.bit_depth, s.blooming), (12, Blooming::Vertical));
+        assert_eq!(
+            SceneConfig::parse("[camera]\nf_number = 4\n[sensor]\n")
+                .unwrap()
+                .sensor,
+            Some(SensorConfig::default())
+        );
+        for (text, field) in [
+            ("[sensor]\n", "camera.f_number"),
+            ("[camera]\nf_number = 0.1\n", "camera.f_number"),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nbit_depth = 9\n",
+                "sensor.bit_depth",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nexposure = 3.0\n",
+                "ms = 3",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nexposure = \"manual\"\n",
+                "auto",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nquantum_efficiency = 1.5\n",
+                "sensor.quantum_efficiency",
+            ),
+            ("[camera]\nf_number = \"wide\"\n", "camera.f_number"),
+        ] {
+            let e = SceneConfig::parse(text).unwrap_err().to_string();
+            assert!(e.contains(field), "{text}: {e}");
+        }
     }
 
     #[test]
