@@ -4,10 +4,14 @@
 // (class, defect instance, face) and the share of an n x n stratified grid of rays in
 // the pixel whose first hit is a defect triangle. Occlusion is exact: these are first
 // hits of camera rays against the same geometry the image is rendered from.
+// Under a thin lens (cam.eye.w > 0) the rays are the path tracer's first n x n primary
+// rays (same sampler, seed, pixel jitter and aperture points): the label is the label
+// word most of them hit (ties: the earliest sample), coverage the share hitting a defect.
 #include "common/trace.glsl"
 #include "interface.glsl"
 #include "common/tile.glsl"
 #include "common/camera.glsl"
+#include "common/sampler.glsl"
 
 layout(local_size_x = TILE, local_size_y = TILE) in;
 
@@ -25,11 +29,47 @@ uint label_at(vec2 pixel_pos) {
     return h.prim == NO_HIT || h.prim >= uint(labels.length()) ? 0u : labels[h.prim];
 }
 
+uint label_of_ray(vec3 o, vec3 d) {
+    Hit h = trace(o, d, 0.0, 3.0e38);
+    return h.prim == NO_HIT || h.prim >= uint(labels.length()) ? 0u : labels[h.prim];
+}
+
+// Thin lens: the path tracer's first n x n primary rays of pixel i.
+void lens_labels(uint i, uint px, uint py, uint n) {
+    uint count = min(n * n, 256u);
+    uint words[256];
+    uint defect = 0u;
+    for (uint s = 0u; s < count; ++s) {
+        Sampler rng = sampler_init(uint(pc.cam.centre.w), i, s, pc.seed);
+        vec2 jitter = sample_2d(rng);
+        vec2 lens = sample_2d(rng);
+        vec3 o, d;
+        camera_ray(pc.cam, vec2(px, py) + jitter, vec2(pc.width, pc.height), lens, o, d);
+        words[s] = label_of_ray(o, d);
+        defect += ((words[s] >> LABEL_CLASS_SHIFT) & 0xffu) != 0u ? 1u : 0u;
+    }
+    uint best = words[0], best_n = 0u;
+    for (uint a = 0u; a < count; ++a) {
+        uint k = 0u;
+        for (uint b = 0u; b < count; ++b) k += words[b] == words[a] ? 1u : 0u;
+        if (k > best_n) {
+            best_n = k;
+            best = words[a];
+        }
+    }
+    ids[i] = best;
+    coverage[i] = float(defect) / float(count);
+}
+
 void main() {
     uvec2 pix = tile_pixel(pc.tiles);
     uint px = pix.x, py = pix.y;
     if (px >= pc.width || py >= pc.height) return;
     uint i = py * pc.width + px;
+    if (pc.cam.eye.w > 0.0) {
+        lens_labels(i, px, py, max(pc.grid, 1u));
+        return;
+    }
     ids[i] = label_at(vec2(px, py) + 0.5);
     uint n = max(pc.grid, 1u);
     uint defect = 0u;

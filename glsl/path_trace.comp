@@ -244,8 +244,10 @@ bool surface_sample(uint mat, Conductor c, vec3 wo, vec3 u, out vec3 wi, out flo
 float radiance_sample(uint pixel, uint px, uint py, uint s) {
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec2 jitter = sample_2d(rng);
-    vec3 o = prm.cam.eye.xyz;
-    vec3 d = camera_dir(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height));
+    // Thin lens: the next two dimensions pick the aperture point (the pinhole draws none).
+    vec2 lens = prm.cam.eye.w > 0.0 ? sample_2d(rng) : vec2(0.0);
+    vec3 o, d;
+    camera_ray(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height), lens, o, d);
     Conductor cond;
     cond.alpha = clamp(prm.alpha, 1e-4, 1.0);
     cond.n = prm.ior_n;

@@ -188,3 +188,103 @@ fn annotation_is_exact_and_consistent_on_both_backends() {
         "backends disagree"
     );
 }
+
+/// Fraction of a disc of radius r left of the line at offset x, box-filtered over one
+/// pixel (the pixel jitter): the edge spread function of the thin lens's blur.
+fn disc_esf(x: f64, r: f64) -> f64 {
+    let a = |t: f64| {
+        let t = t.clamp(-1.0, 1.0);
+        (std::f64::consts::PI - t.acos() + t * (1.0 - t * t).sqrt()) / std::f64::consts::PI
+    };
+    let n = 200;
+    (0..n)
+        .map(|i| a((x + (i as f64 + 0.5) / n as f64 - 0.5) / r))
+        .sum::<f64>()
+        / n as f64
+}
+
+/// Distance between the 10 % and 90 % crossings of a rising profile sampled at
+/// positions `xs` (linear interpolation).
+fn width_10_90(xs: &[f64], ys: &[f64]) -> f64 {
+    let cross = |level: f64| {
+        for i in 1..xs.len() {
+            if ys[i - 1] < level && ys[i] >= level {
+                let t = (level - ys[i - 1]) / (ys[i] - ys[i - 1]);
+                return xs[i - 1] + t * (xs[i] - xs[i - 1]);
+            }
+        }
+        f64::NAN
+    };
+    cross(0.9) - cross(0.1)
+}
+
+/// A thin lens blurs a labelled step edge off focus by the circle of confusion
+/// `2 R fx |1/z - 1/z_f|` pixels (the labels follow the path tracer's lens samples); in
+/// focus the edge stays sharp. Both backends.
+#[test]
+fn thin_lens_blurs_an_edge_by_the_circle_of_confusion() {
+    let ctx = common::gpu();
+    // The plane z = 0: defect (class 1) for x > 0.3 mm, plain for x < 0.3 mm.
+    let mut mesh = Mesh::default();
+    for (x0, x1, class) in [(-100.0, 0.3, 0u8), (0.3, 100.0, 1u8)] {
+        let b = mesh.positions.len() as u32;
+        mesh.positions.extend([
+            Vec3::new(x0, -100.0, 0.0),
+            Vec3::new(x1, -100.0, 0.0),
+            Vec3::new(x1, 100.0, 0.0),
+            Vec3::new(x0, 100.0, 0.0),
+        ]);
+        mesh.triangles
+            .extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        let label = TriLabel {
+            face: 1,
+            class,
+            instance: class as u16,
+        };
+        mesh.labels.extend([label; 2]);
+    }
+    let w = 64u32;
+    let fx = w as f64 / 2.0 / (15f64).to_radians().tan();
+    for b in common::BACKENDS {
+        let ts = TraceScene::build(&ctx, &mesh, b, None).unwrap();
+        for (focus, radius) in [(30.0f32, 4.0f32), (50.0, 4.0)] {
+            let mut cam = Camera::look(Vec3::new(0.0, 0.0, 50.0), -Vec3::Z, Vec3::Y, 30.0, w, w);
+            cam.lens_radius_mm = radius;
+            cam.focus_distance_mm = focus;
+            let (a, _) = annotate(&ctx, &ts, &mesh, &cam, 16, None).unwrap();
+            // Mean coverage over the middle rows, per column.
+            let rows = 24..40u32;
+            let xs: Vec<f64> = (0..w).map(|x| x as f64 + 0.5).collect();
+            let ys: Vec<f64> = (0..w)
+                .map(|x| {
+                    rows.clone()
+                        .map(|y| a.coverage[(y * w + x) as usize] as f64)
+                        .sum::<f64>()
+                        / rows.len() as f64
+                })
+                .collect();
+            let got = width_10_90(&xs, &ys);
+            let coc = 2.0 * radius as f64 * fx * (1.0 / 50.0 - 1.0 / focus as f64).abs();
+            // The edge's image: x = 0.3 mm at 50 mm is 0.006 fx pixels right of centre.
+            let edge = 32.0 + 0.3 / 50.0 * fx;
+            let model: Vec<f64> = xs
+                .iter()
+                .map(|&x| disc_esf(x - edge, coc.max(1e-6) / 2.0))
+                .collect();
+            let expect = width_10_90(&xs, &model);
+            eprintln!(
+                "{}: focus {focus} mm: circle of confusion {coc:.2} px, 10-90 % edge width {got:.2} px (model {expect:.2})",
+                b.name()
+            );
+            assert!(
+                (got - expect).abs() <= 0.05 * expect + 0.2,
+                "{}: edge width {got} vs {expect}",
+                b.name()
+            );
+            // Labels of blurred pixels: the majority class of the samples.
+            let mid = (32 * w) as usize;
+            assert_eq!(a.class[mid + 2] as f64, if ys[2] > 0.5 { 1.0 } else { 0.0 });
+        }
+    }
+    common::assert_clean(&ctx);
+}

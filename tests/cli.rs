@@ -205,3 +205,48 @@ fn render_and_dataset_run_write_their_files_and_report_on_stdout() {
         text(&o.stdout)
     );
 }
+
+/// `synosis render` with an OpenCV calibration, a thin lens and an EMVA 1288 sensor:
+/// the calibration's size, a 16-bit PNG of 12-bit codes, the exposure on stderr; and
+/// `--png16` next to `[sensor]` is refused naming it.
+#[test]
+fn render_with_calibration_lens_and_sensor() {
+    let dir = tempfile::tempdir().unwrap();
+    let dp = dir.path();
+    std::fs::write(
+        dp.join("cam.yaml"),
+        "%YAML:1.0\n---\nimage_width: 40\nimage_height: 30\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 120., 0., 20.5, 0., 121., 14.2, 0., 0., 1. ]\ndistortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n   data: [ -0.2, 0.05, 1.0e-3, 0., 0. ]\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dp.join("s.toml"),
+        "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0\n[light]\nradiance = 50.0\n[render]\nspp = 2\nbatch_spp = 2\n[sensor]\nbit_depth = 12\ngain_dn_per_electron = 0.4\nblooming = \"vertical\"\n",
+    )
+    .unwrap();
+    let o = synosis(&["render", "s.toml", "--out", "out"], dp);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("sensor: exposure") && err.contains("12 bit"),
+        "{err}"
+    );
+    let dec = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dp.join("out/image.png")).unwrap(),
+    ));
+    let mut r = dec.read_info().unwrap();
+    let mut buf = vec![0; r.output_buffer_size().unwrap()];
+    let info = r.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (40, 30));
+    assert_eq!(info.bit_depth, png::BitDepth::Sixteen);
+    let codes: Vec<u16> = buf[..info.buffer_size()]
+        .chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
+    let max = *codes.iter().max().unwrap();
+    assert!(max <= 4095 && max > 0, "12-bit codes, max {max}");
+    assert!(dp.join("out/mask.png").exists());
+    assert_fails(
+        &synosis(&["render", "s.toml", "--out", "out2", "--png16"], dp),
+        &["--png16", "bit_depth"],
+    );
+}

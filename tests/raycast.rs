@@ -247,3 +247,75 @@ fn cli_bad_inputs_fail_clearly_and_leave_nothing_behind() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert!(out.join("depth.exr").exists());
 }
+
+/// A calibrated camera with strong distortion and an off-centre principal point: the
+/// depth of every pixel on a tilted plane, on both backends, is the CPU camera model's
+/// (`Camera::dir`, the reference for every pass's `camera_dir`).
+#[test]
+fn distorted_camera_rays_match_the_cpu_model_on_both_backends() {
+    use synosis::scene::{Distortion, Intrinsics};
+    let ctx = common::gpu();
+    // The plane z = 0.2 x, far larger than the view.
+    let plane = |x: f32, y: f32| Vec3::new(x, y, 0.2 * x);
+    let mesh = Mesh {
+        positions: vec![
+            plane(-200.0, -200.0),
+            plane(200.0, -200.0),
+            plane(200.0, 200.0),
+            plane(-200.0, 200.0),
+        ],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        labels: vec![TriLabel::default(); 2],
+    };
+    let k = Intrinsics {
+        fx: 60.0,
+        fy: 62.0,
+        cx: 35.2,
+        cy: 20.7,
+        width: 64,
+        height: 48,
+        distortion: Distortion {
+            k1: -0.2,
+            k2: 0.05,
+            p1: 2.0e-3,
+            p2: -1.0e-3,
+            k3: 0.0,
+        },
+    };
+    let base = Camera::look(Vec3::new(0.0, 0.0, 50.0), -Vec3::Z, Vec3::Y, 40.0, 64, 48);
+    let cam = base.with_intrinsics(&k);
+    let undistorted = base.with_intrinsics(&Intrinsics {
+        distortion: Distortion::default(),
+        ..k
+    });
+    let expect = |c: &Camera, px: u32, py: u32| {
+        let d = c.pixel_dir(px, py);
+        // eye + t d on z = 0.2 x.
+        (0.2 * c.eye.x - c.eye.z) / (d.z - 0.2 * d.x)
+    };
+    for b in [Backend::RayQuery, Backend::Software] {
+        let scene = TraceScene::build(&ctx, &mesh, b, None).unwrap();
+        let img = raycast(&ctx, &scene, &cam, None).unwrap();
+        let (mut worst, mut moved) = (0.0f32, 0usize);
+        for py in 0..48 {
+            for px in 0..64 {
+                let got = img.depth[(py * 64 + px) as usize];
+                let want = expect(&cam, px, py);
+                worst = worst.max((got - want).abs() / want);
+                // Without the distortion the depth would differ.
+                moved += ((expect(&undistorted, px, py) - want).abs() / want > 1e-3) as usize;
+            }
+        }
+        eprintln!(
+            "{}: worst relative depth error {worst:e}; {moved} of 3072 pixels move with the distortion",
+            b.name()
+        );
+        assert!(
+            worst < 1e-4,
+            "{}: GPU rays differ from the CPU camera ({worst})",
+            b.name()
+        );
+        assert!(moved > 1000, "the test distortion is too weak ({moved})");
+    }
+    common::assert_clean(&ctx);
+}

@@ -872,6 +872,84 @@ fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
     e
 }
 
+/// `small_cfg` with more `[camera]` fields.
+fn lens_cfg(camera: &str) -> SceneConfig {
+    let text = format!(
+        "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n{camera}[render]\nspp = 16\nbatch_spp = 8\nseed = 3\n"
+    );
+    let mut cfg = SceneConfig::parse(&text).expect("test scene");
+    cfg.set_resolution(64, 48).expect("size");
+    cfg
+}
+
+/// Sum of squared differences between horizontally and vertically neighbouring 4 x 4
+/// block means (block means keep the sampling noise out of the edge measure; squared,
+/// because a blur keeps the sum of absolute steps across a monotonic edge).
+fn edge_energy(img: &Radiance) -> f64 {
+    let (w, h) = (img.width as usize / 4, img.height as usize / 4);
+    let block = |bx: usize, by: usize| {
+        let mut s = 0.0;
+        for y in 0..4 {
+            for x in 0..4 {
+                s += img.data[(by * 4 + y) * img.width as usize + bx * 4 + x] as f64;
+            }
+        }
+        s / 16.0
+    };
+    let mut e = 0.0;
+    for by in 0..h {
+        for bx in 0..w {
+            if bx + 1 < w {
+                e += (block(bx + 1, by) - block(bx, by)).powi(2);
+            }
+            if by + 1 < h {
+                e += (block(bx, by + 1) - block(bx, by)).powi(2);
+            }
+        }
+    }
+    e
+}
+
+/// `f_number = "inf"` is the pinhole, bit for bit; an aperture focused far from the
+/// body blurs its silhouette (the path tracer samples the aperture), both backends.
+#[test]
+fn thin_lens_in_the_path_tracer() {
+    for backend in common::BACKENDS {
+        // The whole body against the table, from 300 mm.
+        let far = "working_distance_mm = 300.0\n";
+        let pinhole = render(&lens_cfg(far), backend, |_| {});
+        let inf = render(
+            &lens_cfg(&format!("{far}f_number = \"inf\"\n")),
+            backend,
+            |_| {},
+        );
+        assert!(
+            pinhole.data == inf.data,
+            "{}: f_number = inf changed the image",
+            backend.name()
+        );
+        // f/1 focused at 150 mm: a circle of confusion of about 16 pixels at 300 mm.
+        let lens = render(
+            &lens_cfg(&format!("{far}f_number = 1.0\nfocus_distance_mm = 150.0\n")),
+            backend,
+            |_| {},
+        );
+        assert_sane("thin lens", &lens);
+        let (e0, e1) = (edge_energy(&pinhole), edge_energy(&lens));
+        println!(
+            "{}: edge energy pinhole {e0:.3e}, f/1 off focus {e1:.3e}; mean radiance {:.3e} vs {:.3e}",
+            backend.name(),
+            mean(&pinhole.data),
+            mean(&lens.data)
+        );
+        assert!(
+            e1 < 0.6 * e0,
+            "{}: the lens did not blur ({e1} vs {e0})",
+            backend.name()
+        );
+    }
+}
+
 /// Radiance and per-pixel face ids of one render, after `tweak` on the assembled scene.
 fn render_faces_with(
     cfg: &SceneConfig,

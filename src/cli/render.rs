@@ -9,6 +9,7 @@ use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene};
 use synosis::render::pixels::Exposure;
+use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
 use synosis::scene::assemble::load_object_inspected;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::trace::{AccelChoice, resolve};
@@ -78,6 +79,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         cfg.camera.opencv = None;
     }
     cfg.validate()?;
+    if a.png16 && cfg.sensor.is_some() {
+        anyhow::bail!(
+            "--png16: with a [sensor] section, sensor.bit_depth sets the PNG depth (8 -> 8-bit PNG, 10/12/16 -> 16-bit PNG)"
+        );
+    }
     let (object, inspected) = profiler
         .cpu("load object", || load_object_inspected(&cfg))
         .context("loading the object")?;
@@ -125,16 +131,45 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let (w, h) = (img.width, img.height);
+    // The EMVA 1288 sensor: exposure (auto: from the inspected faces' pixels) and noise
+    // from the linear radiance, seeded by the image's seed.
+    let captured = match &cfg.sensor {
+        None => None,
+        Some(s) => {
+            let n = cfg.camera.f_number.context("camera.f_number")?;
+            let resp = Responsivity::new(&scene.view.camera, cfg.camera.focal_mm as f64, n, s);
+            let mask: Option<Vec<bool>> = frame
+                .annotation
+                .as_ref()
+                .map(|a| a.face.iter().map(|&f| f != 0).collect());
+            let t = exposure_time_s(&resp, &img.data, mask.as_deref(), s).context("[sensor]")?;
+            let cap =
+                capture(&resp, &img.data, t, s, cfg.render.seed as u64).context("[sensor]")?;
+            eprintln!(
+                "sensor: exposure {:.6} ms, {} bit",
+                cap.exposure_s * 1e3,
+                cap.bit_depth
+            );
+            Some(cap)
+        }
+    };
     profiler.cpu("write images", || -> anyhow::Result<()> {
         let exr = a.out.join("radiance.exr");
         synosis::image_io::write_exr_f32(&exr, w as usize, h as usize, "Y", &img.data)
             .with_context(|| format!("writing {}", exr.display()))?;
         let png = a.out.join("image.png");
-        let sensor = Exposure::new(cfg.camera.exposure, cfg.camera.gain);
-        if a.png16 {
-            synosis::image_io::write_png_gray16(&png, w, h, &sensor.quantise16(&img.data))
+        if let Some(cap) = &captured {
+            match cap.codes8() {
+                Some(c8) => synosis::image_io::write_png_gray8(&png, w, h, &c8),
+                None => synosis::image_io::write_png_gray16(&png, w, h, &cap.codes),
+            }
         } else {
-            synosis::image_io::write_png_gray8(&png, w, h, &sensor.quantise8(&img.data))
+            let sensor = Exposure::new(cfg.camera.exposure, cfg.camera.gain);
+            if a.png16 {
+                synosis::image_io::write_png_gray16(&png, w, h, &sensor.quantise16(&img.data))
+            } else {
+                synosis::image_io::write_png_gray8(&png, w, h, &sensor.quantise8(&img.data))
+            }
         }
         .with_context(|| format!("writing {}", png.display()))?;
         if let Some(ann) = &frame.annotation {

@@ -76,7 +76,8 @@ impl Annotation {
 }
 
 /// Adds the annotation dispatch(es) to `g`: labels of the first hits of `cam`'s rays,
-/// written into `targets` (ids, coverage).
+/// written into `targets` (ids, coverage). `sampling`: (SAMPLER_* kind, seed) of the
+/// path tracer, whose first `grid^2` primary rays label a pixel under a thin lens.
 #[allow(clippy::too_many_arguments)]
 pub fn record_annotate<'a>(
     g: &mut Graph<'a>,
@@ -89,16 +90,19 @@ pub fn record_annotate<'a>(
     (width, height): (u32, u32),
     grid: u32,
     tiling: &Tiling,
+    (sampler, seed): (u32, u32),
 ) {
     let off = backend_bindings;
+    let mut cam = *cam;
+    cam.centre[3] = sampler as f32;
     for (tiles, groups) in tiling.dispatches() {
         let push = ImagePush {
-            cam: *cam,
+            cam,
             width,
             height,
             grid: grid.clamp(1, 16),
+            seed,
             tiles,
-            ..Default::default()
         };
         trace
             .bind(g.dispatch("annotate", pipeline, [groups, 1, 1]))
@@ -210,6 +214,7 @@ impl AnnotatePass {
             size,
             self.grid,
             &tiling,
+            (crate::gpu_interface::SAMPLER_SOBOL, 0),
         );
     }
 }

@@ -10,6 +10,7 @@ pub mod gpu_scene;
 pub mod path_trace;
 pub mod pixels;
 pub mod raycast;
+pub mod sensor;
 pub mod settings;
 pub mod slope;
 pub mod tracer;

@@ -57,10 +57,18 @@ impl Tiling {
 /// The camera as the shaders take it.
 pub fn camera_block(cam: &Camera) -> crate::gpu_interface::CameraBlock {
     crate::gpu_interface::CameraBlock {
-        eye: cam.eye.extend(0.0).into(),
+        eye: cam.eye.extend(cam.lens_radius_mm).into(),
         right: (cam.right * cam.tan_half_w).extend(0.0).into(),
         up: (cam.up * cam.tan_half_h).extend(0.0).into(),
-        forward: cam.forward.extend(0.0).into(),
+        forward: cam.forward.extend(cam.focus_distance_mm).into(),
+        // w: the sampler kind of the thin-lens annotation, set by the caller.
+        centre: [cam.principal.x, cam.principal.y, cam.distortion.k3, 0.0],
+        dist: [
+            cam.distortion.k1,
+            cam.distortion.k2,
+            cam.distortion.p1,
+            cam.distortion.p2,
+        ],
     }
 }
 
@@ -74,6 +82,8 @@ pub struct View<'s> {
     annotation: Option<(AnnotationTargets, u32)>,
     camera: Camera,
     tiling: Tiling,
+    /// (sampler kind, seed) of the path tracer, which the thin-lens annotation follows.
+    sampling: (u32, u32),
 }
 
 impl<'s> View<'s> {
@@ -118,6 +128,7 @@ impl<'s> View<'s> {
             annotation,
             camera: *cam,
             tiling: Tiling::new(width, height, ctx.info.max_workgroup_count[0]),
+            sampling: (settings.sampler as u32, settings.seed),
         })
     }
 
@@ -149,6 +160,7 @@ impl<'s> View<'s> {
                 let size = (self.camera.width, self.camera.height);
                 let (mut ids, mut cov) = (g.import(&targets.ids), g.import(&targets.coverage));
                 let cam = camera_block(&self.camera);
+                let sampling = (self.sampling.0, self.sampling.1);
                 record_annotate(
                     g,
                     &tracer.annotate,
@@ -160,6 +172,7 @@ impl<'s> View<'s> {
                     size,
                     *grid,
                     &self.tiling,
+                    sampling,
                 );
             }
         }

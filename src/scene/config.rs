@@ -29,6 +29,8 @@ pub enum ConfigError {
         field: &'static str,
         message: String,
     },
+    #[error(transparent)]
+    Calibration(#[from] crate::scene::calibration::CalibrationError),
 }
 
 /// The scene file's top level.
@@ -42,6 +44,9 @@ pub struct SceneConfig {
     pub camera: CameraConfig,
     pub render: RenderConfig,
     pub texture: TextureConfig,
+    /// EMVA 1288 sensor (docs/scene-format.md, `[sensor]`); None: the linear
+    /// `camera.exposure * camera.gain` model.
+    pub sensor: Option<SensorConfig>,
 }
 
 /// The inspected object: a glTF file or a built-in test body, and where it stands.
@@ -240,6 +245,20 @@ pub struct CameraConfig {
     /// Pose instead of `view`: OpenCV extrinsics, world-to-camera (x right, y down, z
     /// forward): x_cam = R(rvec) x_world + tvec.
     pub opencv: Option<OpenCvPose>,
+    /// OpenCV calibration file (YAML or JSON), relative to the scene file: sets the
+    /// resolution, the focal lengths, the principal point and the distortion.
+    pub calibration: Option<PathBuf>,
+    /// The calibration's intrinsics once loaded ([`SceneConfig::load`]); None: the
+    /// centred pinhole of `focal_mm` and `pixel_um`.
+    #[serde(skip)]
+    pub intrinsics: Option<crate::scene::calibration::Intrinsics>,
+    /// Working f-number of the lens, [0.5, 1000]; None (omitted or "inf"): pinhole. Sets
+    /// the image-plane irradiance of the `[sensor]` model.
+    #[serde(deserialize_with = "f_number_or_inf")]
+    pub f_number: Option<f64>,
+    /// Distance along the view axis to the plane in focus, mm, (0, 100000]; None: the
+    /// working distance (the aimed face centre). Used with `f_number`.
+    pub focus_distance_mm: Option<f32>,
 }
 
 /// `look_at = { eye = [..], target = [..], up = [0, 0, 1] }`, scene millimetres.
@@ -443,6 +462,226 @@ impl CameraConfig {
     }
 }
 
+/// `f_number`: a number, or "inf" (the pinhole: None).
+fn f_number_or_inf<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Raw {
+        Num(f64),
+        Word(String),
+    }
+    match Raw::deserialize(d)? {
+        Raw::Num(n) if n.is_infinite() && n > 0.0 => Ok(None),
+        Raw::Num(n) => Ok(Some(n)),
+        Raw::Word(w) if w == "inf" => Ok(None),
+        Raw::Word(w) => Err(serde::de::Error::custom(format!(
+            "camera.f_number = {w:?}: allowed a number in [0.5, 1000] or \"inf\" (pinhole)"
+        ))),
+    }
+}
+
+/// `[sensor] exposure`: "auto" or a fixed time.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(try_from = "ExposureRaw")]
+pub enum ExposureSetting {
+    /// Chosen per image from the linear radiance (`auto_percentile`, `auto_fraction`).
+    Auto(AutoExposure),
+    /// A fixed exposure time, ms.
+    Fixed { ms: f64 },
+}
+
+/// The "auto" word (a unit type so the variant reads as data).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AutoExposure;
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum ExposureRaw {
+    Word(String),
+    Table { ms: f64 },
+    Num(f64),
+}
+
+impl TryFrom<ExposureRaw> for ExposureSetting {
+    type Error = String;
+    fn try_from(r: ExposureRaw) -> Result<Self, String> {
+        match r {
+            ExposureRaw::Word(w) if w == "auto" => Ok(ExposureSetting::Auto(AutoExposure)),
+            ExposureRaw::Table { ms } => Ok(ExposureSetting::Fixed { ms }),
+            ExposureRaw::Word(w) => Err(format!(
+                "sensor.exposure = {w:?}: allowed \"auto\" or {{ ms = <time> }}"
+            )),
+            ExposureRaw::Num(n) => Err(format!(
+                "sensor.exposure = {n}: write {{ ms = {n} }} (milliseconds) or \"auto\""
+            )),
+        }
+    }
+}
+
+/// Vertical blooming (CCD) or none (CMOS).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Blooming {
+    #[default]
+    None,
+    Vertical,
+}
+
+/// The `[sensor]` section: an EMVA 1288 camera (src/render/sensor.rs). Defaults: a
+/// monochrome machine-vision camera, docs/scene-format.md.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorConfig {
+    /// "auto" or { ms = ... }, ms in (0, 1e6].
+    pub exposure: ExposureSetting,
+    /// Percentile of the object's pixels auto exposure aims at, (0, 100].
+    pub auto_percentile: f64,
+    /// Fraction of saturation that percentile reaches, (0, 1].
+    pub auto_fraction: f64,
+    /// Quantum efficiency at `wavelength_nm`, (0, 1].
+    pub quantum_efficiency: f64,
+    /// System gain K, DN per electron at `bit_depth`, (0, 1000].
+    pub gain_dn_per_electron: f64,
+    /// Temporal dark noise, electrons (rms), [0, 1e5].
+    pub dark_noise_electrons: f64,
+    /// Full-well (saturation) capacity, electrons, [1, 1e8].
+    pub saturation_electrons: f64,
+    /// ADC bits: 8, 10, 12 or 16.
+    pub bit_depth: u32,
+    /// "none" (CMOS) or "vertical" (CCD: excess charge spills along the column).
+    pub blooming: Blooming,
+    /// Dark offset added to every code, DN, [0, 2^bit_depth - 1).
+    pub black_level_dn: f64,
+    /// Dark signal non-uniformity (rms of a fixed per-pixel offset), electrons, [0, 1e5].
+    pub dsnu_electrons: f64,
+    /// Seed of the DSNU pattern (fixed per camera, not per image), any u64.
+    pub dsnu_seed: u64,
+    /// The camera's wavelength (photon energy), nm, [200, 2000].
+    pub wavelength_nm: f64,
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        SensorConfig {
+            exposure: ExposureSetting::Auto(AutoExposure),
+            auto_percentile: 99.5,
+            auto_fraction: 0.9,
+            quantum_efficiency: 0.6,
+            gain_dn_per_electron: 0.025,
+            dark_noise_electrons: 7.0,
+            saturation_electrons: 10_000.0,
+            bit_depth: 8,
+            blooming: Blooming::None,
+            black_level_dn: 0.0,
+            dsnu_electrons: 0.0,
+            dsnu_seed: 0,
+            wavelength_nm: 550.0,
+        }
+    }
+}
+
+impl SensorConfig {
+    /// Checks every field against its documented range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let f = |field, v: f64, lo: f64, hi: f64, lo_open: bool, range| {
+            range_f(field, v as f32, lo as f32, hi as f32, lo_open, range).and_then(|_| {
+                if v.is_finite() {
+                    Ok(())
+                } else {
+                    Err(ConfigError::Range {
+                        field,
+                        value: v.to_string(),
+                        range,
+                    })
+                }
+            })
+        };
+        if let ExposureSetting::Fixed { ms } = self.exposure {
+            f("sensor.exposure.ms", ms, 0.0, 1e6, true, "(0, 1e6] ms")?;
+        }
+        f(
+            "sensor.auto_percentile",
+            self.auto_percentile,
+            0.0,
+            100.0,
+            true,
+            "(0, 100]",
+        )?;
+        f(
+            "sensor.auto_fraction",
+            self.auto_fraction,
+            0.0,
+            1.0,
+            true,
+            "(0, 1]",
+        )?;
+        f(
+            "sensor.quantum_efficiency",
+            self.quantum_efficiency,
+            0.0,
+            1.0,
+            true,
+            "(0, 1]",
+        )?;
+        f(
+            "sensor.gain_dn_per_electron",
+            self.gain_dn_per_electron,
+            0.0,
+            1000.0,
+            true,
+            "(0, 1000] DN/e-",
+        )?;
+        f(
+            "sensor.dark_noise_electrons",
+            self.dark_noise_electrons,
+            0.0,
+            1e5,
+            false,
+            "[0, 1e5] e-",
+        )?;
+        f(
+            "sensor.saturation_electrons",
+            self.saturation_electrons,
+            1.0,
+            1e8,
+            false,
+            "[1, 1e8] e-",
+        )?;
+        if ![8, 10, 12, 16].contains(&self.bit_depth) {
+            return Err(ConfigError::Range {
+                field: "sensor.bit_depth",
+                value: self.bit_depth.to_string(),
+                range: "8, 10, 12 or 16",
+            });
+        }
+        let top = ((1u64 << self.bit_depth) - 1) as f64;
+        if !(self.black_level_dn >= 0.0 && self.black_level_dn < top) {
+            return Err(ConfigError::Range {
+                field: "sensor.black_level_dn",
+                value: self.black_level_dn.to_string(),
+                range: "[0, 2^bit_depth - 1) DN",
+            });
+        }
+        f(
+            "sensor.dsnu_electrons",
+            self.dsnu_electrons,
+            0.0,
+            1e5,
+            false,
+            "[0, 1e5] e-",
+        )?;
+        f(
+            "sensor.wavelength_nm",
+            self.wavelength_nm,
+            200.0,
+            2000.0,
+            false,
+            "[200, 2000] nm",
+        )?;
+        Ok(())
+    }
+}
+
 impl Default for CameraConfig {
     fn default() -> Self {
         CameraConfig {
@@ -457,7 +696,54 @@ impl Default for CameraConfig {
             look_at: None,
             matrix: None,
             opencv: None,
+            calibration: None,
+            intrinsics: None,
+            f_number: None,
+            focus_distance_mm: None,
         }
+    }
+}
+
+impl CameraConfig {
+    /// Reads `calibration` (if given and not yet read) into `intrinsics`; the file's
+    /// image size becomes `width` x `height` and `focal_mm` becomes fx times the pixel
+    /// pitch. `text` is the TOML the section came from: writing `width`, `height` or
+    /// `focal_mm` next to `calibration` is an error (the file sets them).
+    pub fn load_calibration(&mut self, text: &str) -> Result<(), ConfigError> {
+        let Some(path) = &self.calibration else {
+            return Ok(());
+        };
+        if self.intrinsics.is_some() {
+            return Ok(());
+        }
+        let table: toml::Table = toml::from_str(text).unwrap_or_default();
+        let written = |k: &str| table.get("camera").and_then(|c| c.get(k)).is_some();
+        for (k, field) in [
+            ("width", "camera.width"),
+            ("height", "camera.height"),
+            ("focal_mm", "camera.focal_mm"),
+        ] {
+            if written(k) {
+                return Err(ConfigError::Invalid {
+                    field,
+                    message: format!(
+                        "given together with `camera.calibration` ({}), which sets it (image_width, image_height, camera_matrix); remove `{k}` or the calibration",
+                        path.display()
+                    ),
+                });
+            }
+        }
+        let k = crate::scene::calibration::Intrinsics::load(path)?;
+        pixel_count(
+            "camera.calibration (image_width x image_height)",
+            k.width,
+            k.height,
+        )?;
+        self.width = k.width;
+        self.height = k.height;
+        self.focal_mm = (k.fx * self.pixel_um as f64 * 1e-3) as f32;
+        self.intrinsics = Some(k);
+        Ok(())
     }
 }
 
@@ -693,6 +979,13 @@ impl SceneConfig {
             let base = path.parent().unwrap_or(Path::new("."));
             cfg.texture.path = Some(base.join(t));
         }
+        if let Some(c) = &cfg.camera.calibration
+            && c.is_relative()
+        {
+            let base = path.parent().unwrap_or(Path::new("."));
+            cfg.camera.calibration = Some(base.join(c));
+        }
+        cfg.camera.load_calibration(&text)?;
         Ok(cfg)
     }
 
@@ -861,6 +1154,34 @@ impl SceneConfig {
         range_f("camera.gain", c.gain, 0.0, 1e6, true, "(0, 1e6]")?;
         parse_view(&c.view)?;
         c.pose()?;
+        if let Some(n) = c.f_number
+            && !(n.is_finite() && (0.5..=1000.0).contains(&n))
+        {
+            return Err(ConfigError::Range {
+                field: "camera.f_number",
+                value: n.to_string(),
+                range: "[0.5, 1000] or \"inf\" (pinhole)",
+            });
+        }
+        if let Some(f) = c.focus_distance_mm {
+            range_f(
+                "camera.focus_distance_mm",
+                f,
+                0.0,
+                1e5,
+                true,
+                "(0, 100000] mm",
+            )?;
+        }
+        if let Some(s) = &self.sensor {
+            s.validate()?;
+            if c.f_number.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "camera.f_number",
+                    message: "the [sensor] model needs the lens's working f-number for the image-plane irradiance (E = pi L cos^4 / (4 N^2)); give e.g. f_number = 8.0".into(),
+                });
+            }
+        }
         let r = &self.render;
         range_u("render.spp", r.spp, 1, 1 << 20, "[1, 1048576]")?;
         range_u("render.max_bounces", r.max_bounces, 1, 64, "[1, 64]")?;
@@ -1020,6 +1341,84 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("shine"), "{e}");
+    }
+
+    #[test]
+    fn calibration_file_sets_the_intrinsics() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("cam.yaml"),
+            "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 2000., 0., 330., 0., 2010., 235., 0., 0., 1. ]\n",
+        )
+        .unwrap();
+        let scene = dir.path().join("s.toml");
+        std::fs::write(
+            &scene,
+            "[camera]\ncalibration = \"cam.yaml\"\npixel_um = 5.0\n",
+        )
+        .unwrap();
+        let c = SceneConfig::load(&scene).expect("load");
+        assert_eq!((c.camera.width, c.camera.height), (640, 480));
+        assert_eq!(c.camera.focal_mm, 10.0);
+        assert_eq!(c.camera.intrinsics.unwrap().cx, 330.0);
+        std::fs::write(
+            &scene,
+            "[camera]\ncalibration = \"cam.yaml\"\nwidth = 1000\n",
+        )
+        .unwrap();
+        let e = SceneConfig::load(&scene).unwrap_err().to_string();
+        assert!(
+            e.contains("camera.width") && e.contains("calibration"),
+            "{e}"
+        );
+        std::fs::write(&scene, "[camera]\ncalibration = \"missing.yaml\"\n").unwrap();
+        let e = SceneConfig::load(&scene).unwrap_err().to_string();
+        assert!(e.contains("missing.yaml"), "{e}");
+    }
+
+    #[test]
+    fn lens_and_sensor_fields_parse_and_check() {
+        let c = SceneConfig::parse("[camera]\nf_number = \"inf\"\n").unwrap();
+        assert_eq!(c.camera.f_number, None);
+        assert!(c.sensor.is_none());
+        let c = SceneConfig::parse(
+            "[camera]\nf_number = 8.0\nfocus_distance_mm = 80.0\n[sensor]\nexposure = { ms = 2.5 }\nbit_depth = 12\nblooming = \"vertical\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.camera.f_number, Some(8.0));
+        let s = c.sensor.unwrap();
+        assert_eq!(s.exposure, ExposureSetting::Fixed { ms: 2.5 });
+        assert_eq!((s.bit_depth, s.blooming), (12, Blooming::Vertical));
+        assert_eq!(
+            SceneConfig::parse("[camera]\nf_number = 4\n[sensor]\n")
+                .unwrap()
+                .sensor,
+            Some(SensorConfig::default())
+        );
+        for (text, field) in [
+            ("[sensor]\n", "camera.f_number"),
+            ("[camera]\nf_number = 0.1\n", "camera.f_number"),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nbit_depth = 9\n",
+                "sensor.bit_depth",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nexposure = 3.0\n",
+                "ms = 3",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nexposure = \"manual\"\n",
+                "auto",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nquantum_efficiency = 1.5\n",
+                "sensor.quantum_efficiency",
+            ),
+            ("[camera]\nf_number = \"wide\"\n", "camera.f_number"),
+        ] {
+            let e = SceneConfig::parse(text).unwrap_err().to_string();
+            assert!(e.contains(field), "{text}: {e}");
+        }
     }
 
     #[test]

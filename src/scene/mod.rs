@@ -2,6 +2,7 @@
 //! scene file, cameras and the ring light.
 
 pub mod assemble;
+pub mod calibration;
 pub mod camera;
 pub mod config;
 pub mod flange;
@@ -12,6 +13,7 @@ pub mod mesh_io;
 pub mod procedural;
 pub mod testbody;
 
+pub use calibration::{Distortion, Intrinsics};
 pub use camera::Camera;
 pub use flange::{FlangeParams, flange};
 pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
