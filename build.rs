@@ -20,7 +20,7 @@ use std::rc::Rc;
 macro_rules! gpu_constants {
     ($($(#[doc = $doc:literal])* $name:ident = $value:literal;)*) => {
         fn glsl_constants(s: &mut String) {
-            $(s.push_str(&format!("#define {} {}u\n", stringify!($name), $value));)*
+            $(s.push_str(&format!("#define {} {}u\n", stringify!($name), stringify!($value)));)*
         }
     };
 }

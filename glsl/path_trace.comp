@@ -29,20 +29,22 @@ layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
 
-// Slope maps, one header per face id (0 = other: never a map); see src/render/slope.rs.
-// FaceMapHeader: origin (xyz map centre, world mm; w texels per mm), axis_x (map x axis),
-// axis_up (map up axis, -y), dims (width, height, first texel, 1 = present).
-layout(std430, set = 0, binding = PT_FACE_MAPS) readonly buffer FaceMaps { FaceMapHeader face_maps[]; };
-// Texels of faces A, B, C, one buffer each: two f16 slopes [dh/dx, dh/dy] per uint.
-layout(std430, set = 0, binding = PT_SLOPES_A) readonly buffer SlopesA { uint slopes_a[]; };
-layout(std430, set = 0, binding = PT_SLOPES_B) readonly buffer SlopesB { uint slopes_b[]; };
-layout(std430, set = 0, binding = PT_SLOPES_C) readonly buffer SlopesC { uint slopes_c[]; };
+// Slope maps, one header per slot: slot 0 (table, light) never has a map, slot r + 1 is
+// planar region r of the object; see src/render/slope.rs. MapHeader: origin (xyz map
+// centre, world mm; w texels per mm), axis_x (map x axis), axis_up (map up axis, -y),
+// dims (width, height, first texel, buffer + 1 | MAP_WRAP; 0 = no map).
+layout(std430, set = 0, binding = PT_MAP_HEADERS) readonly buffer MapHeaders { MapHeader map_headers[]; };
+// Texels of up to three distinct maps, one buffer each: two f16 slopes [dh/dx, dh/dy]
+// per uint.
+layout(std430, set = 0, binding = PT_SLOPES0) readonly buffer Slopes0 { uint slopes0[]; };
+layout(std430, set = 0, binding = PT_SLOPES1) readonly buffer Slopes1 { uint slopes1[]; };
+layout(std430, set = 0, binding = PT_SLOPES2) readonly buffer Slopes2 { uint slopes2[]; };
 
-vec2 slope_texel(uint face, uint i) {
+vec2 slope_texel(uint buf, uint i) {
     uint w;
-    if (face == 1u) w = slopes_a[i];
-    else if (face == 2u) w = slopes_b[i];
-    else w = slopes_c[i];
+    if (buf == 1u) w = slopes0[i];
+    else if (buf == 2u) w = slopes1[i];
+    else w = slopes2[i];
     return unpackHalf2x16(w);
 }
 
@@ -76,7 +78,8 @@ Tri fetch_tri(uint prim) {
     return t;
 }
 
-// Material in the low byte, inspected face id in the next; light triangles are MAT_LIGHT.
+// Material in the low byte, slope-map slot above it (MAT_MAP_SHIFT); light triangles are
+// MAT_LIGHT.
 uint mat_word(uint prim) {
     return prim < prm.light_first ? mats[prim] : MAT_LIGHT;
 }
@@ -143,36 +146,57 @@ const float MAX_SLOPE = 11.43;
 // bend_towards_viewer.
 const float SHADE_MIN_COS = 0.1;
 
-// Bilinear slopes [dh/dx, dh/dy] (image axes, y down) at p; zero outside the map.
-vec2 map_slopes(uint face, vec3 p) {
-    FaceMapHeader m = face_maps[face];
-    if (m.dims.w == 0u) return vec2(0.0);
+// Bilinear slopes [dh/dx, dh/dy] (image axes, y down) at p: zero outside the map, or the
+// map repeated (MAP_WRAP).
+vec2 map_slopes(uint slot, vec3 p) {
+    MapHeader m = map_headers[slot];
+    uint buf = m.dims.w & MAP_BUFFER_MASK;
+    if (buf == 0u) return vec2(0.0);
     vec3 d = p - m.origin.xyz;
     vec2 wh = vec2(m.dims.xy);
     float x = dot(d, m.axis_x.xyz) * m.origin.w + 0.5 * wh.x;
     float y = -dot(d, m.axis_up.xyz) * m.origin.w + 0.5 * wh.y;
-    if (!(x >= 0.0 && y >= 0.0 && x <= wh.x && y <= wh.y)) return vec2(0.0);
-    float fx = clamp(x - 0.5, 0.0, wh.x - 1.0);
-    float fy = clamp(y - 0.5, 0.0, wh.y - 1.0);
-    uint x0 = uint(fx), y0 = uint(fy);
-    uint x1 = min(x0 + 1u, m.dims.x - 1u), y1 = min(y0 + 1u, m.dims.y - 1u);
-    float tx = fx - float(x0), ty = fy - float(y0);
+    uint x0, y0, x1, y1;
+    float tx, ty;
+    if ((m.dims.w & MAP_WRAP) != 0u) {
+        // Texel centres at i + 0.5; the last texel's neighbour is the first.
+        float fx = x - 0.5, fy = y - 0.5;
+        fx -= wh.x * floor(fx / wh.x);
+        fy -= wh.y * floor(fy / wh.y);
+        if (!(fx >= 0.0 && fy >= 0.0)) return vec2(0.0); // NaN (degenerate header)
+        x0 = min(uint(fx), m.dims.x - 1u);
+        y0 = min(uint(fy), m.dims.y - 1u);
+        x1 = x0 + 1u == m.dims.x ? 0u : x0 + 1u;
+        y1 = y0 + 1u == m.dims.y ? 0u : y0 + 1u;
+        tx = fx - float(x0);
+        ty = fy - float(y0);
+    } else {
+        if (!(x >= 0.0 && y >= 0.0 && x <= wh.x && y <= wh.y)) return vec2(0.0);
+        float fx = clamp(x - 0.5, 0.0, wh.x - 1.0);
+        float fy = clamp(y - 0.5, 0.0, wh.y - 1.0);
+        x0 = uint(fx);
+        y0 = uint(fy);
+        x1 = min(x0 + 1u, m.dims.x - 1u);
+        y1 = min(y0 + 1u, m.dims.y - 1u);
+        tx = fx - float(x0);
+        ty = fy - float(y0);
+    }
     uint b = m.dims.z;
-    vec2 a = mix(slope_texel(face, b + y0 * m.dims.x + x0), slope_texel(face, b + y0 * m.dims.x + x1), tx);
-    vec2 c = mix(slope_texel(face, b + y1 * m.dims.x + x0), slope_texel(face, b + y1 * m.dims.x + x1), tx);
+    vec2 a = mix(slope_texel(buf, b + y0 * m.dims.x + x0), slope_texel(buf, b + y0 * m.dims.x + x1), tx);
+    vec2 c = mix(slope_texel(buf, b + y1 * m.dims.x + x0), slope_texel(buf, b + y1 * m.dims.x + x1), tx);
     return mix(a, c, ty);
 }
 
-// Shading normal from the face's slope map; ng is the geometric normal facing the ray.
+// Shading normal from the region's slope map; ng is the geometric normal facing the ray.
 // Exactly ng where the slopes are zero (a flat map renders as no map). The map axes are
-// projected into the triangle's plane, so triangles that are not coplanar with the face
-// (defect patches labelled with it) still get a normal in their own hemisphere.
-vec3 shading_normal(uint face, vec3 p, vec3 ng) {
-    FaceMapHeader m = face_maps[face];
-    if (m.dims.w == 0u) return ng;
-    // Seen from inside (not the face's outward side): no perturbation.
+// projected into the triangle's plane, so triangles that are not coplanar with the
+// region (defect patches given to it) still get a normal in their own hemisphere.
+vec3 shading_normal(uint slot, vec3 p, vec3 ng) {
+    MapHeader m = map_headers[slot];
+    if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
+    // Seen from inside (not the region's outward side): no perturbation.
     if (dot(cross(m.axis_x.xyz, m.axis_up.xyz), ng) <= 0.0) return ng;
-    vec2 s = map_slopes(face, p);
+    vec2 s = map_slopes(slot, p);
     if (s.x == 0.0 && s.y == 0.0) return ng;
     float len = length(s);
     if (len > MAX_SLOPE) s *= MAX_SLOPE / len;
@@ -238,7 +262,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         if (h.prim == NO_HIT) break;   // no environment light
         Tri t = fetch_tri(h.prim);
         uint mat = mat_word(h.prim) & 0xffu;
-        uint face = (mat_word(h.prim) >> MAT_FACE_SHIFT) & 0xffu;
+        uint word = mat_word(h.prim);
+        uint slot = (word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK;
         vec3 ng_raw = tri_normal(t);
         vec3 ng = normalize(ng_raw);
         if (mat == MAT_LIGHT) {
@@ -258,12 +283,13 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         // unlike o + t d whose error grows with the distance travelled.
         vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
         if (dot(ng, d) > 0.0) ng = -ng;
-        // Shading frame: the slope-mapped normal (conductor on an inspected face), bent
+        // Shading frame: the slope-mapped normal (conductor with a map), bent
         // towards the viewer if needed. Side and visibility tests use ng: directions below
         // the geometric surface are never lit nor continued (no light leaks).
         vec3 ns = ng;
-        if (mat == MAT_CONDUCTOR && face != 0u && face < FACE_SLOTS) {
-            ns = bend_towards_viewer(shading_normal(face, p, ng), ng, -d);
+        if (mat == MAT_CONDUCTOR && slot != 0u && ((word & MAT_LABELLED) != 0u
+                || (map_headers[slot].dims.w & MAP_LABELLED_ONLY) == 0u)) {
+            ns = bend_towards_viewer(shading_normal(slot, p, ng), ng, -d);
         }
         vec3 tb, bt;
         onb(ns, tb, bt);

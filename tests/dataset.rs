@@ -993,6 +993,38 @@ fn postprocess_reruns_from_raw_files() {
         e["files"]["image.png"].as_str().unwrap(),
         dataset::files::content_hash(&std::fs::read(out.join("images/000000/image.png")).unwrap())
     );
+    // Exposure is re-done from the stored radiance: a finish's `exposure` multiplies
+    // `[sensor] exposure` for its images only.
+    let finish = e["finish"].as_str().unwrap().to_string();
+    let exposed = plain
+        .replace(
+            &format!("name = \"{finish}\"\n"),
+            &format!("name = \"{finish}\"\nexposure = 0.5\n"),
+        )
+        .replace("[texture]", "[sensor]\nexposure = 3.0\n[texture]");
+    assert_ne!(exposed, plain);
+    std::fs::write(&pj, &exposed).unwrap();
+    dataset::postprocess_dir(&out, Some(&pj)).unwrap();
+    let mut seen = [false; 2];
+    for e in manifest_without_times(&out) {
+        let img = image::open(out.join(e["image"].as_str().unwrap()))
+            .unwrap()
+            .into_luma8();
+        let id = e["id"].as_str().unwrap();
+        let (_, _, rad) =
+            synosis::image_io::read_exr_f32(&out.join(format!("images/{id}/radiance.exr")))
+                .unwrap();
+        let k = if e["finish"].as_str().unwrap() == finish {
+            1.5
+        } else {
+            3.0
+        };
+        seen[(k == 1.5) as usize] = true;
+        for (p, l) in img.as_raw().iter().zip(&rad) {
+            assert_eq!(*p, (255.0 * k * l).clamp(0.0, 255.0).round() as u8, "{id}");
+        }
+    }
+    assert_eq!(seen, [true, true], "both finishes rendered");
     // A job differing in more than its post-processing is refused.
     std::fs::write(&pj, plain.replace("seed = 11", "seed = 12")).unwrap();
     assert!(dataset::postprocess_dir(&out, Some(&pj)).is_err());

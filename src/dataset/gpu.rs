@@ -70,7 +70,9 @@ fn scene_for<'c>(
                 l.face = FACE_OBJECT_OTHER;
             }
         }
-        let stage = Stage::new(object, base.object.position_mm, &base.table);
+        let stage = profiler.cpu("stage (planar regions)", || {
+            Stage::new(object, base.object.position_mm, &base.table)
+        });
         let scene = GpuScene::new(tracer, &stage, Some(profiler)).map_err(|e| e.to_string())?;
         *cached = Some((req.mesh_key, scene));
     }
@@ -117,7 +119,7 @@ impl ImageRenderer for GpuRenderer {
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
         scene
-            .set_face_maps(tracer, &face_maps(req))
+            .set_face_maps(tracer, &face_maps(req), &req.placement)
             .map_err(|e| e.to_string())?;
         let (frames, first_light) = (scene.face_frames(), scene.triangle_count);
         let setup = ViewSetup::for_pose(frames, first_light, &pose, &cfg.camera, &cfg.light)
@@ -129,13 +131,15 @@ impl ImageRenderer for GpuRenderer {
         let settings = RenderSettings::from(&cfg);
         let frame = render_frame(tracer, scene, &setup, &settings, opts, |_| {})
             .map_err(|e| e.to_string())?;
-        // CPU phases of the acceleration structures (the object's only when this request
-        // built its GPU scene; the view's light every time), GPU time of the two passes.
+        // CPU phases of the stage and the acceleration structures (the object's only when
+        // this request built its GPU scene; the view's light every time), GPU time of the
+        // two passes.
         let secs = |names: &[&str]| names.iter().map(|n| profiler.total_ms(n)).sum::<f64>() / 1e3;
         self.stages = vec![
             (
                 "render.acceleration".into(),
                 secs(&[
+                    "stage (planar regions)",
                     "upload geometry",
                     "BVH build (obvhs)",
                     "upload BVH",

@@ -245,6 +245,11 @@ pub struct MappingSettings {
     pub rotation_deg: f64,
     /// Texture translation per face, texture pixels, each axis drawn from [-t, t].
     pub translation_px: FaceTranslation,
+    /// "part" (default): every planar region of the object gets the finish (regions
+    /// other than A, B, C: one of the instance's three maps, rotation drawn from
+    /// [-rotation_deg, rotation_deg], offset over the whole map, maps repeated beyond
+    /// their edges); "faces": only A, B and C, each map clipped (before issue 11).
+    pub cover: crate::scene::assemble::Cover,
 }
 
 impl Default for MappingSettings {
@@ -252,6 +257,7 @@ impl Default for MappingSettings {
         MappingSettings {
             rotation_deg: 15.0,
             translation_px: FaceTranslation::default(),
+            cover: Default::default(),
         }
     }
 }
@@ -369,6 +375,10 @@ pub struct Finish {
     /// matched to its mean and Sq (instead of the default). docs/dataset.md.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measurement: Option<MeasurementRef>,
+    /// Multiplies `[sensor] exposure` for this finish's images (a bright sandblasted
+    /// finish and a dark milled one both well exposed; docs/dataset.md). Default 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure: Option<f64>,
 }
 
 /// A measured height map named in a job.
@@ -401,6 +411,11 @@ fn default_exr_spacing() -> f64 {
 }
 
 impl Finish {
+    /// The exposure factor of this finish's images (`exposure`, default 1).
+    pub fn exposure_factor(&self) -> f64 {
+        self.exposure.unwrap_or(1.0)
+    }
+
     /// Texture type: the name up to its first '-', lower case (as `synosis compare`).
     pub fn texture_type(&self) -> String {
         crate::metrics::dataset::texture_of(&self.name)
@@ -517,6 +532,11 @@ impl Job {
         let strip = |j: &Job| {
             let mut j = j.clone();
             j.postprocess.clear();
+            // Exposure acts on the stored linear radiance: post-processing re-does it.
+            j.sensor.exposure = 1.0;
+            for f in &mut j.finishes {
+                f.exposure = None;
+            }
             j.base_dir = PathBuf::new();
             j.origin.clear();
             toml::to_string(&j).ok()
@@ -646,6 +666,9 @@ impl Job {
                 ));
             }
             self.int(&format!("{p}.textures"), f.textures, 1, 10_000)?;
+            if let Some(e) = f.exposure {
+                self.real(&format!("{p}.exposure"), e, 1e-6, 1e6)?;
+            }
             match f.kind {
                 FinishKind::Milled => {
                     if f.exemplar.is_some() {

@@ -83,6 +83,8 @@ pub struct ImageRequest<'a> {
     /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
     pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,
+    /// How the face textures spread over the object's other planar regions.
+    pub placement: crate::scene::assemble::Placement,
     pub width: u32,
     pub height: u32,
     pub spp: u32,

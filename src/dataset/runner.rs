@@ -23,6 +23,7 @@ use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
 use crate::render::pixels::{Exposure, quantise_units8};
+use crate::scene::assemble::Placement;
 use crate::scene::{Degenerates, Mesh, face_frames, testbody};
 
 /// A job with everything loaded and checked: meshes, defect sets, the plan.
@@ -780,6 +781,11 @@ impl<'p> Ctx<'p> {
             view,
             alpha: params.alpha as f32,
             face_textures,
+            placement: Placement {
+                cover: job.mapping.cover,
+                seed: derive(inst.seed, &[tag::REGIONS]),
+                rotation_range_deg: job.mapping.rotation_deg as f32,
+            },
             width: job.render.width as u32,
             height: job.render.height as u32,
             spp: job.render.spp as u32,
@@ -798,7 +804,7 @@ impl<'p> Ctx<'p> {
         let dir = out.join("images").join(item.id());
         std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
         let mut hashes = write_raw(&dir, &img)?;
-        let frame = raw_frame(job, &img);
+        let frame = raw_frame(job, &finish.name, &img);
         let (post_hashes, defects, noise_sigma) =
             write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
         hashes.extend(post_hashes);
@@ -895,16 +901,23 @@ fn write_raw(dir: &Path, img: &RenderedImage) -> Result<BTreeMap<String, String>
     Ok(m)
 }
 
-/// The job's exposure model (`[sensor]`; the dataset has no gain).
-fn sensor(job: &Job) -> Exposure {
-    Exposure::new(job.sensor.exposure as f32, 1.0)
+/// The exposure model of a finish's images (`[sensor] exposure` times the finish's
+/// `exposure`; the dataset has no gain). An unknown finish name (a folder of another
+/// job) gets the job's exposure alone.
+fn sensor(job: &Job, finish: &str) -> Exposure {
+    let factor = job
+        .finishes
+        .iter()
+        .find(|f| f.name == finish)
+        .map_or(1.0, |f| f.exposure_factor());
+    Exposure::new((job.sensor.exposure * factor) as f32, 1.0)
 }
 
-fn raw_frame(job: &Job, img: &RenderedImage) -> Frame {
+fn raw_frame(job: &Job, finish: &str, img: &RenderedImage) -> Frame {
     Frame {
         width: img.width as usize,
         height: img.height as usize,
-        image: sensor(job).units8(&img.radiance),
+        image: sensor(job, finish).units8(&img.radiance),
         class: img.class.clone(),
         instance: img.instance.clone(),
         object: img.object.clone(),
@@ -912,7 +925,7 @@ fn raw_frame(job: &Job, img: &RenderedImage) -> Frame {
 }
 
 /// Reads the raw files of an image back into a frame (for `postprocess`).
-fn read_raw_frame(job: &Job, dir: &Path) -> Result<Frame> {
+fn read_raw_frame(job: &Job, finish: &str, dir: &Path) -> Result<Frame> {
     let (w, h, radiance) = files::read_exr(&dir.join("radiance.exr"))?;
     let (_, _, class) = files::read_gray8(&dir.join("raw_mask.png"))?;
     let (_, _, instance) = files::read_gray16(&dir.join("raw_instances.png"))?;
@@ -926,7 +939,7 @@ fn read_raw_frame(job: &Job, dir: &Path) -> Result<Frame> {
     Ok(Frame {
         width: w,
         height: h,
-        image: sensor(job).units8(&radiance),
+        image: sensor(job, finish).units8(&radiance),
         class,
         instance,
         object: object.iter().map(|&o| (o != 0) as u8).collect(),
@@ -1343,8 +1356,9 @@ fn move_dir(from: &Path, to: &Path) -> Result<()> {
 }
 
 /// Re-runs the post-processing of every finished image from its raw files. With
-/// `new_job`, its `[[postprocess]]` steps replace the stored ones (everything else in
-/// it must equal the stored job). Returns the number of images processed.
+/// `new_job`, its `[[postprocess]]` steps and exposures (`[sensor] exposure`, each
+/// finish's `exposure`) replace the stored ones (everything else in it must equal the
+/// stored job). Returns the number of images processed.
 pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
     use rayon::prelude::*;
     let (_, mut job) = stored_job(dir)?;
@@ -1372,7 +1386,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
             .into_par_iter()
             .map(|mut e| -> Result<ManifestEntry> {
                 let idir = dir.join("images").join(&e.id);
-                let frame = read_raw_frame(&job, &idir)?;
+                let frame = read_raw_frame(&job, &e.finish, &idir)?;
                 let (hashes, defects, noise) =
                     write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
                 e.files.extend(hashes);

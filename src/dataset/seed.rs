@@ -15,6 +15,7 @@ pub mod tag {
     pub const IMAGE: u64 = 4;
     pub const SPLIT: u64 = 5;
     pub const POST: u64 = 6;
+    pub const REGIONS: u64 = 7;
 }
 
 /// SplitMix64 finaliser (Steele et al. 2014): a bijective 64-bit mixer.

@@ -1,5 +1,5 @@
 //! A stage on the GPU: the object's acceleration structure, its materials and labels,
-//! and the slope maps on its faces. Built once per mesh and reused by every view of it
+//! and the slope maps on its planar regions. Built once per mesh and reused by every view of it
 //! (the dataset caches it by mesh key); only the slope maps can change in between.
 
 use std::sync::Arc;
@@ -8,10 +8,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use ash::vk;
 
 use super::RenderError;
-use super::slope::{self, FaceMap};
+use super::slope::{self, FaceMap, Placement};
 use super::tracer::PathTracer;
-use crate::gpu_interface::{LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAT_FACE_SHIFT};
-use crate::scene::assemble::Stage;
+use crate::gpu_interface::{
+    LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAT_LABELLED, MAT_MAP_SHIFT, MAT_SLOT_MASK,
+};
+use crate::scene::assemble::{RegionFrame, Stage, place_maps};
+use crate::scene::mesh::{FACE_A, FACE_C};
 use crate::scene::{FaceFrame, TriLabel};
 use crate::trace::TraceGeometry;
 use crate::vk::{Buffer, Profiler};
@@ -28,9 +31,17 @@ pub fn label_word(l: &TriLabel) -> u32 {
 /// Slope-map headers and texels as uploaded, with what they were made from (so the same
 /// maps are not uploaded twice).
 struct MapBuffers {
-    key: Vec<(usize, u32, [u32; 2], u8)>,
+    key: MapKey,
     headers: Buffer,
-    texels: [Buffer; 3],
+    texels: [Buffer; slope::MAP_BUFFERS],
+}
+
+/// What a set of uploaded maps was made from: each face map's identity and placement,
+/// and how they were spread over the regions.
+#[derive(PartialEq)]
+struct MapKey {
+    maps: Vec<(usize, u32, [u32; 2], u8)>,
+    placement: Option<(crate::scene::assemble::Cover, u64, u32)>,
 }
 
 /// The GPU side of a [`Stage`].
@@ -40,6 +51,7 @@ pub struct GpuScene {
     pub(crate) labels: Buffer,
     maps: MapBuffers,
     face_frames: Vec<FaceFrame>,
+    regions: Vec<RegionFrame>,
     pub table_albedo: f32,
     /// Triangles of the stage (the view's light is numbered after them).
     pub triangle_count: u32,
@@ -61,16 +73,32 @@ impl GpuScene {
             0,
             profiler,
         )?);
-        // Material in the low byte, inspected face id in the next: the shader finds the
-        // face's slope map without another buffer.
+        // Material in the low byte, the slope-map slot above it (region + 1; 0 for the
+        // table), the top bit for triangles labelled A, B or C: the shader finds the
+        // region's map without another buffer.
+        if stage.regions.len() as u64 >= MAT_SLOT_MASK as u64 {
+            return Err(RenderError::Slope(slope::SlopeError::Invalid {
+                region: stage.regions.len() as u32,
+                message: format!("more than {} planar regions", MAT_SLOT_MASK - 1),
+            }));
+        }
         let mat_words: Vec<u32> = stage
             .materials
             .iter()
             .zip(&stage.mesh.labels)
-            .map(|(&m, l)| m | (l.face as u32) << MAT_FACE_SHIFT)
+            .enumerate()
+            .map(|(t, (&m, l))| {
+                let slot = stage.region_of.get(t).map_or(0, |&r| r.wrapping_add(1));
+                let labelled = (FACE_A..=FACE_C).contains(&l.face) as u32 * MAT_LABELLED;
+                m | (slot & MAT_SLOT_MASK) << MAT_MAP_SHIFT | labelled
+            })
             .collect();
         let labels: Vec<u32> = stage.mesh.labels.iter().map(label_word).collect();
-        let maps = upload_maps(tracer, &[], &stage.face_frames)?;
+        let empty = MapKey {
+            maps: Vec::new(),
+            placement: None,
+        };
+        let maps = upload_maps(tracer, &[], stage.regions.len() + 1, empty)?;
         BUILT.fetch_add(1, Ordering::Relaxed);
         Ok(GpuScene {
             geometry,
@@ -78,22 +106,32 @@ impl GpuScene {
             labels: Buffer::from_slice(ctx, "triangle labels", &labels, storage)?,
             maps,
             face_frames: stage.face_frames.clone(),
+            regions: stage.regions.clone(),
             table_albedo: stage.table_albedo,
             triangle_count: stage.mesh.triangles.len() as u32,
         })
     }
 
-    /// Puts `maps` on the faces (replacing any before); uploads only when they differ
-    /// from the current ones (same map objects at the same placement: nothing to do).
+    /// Puts `maps` on the faces and spreads them over the object's regions as `placement`
+    /// says (`scene::assemble::place_maps`), replacing any before; uploads only when they
+    /// differ from the current ones (same map objects, same placement: nothing to do).
     pub fn set_face_maps(
         &mut self,
         tracer: &PathTracer,
         maps: &[FaceMap],
+        placement: &Placement,
     ) -> Result<(), RenderError> {
-        if map_key(maps) != self.maps.key {
-            self.maps = upload_maps(tracer, maps, &self.face_frames)?;
+        let key = map_key(maps, placement);
+        if key != self.maps.key {
+            let placed = place_maps(maps, &self.face_frames, &self.regions, placement)?;
+            self.maps = upload_maps(tracer, &placed, self.regions.len() + 1, key)?;
         }
         Ok(())
+    }
+
+    /// The object's planar regions (where slope maps are projected).
+    pub fn regions(&self) -> &[RegionFrame] {
+        &self.regions
     }
 
     /// Frames of the stage's inspected faces (where views and slope maps are placed).
@@ -101,7 +139,7 @@ impl GpuScene {
         &self.face_frames
     }
 
-    pub(crate) fn map_buffers(&self) -> (&Buffer, &[Buffer; 3]) {
+    pub(crate) fn map_buffers(&self) -> (&Buffer, &[Buffer; slope::MAP_BUFFERS]) {
         (&self.maps.headers, &self.maps.texels)
     }
 
@@ -111,39 +149,44 @@ impl GpuScene {
     }
 }
 
-fn map_key(maps: &[FaceMap]) -> Vec<(usize, u32, [u32; 2], u8)> {
-    maps.iter()
-        .map(|m| {
-            (
-                Arc::as_ptr(&m.slopes) as usize,
-                m.rotation_deg.to_bits(),
-                m.offset_mm.map(f32::to_bits),
-                m.face,
-            )
-        })
-        .collect()
+fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {
+    MapKey {
+        maps: maps
+            .iter()
+            .map(|m| {
+                (
+                    Arc::as_ptr(&m.slopes) as usize,
+                    m.rotation_deg.to_bits(),
+                    m.offset_mm.map(f32::to_bits),
+                    m.face,
+                )
+            })
+            .collect(),
+        placement: Some((p.cover, p.seed, p.rotation_range_deg.to_bits())),
+    }
 }
 
 fn upload_maps(
     tracer: &PathTracer,
-    maps: &[FaceMap],
-    frames: &[FaceFrame],
+    placed: &[slope::PlacedMap],
+    slots: usize,
+    key: MapKey,
 ) -> Result<MapBuffers, RenderError> {
     let ctx = &tracer.ctx;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let (headers, texels) = slope::pack(maps, frames, ctx.info.max_storage_buffer_range as u64)?;
+    let (headers, texels) = slope::pack(placed, slots, ctx.info.max_storage_buffer_range as u64)?;
     let buf = |texels: &[u32], name: &str| {
-        // A binding may not be empty; a face without a map never reads it.
+        // A binding may not be empty; a slot without a map never reads it.
         let data: &[u32] = if texels.is_empty() { &[0] } else { texels };
         Buffer::from_slice(ctx, name, data, storage)
     };
     Ok(MapBuffers {
-        key: map_key(maps),
+        key,
         headers: Buffer::from_slice(ctx, "slope map headers", &headers, storage)?,
         texels: [
-            buf(&texels[0], "slopes A")?,
-            buf(&texels[1], "slopes B")?,
-            buf(&texels[2], "slopes C")?,
+            buf(&texels[0], "slopes 0")?,
+            buf(&texels[1], "slopes 1")?,
+            buf(&texels[2], "slopes 2")?,
         ],
     })
 }

@@ -112,7 +112,7 @@ pub fn render_scene(
 ) -> Result<Frame, RenderError> {
     let tracer = PathTracer::new(ctx, backend, tables)?;
     let mut gpu = GpuScene::new(&tracer, &scene.stage, opts.profiler)?;
-    gpu.set_face_maps(&tracer, &scene.face_maps)?;
+    gpu.set_face_maps(&tracer, &scene.face_maps, &scene.placement)?;
     render_frame(&tracer, &gpu, &scene.view, &settings.into(), opts, progress)
 }
 

@@ -1,105 +1,128 @@
-//! Slope (normal) maps on the inspected faces: planar projection of a per-face slope map,
-//! rotated and translated in the face plane, packed for glsl/path_trace.comp.
+//! Slope (normal) maps on the object: planar projection of slope maps onto its planar
+//! regions (placed by `scene::assemble::place_maps`), packed for glsl/path_trace.comp.
 //!
 //! Conventions follow the texture module (docs/texture.md): a map is row-major, row 0 at
 //! the top, slopes `[dh/dx, dh/dy]` in image axes (x right, y down), unitless (µm/µm).
-//! On a face, the map's x axis is the face frame's `u` rotated by `rotation_deg` about the
-//! face normal (counter-clockwise seen from outside, i.e. towards `v`), its "up" (-y) is
-//! the rotated `v`, and its centre sits at `centre + offset_mm[0] u + offset_mm[1] v`.
+//! A placed map's x axis and "up" (-y) axis lie in the region's plane, its centre at the
+//! placed centre; outside its extent it repeats (`wrap`) or gives zero slopes.
+//!
+//! The material word of a triangle holds its slot (`MAT_MAP_SHIFT`): slot 0 (table,
+//! lights) never has a map, slot `r + 1` is region `r`; a map marked `labelled_only`
+//! shades only the region's triangles labelled A, B or C (`MAT_LABELLED`). The header table has one entry
+//! per slot; up to three distinct maps (by identity) have one texel buffer each.
+
+use std::sync::Arc;
 
 use glam::Vec3;
 
-use crate::scene::testbody::FaceFrame;
+use crate::gpu_interface::{MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_WRAP};
 
 /// Per-texel slopes from the texture module (`[dh/dx, dh/dy]`, row 0 at the top, y down,
 /// `spacing_um`); the renderer takes it as is.
 pub use crate::texture::SlopeMap;
 
-/// A slope map placed on one inspected face (assembled in `scene::assemble`).
-pub use crate::scene::assemble::FaceMap;
+/// A slope map chosen for one inspected face, and its placement on the whole part.
+pub use crate::scene::assemble::{Cover, FaceMap, PlacedMap, Placement};
 
-/// Face ids 0..FACE_SLOTS index the header table (0, "other", never has a map).
-pub const FACE_SLOTS: usize = crate::gpu_interface::FACE_SLOTS as usize;
+/// One slot's placement as the shader reads it (declared in src/gpu_interface.in).
+pub use crate::gpu_interface::MapHeader;
 
-/// One face's placement as the shader reads it (declared in src/gpu_interface.in).
-pub use crate::gpu_interface::FaceMapHeader as FaceMapGpu;
+/// Distinct maps (texel buffers) one scene may use at once.
+pub const MAP_BUFFERS: usize = 3;
 
-/// Why face maps cannot be packed.
+/// Why maps cannot be packed.
 #[derive(Debug, thiserror::Error)]
 pub enum SlopeError {
-    #[error("slope map for face {face}: {message}")]
-    Invalid { face: &'static str, message: String },
+    #[error("slope map on region {region}: {message}")]
+    Invalid { region: u32, message: String },
+    #[error("{0} distinct slope maps on one object; at most {MAP_BUFFERS} fit")]
+    TooMany(usize),
 }
 
-/// Headers (one per face id) and, per inspected face A, B, C, its texels as two f16
-/// slopes in one u32 (`unpackHalf2x16` in the shader): 4 bytes a texel, and one buffer
-/// per face, so each face may use the whole storage-buffer range (128 MiB on lavapipe:
-/// 33.5 M texels, e.g. 5792 x 5792). Maps on faces that the mesh does not have are
-/// refused, so a typo in a face id cannot silently render flat.
+/// Headers (one per slot: `slots` = regions + 1) and the texels of each distinct map as
+/// two f16 slopes in one u32 (`unpackHalf2x16` in the shader): 4 bytes a texel, one
+/// buffer per map, so each map may use the whole storage-buffer range (128 MiB on
+/// lavapipe: 33.5 M texels, e.g. 5792 x 5792).
 pub fn pack(
-    maps: &[FaceMap],
-    frames: &[FaceFrame],
+    maps: &[PlacedMap],
+    slots: usize,
     max_bytes: u64,
-) -> Result<(Vec<FaceMapGpu>, [Vec<u32>; 3]), SlopeError> {
-    let mut headers = vec![FaceMapGpu::default(); FACE_SLOTS];
-    let mut texels: [Vec<u32>; 3] = Default::default();
+) -> Result<(Vec<MapHeader>, [Vec<u32>; MAP_BUFFERS]), SlopeError> {
+    let mut headers = vec![MapHeader::default(); slots];
+    let mut texels: [Vec<u32>; MAP_BUFFERS] = Default::default();
+    let mut distinct: Vec<*const SlopeMap> = Vec::new();
     for m in maps {
-        let name = crate::scene::mesh::face_name(m.face);
         let bad = |message: String| SlopeError::Invalid {
-            face: name,
+            region: m.region,
             message,
         };
-        let frame = frames
-            .iter()
-            .find(|f| f.face == m.face)
-            .ok_or_else(|| bad("the mesh has no such face".into()))?;
+        let slot = m.region as usize + 1;
+        if slot >= slots {
+            return Err(bad(format!("the object has {} regions", slots - 1)));
+        }
         let s = &m.slopes;
-        if s.width == 0 || s.height == 0 || s.data.len() != s.width * s.height {
-            return Err(bad(format!(
-                "{} x {} texels but {} values",
-                s.width,
-                s.height,
-                s.data.len()
-            )));
+        let buf = match distinct.iter().position(|&p| p == Arc::as_ptr(s)) {
+            Some(b) => b,
+            None => {
+                if s.width == 0 || s.height == 0 || s.data.len() != s.width * s.height {
+                    return Err(bad(format!(
+                        "{} x {} texels but {} values",
+                        s.width,
+                        s.height,
+                        s.data.len()
+                    )));
+                }
+                if s.data.len() as u64 * 4 > max_bytes {
+                    return Err(bad(format!(
+                        "{} x {} texels need {} MiB, more than one storage buffer allows ({} MiB)",
+                        s.width,
+                        s.height,
+                        (s.data.len() as u64 * 4) >> 20,
+                        max_bytes >> 20
+                    )));
+                }
+                if !(s.spacing_um.is_finite() && s.spacing_um > 0.0) {
+                    return Err(bad(format!("spacing_um = {} must be > 0", s.spacing_um)));
+                }
+                if s.data
+                    .iter()
+                    .any(|v| !(v[0].is_finite() && v[1].is_finite()))
+                {
+                    return Err(bad("slopes must be finite".into()));
+                }
+                if distinct.len() == MAP_BUFFERS {
+                    let mut all: Vec<_> = maps.iter().map(|m| Arc::as_ptr(&m.slopes)).collect();
+                    all.sort();
+                    all.dedup();
+                    return Err(SlopeError::TooMany(all.len()));
+                }
+                texels[distinct.len()] = s
+                    .data
+                    .iter()
+                    .map(|v| f16_bits(v[0]) as u32 | (f16_bits(v[1]) as u32) << 16)
+                    .collect();
+                distinct.push(Arc::as_ptr(s));
+                distinct.len() - 1
+            }
+        };
+        if headers[slot].dims[3] != 0 {
+            return Err(bad("two maps on one region".into()));
         }
-        if s.data.len() as u64 * 4 > max_bytes {
-            return Err(bad(format!(
-                "{} x {} texels need {} MiB, more than one storage buffer allows ({} MiB)",
-                s.width,
-                s.height,
-                (s.data.len() as u64 * 4) >> 20,
-                max_bytes >> 20
-            )));
+        if !(m.centre.is_finite() && m.axis_x.is_finite() && m.axis_up.is_finite()) {
+            return Err(bad("placement must be finite".into()));
         }
-        if !(s.spacing_um.is_finite() && s.spacing_um > 0.0) {
-            return Err(bad(format!("spacing_um = {} must be > 0", s.spacing_um)));
-        }
-        if s.data
-            .iter()
-            .any(|v| !(v[0].is_finite() && v[1].is_finite()))
-        {
-            return Err(bad("slopes must be finite".into()));
-        }
-        if !(m.rotation_deg.is_finite() && m.offset_mm.iter().all(|v| v.is_finite())) {
-            return Err(bad("rotation and offset must be finite".into()));
-        }
-        if headers[m.face as usize].dims[3] != 0 {
-            return Err(bad("two maps on one face".into()));
-        }
-        let (sin, cos) = m.rotation_deg.to_radians().sin_cos();
-        let ax = frame.u * cos + frame.v * sin;
-        let up = frame.v * cos - frame.u * sin;
-        let centre = frame.centre + frame.u * m.offset_mm[0] + frame.v * m.offset_mm[1];
-        texels[m.face as usize - 1] = s
-            .data
-            .iter()
-            .map(|v| f16_bits(v[0]) as u32 | (f16_bits(v[1]) as u32) << 16)
-            .collect();
-        headers[m.face as usize] = FaceMapGpu {
-            origin: centre.extend(1000.0 / s.spacing_um as f32).into(),
-            axis_x: ax.extend(0.0).into(),
-            axis_up: up.extend(0.0).into(),
-            dims: [s.width as u32, s.height as u32, 0, 1],
+        let flags = (buf as u32 + 1)
+            | if m.wrap { MAP_WRAP } else { 0 }
+            | if m.labelled_only {
+                MAP_LABELLED_ONLY
+            } else {
+                0
+            };
+        headers[slot] = MapHeader {
+            origin: m.centre.extend(1000.0 / s.spacing_um as f32).into(),
+            axis_x: m.axis_x.extend(0.0).into(),
+            axis_up: m.axis_up.extend(0.0).into(),
+            dims: [s.width as u32, s.height as u32, 0, flags],
         };
     }
     Ok((headers, texels))
@@ -143,9 +166,10 @@ pub fn f16_to_f32(h: u16) -> f32 {
     }
 }
 
-/// The shading normal the shader computes at `p` on a face with outward normal `n`
+/// The shading normal the shader computes at `p` on a region with outward normal `n`
 /// (CPU mirror for tests and docs): bilinear slopes, perturbed normal in the map axes.
-pub fn shading_normal(h: &FaceMapGpu, texels: &[u32], p: Vec3, n: Vec3) -> Vec3 {
+/// `texels` are the header's buffer (`dims.w & MAP_BUFFER_MASK` - 1).
+pub fn shading_normal(h: &MapHeader, texels: &[u32], p: Vec3, n: Vec3) -> Vec3 {
     let s = lookup(h, texels, p);
     let ax = Vec3::from_slice(&h.axis_x[..3]);
     let up = Vec3::from_slice(&h.axis_up[..3]);
@@ -153,9 +177,10 @@ pub fn shading_normal(h: &FaceMapGpu, texels: &[u32], p: Vec3, n: Vec3) -> Vec3 
     (n - ax * s[0] + up * s[1]).normalize()
 }
 
-/// Bilinear slopes at `p` (zero outside the map), as the shader computes them.
-pub fn lookup(h: &FaceMapGpu, texels: &[u32], p: Vec3) -> [f32; 2] {
-    if h.dims[3] == 0 {
+/// Bilinear slopes at `p` as the shader computes them: zero outside the map, or the map
+/// repeated (`MAP_WRAP`).
+pub fn lookup(h: &MapHeader, texels: &[u32], p: Vec3) -> [f32; 2] {
+    if h.dims[3] & MAP_BUFFER_MASK == 0 {
         return [0.0; 2];
     }
     let d = p - Vec3::from_slice(&h.origin[..3]);
@@ -163,14 +188,29 @@ pub fn lookup(h: &FaceMapGpu, texels: &[u32], p: Vec3) -> [f32; 2] {
     let (w, ht) = (h.dims[0] as f32, h.dims[1] as f32);
     let x = d.dot(Vec3::from_slice(&h.axis_x[..3])) * k + 0.5 * w;
     let y = -d.dot(Vec3::from_slice(&h.axis_up[..3])) * k + 0.5 * ht;
-    if !(x >= 0.0 && y >= 0.0 && x <= w && y <= ht) {
-        return [0.0; 2];
+    let (x0, y0, x1, y1, tx, ty);
+    if h.dims[3] & MAP_WRAP != 0 {
+        let fx = (x - 0.5) - w * ((x - 0.5) / w).floor();
+        let fy = (y - 0.5) - ht * ((y - 0.5) / ht).floor();
+        if !(fx >= 0.0 && fy >= 0.0) {
+            return [0.0; 2];
+        }
+        x0 = (fx as u32).min(h.dims[0] - 1);
+        y0 = (fy as u32).min(h.dims[1] - 1);
+        x1 = if x0 + 1 == h.dims[0] { 0 } else { x0 + 1 };
+        y1 = if y0 + 1 == h.dims[1] { 0 } else { y0 + 1 };
+        tx = fx - x0 as f32;
+        ty = fy - y0 as f32;
+    } else {
+        if !(x >= 0.0 && y >= 0.0 && x <= w && y <= ht) {
+            return [0.0; 2];
+        }
+        let fx = (x - 0.5).clamp(0.0, w - 1.0);
+        let fy = (y - 0.5).clamp(0.0, ht - 1.0);
+        (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
+        (x1, y1) = ((x0 + 1).min(h.dims[0] - 1), (y0 + 1).min(h.dims[1] - 1));
+        (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
     }
-    let fx = (x - 0.5).clamp(0.0, w - 1.0);
-    let fy = (y - 0.5).clamp(0.0, ht - 1.0);
-    let (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
-    let (x1, y1) = ((x0 + 1).min(h.dims[0] - 1), (y0 + 1).min(h.dims[1] - 1));
-    let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
     let at = |x: u32, y: u32| {
         let w = texels[(h.dims[2] + y * h.dims[0] + x) as usize];
         [f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16)]
@@ -187,20 +227,43 @@ pub fn lookup(h: &FaceMapGpu, texels: &[u32], p: Vec3) -> [f32; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::FaceFrame;
+    use crate::scene::assemble::{RegionFrame, Stage, place_maps};
+    use crate::scene::mesh::FACE_A;
     use std::sync::Arc;
 
-    #[test]
-    fn placement_follows_rotation_offset_and_image_axes() {
-        use glam::Vec2;
-        let frame = FaceFrame {
-            face: crate::scene::mesh::FACE_A,
+    fn frame_a() -> FaceFrame {
+        FaceFrame {
+            face: FACE_A,
             centre: Vec3::new(1.0, 2.0, 3.0),
             normal: Vec3::Z,
             u: Vec3::X,
             v: Vec3::Y,
-            half_size: Vec2::splat(10.0),
+            half_size: glam::Vec2::splat(10.0),
             area: 400.0,
-        };
+        }
+    }
+
+    fn region_a(f: &FaceFrame) -> RegionFrame {
+        RegionFrame {
+            id: 0,
+            face: f.face,
+            centre: f.centre,
+            normal: f.normal,
+            u: f.u,
+            v: f.v,
+        }
+    }
+
+    const FACES: Placement = Placement {
+        cover: Cover::Faces,
+        seed: 0,
+        rotation_range_deg: 0.0,
+    };
+
+    #[test]
+    fn placement_follows_rotation_offset_and_image_axes() {
+        let frame = frame_a();
         // 4 x 4 texels of 1 mm; the top row (y = 0) slopes in y, the rest in x.
         let mut map = SlopeMap::flat(4, 4, 1000.0);
         for (i, s) in map.data.iter_mut().enumerate() {
@@ -213,9 +276,13 @@ mod tests {
             rotation_deg,
             offset_mm,
         };
-        let (h, t) = pack(&[place(90.0, [5.0, 0.0])], &[frame], 1 << 27).expect("pack");
-        let h = h[frame.face as usize];
-        let t = &t[frame.face as usize - 1];
+        let regions = [region_a(&frame)];
+        let placed = |maps: &[FaceMap], p: &Placement| {
+            let placed = place_maps(maps, &[frame], &regions, p).expect("place");
+            pack(&placed, 2, 1 << 27).expect("pack")
+        };
+        let (h, t) = placed(&[place(90.0, [5.0, 0.0])], &FACES);
+        let (h, t) = (h[1], &t[0]);
         // Rotated 90 degrees: map x = v (+y), map up = -u; centre at (6, 2, 3).
         let centre = Vec3::new(6.0, 2.0, 3.0);
         // 1.5 mm along map x from the centre, 0.5 mm down: texel row 2 (dh/dx = 1), so
@@ -234,19 +301,32 @@ mod tests {
             (n - Vec3::new(-1.0, 0.0, 1.0).normalize()).length() < 1e-5,
             "{n}"
         );
-        // Outside the 4 mm map: flat.
-        assert_eq!(lookup(&h, t, centre + Vec3::Y * 2.5), [0.0, 0.0]);
-        assert!(
-            pack(
-                &[place(0.0, [0.0; 2]), place(0.0, [0.0; 2])],
-                &[frame],
-                1 << 27
-            )
-            .is_err()
-        );
-        let e = pack(&[place(0.0, [0.0; 2])], &[frame], 32)
-            .unwrap_err()
-            .to_string();
+        // Outside the 4 mm map: flat when clipped, the map again 4 mm on when repeated.
+        let outside = centre + Vec3::Y * 2.5;
+        assert_eq!(lookup(&h, t, outside), [0.0, 0.0]);
+        let part = Placement {
+            cover: Cover::Part,
+            ..FACES
+        };
+        let (hw, tw) = placed(&[place(90.0, [5.0, 0.0])], &part);
+        for k in 0..40 {
+            let p = centre + Vec3::new(k as f32 * 0.173 - 3.0, k as f32 * 0.311 - 6.0, 0.0);
+            let a = lookup(&hw[1], &tw[0], p);
+            let b = lookup(&hw[1], &tw[0], p + Vec3::Y * 4.0 - Vec3::X * 8.0);
+            assert!(
+                (a[0] - b[0]).abs() < 1e-5 && (a[1] - b[1]).abs() < 1e-5,
+                "{a:?} {b:?}"
+            );
+            // Inside the map the repeated lookup is the clipped one, bit for bit.
+            if (p - centre).abs().max_element() < 1.99 {
+                assert_eq!(a, lookup(&h, t, p), "{p}");
+            }
+        }
+        assert_ne!(lookup(&hw[1], &tw[0], outside), [0.0, 0.0]);
+        let two = [place(0.0, [0.0; 2]), place(0.0, [0.0; 2])];
+        assert!(place_maps(&two, &[frame], &regions, &FACES).is_err());
+        let one = place_maps(&[place(0.0, [0.0; 2])], &[frame], &regions, &FACES).expect("one");
+        let e = pack(&one, 2, 32).unwrap_err().to_string();
         assert!(e.contains("storage buffer"), "{e}");
     }
 
@@ -265,33 +345,51 @@ mod tests {
         assert_eq!(f16_bits(0.0), 0);
     }
 
+    fn stage_b() -> Stage {
+        let mesh = crate::scene::testbody(crate::scene::Variant::B);
+        Stage::new(
+            mesh,
+            [0.0; 3],
+            &crate::scene::config::TableConfig::default(),
+        )
+    }
+
     /// dh/dx (map x) of the grooves of one scene file at `points` on face `face`.
     fn groove_slopes(
         cfg: &crate::scene::config::SceneConfig,
         face: crate::scene::mesh::FaceId,
         points: &[Vec3],
     ) -> Vec<f32> {
-        let mesh = crate::scene::testbody(crate::scene::Variant::B);
-        let frames = crate::scene::face_frames(&mesh);
-        let maps = crate::scene::assemble::texture_maps(&cfg.texture, &frames).expect("maps");
-        let (h, t) = pack(&maps, &frames, 1 << 27).expect("pack");
+        let stage = stage_b();
+        let maps =
+            crate::scene::assemble::texture_maps(&cfg.texture, &stage.face_frames).expect("maps");
+        let placed = place_maps(&maps, &stage.face_frames, &stage.regions, &FACES).expect("place");
+        let (h, t) = pack(&placed, stage.regions.len() + 1, 1 << 27).expect("pack");
+        let r = stage
+            .regions
+            .iter()
+            .find(|r| r.face == face)
+            .expect("region");
+        let h = h[r.id as usize + 1];
         points
             .iter()
-            .map(|&p| lookup(&h[face as usize], &t[face as usize - 1], p)[0])
+            .map(|&p| lookup(&h, &t[(h.dims[3] & MAP_BUFFER_MASK) as usize - 1], p)[0])
             .collect()
     }
 
     #[test]
     fn offsets_move_grooves_by_the_offset_on_their_face_only() {
-        use crate::scene::mesh::FACE_A;
         let mut cfg = crate::scene::config::SceneConfig::parse(
             "[texture]\nkind = \"test-grooves\"\nspacing_um = 10.0\ngroove_period_mm = 1.2\n\
              rotation_deg = [30.0, 0.0, 0.0]\n",
         )
         .expect("cfg");
-        let mesh = crate::scene::testbody(crate::scene::Variant::B);
-        let frames = crate::scene::face_frames(&mesh);
-        let fa = *frames.iter().find(|f| f.face == FACE_A).expect("A");
+        let stage = stage_b();
+        let fa = *stage
+            .face_frames
+            .iter()
+            .find(|f| f.face == FACE_A)
+            .expect("A");
         let ax = fa.u * 30f32.to_radians().cos() + fa.v * 30f32.to_radians().sin();
         // Points along the grooves' direction of variation (map x) around A's centre.
         let points: Vec<Vec3> = (0..24)
@@ -314,6 +412,75 @@ mod tests {
             base,
             "offset B moved A"
         );
+    }
+
+    /// With `Cover::Part` every object triangle's slot has a repeating map (so every
+    /// point of the object gets a slope from a map: no untextured border anywhere), the
+    /// inspected faces keep their own map and placement, and the other regions draw
+    /// theirs from the seed; with `Cover::Faces` only A, B and C have one.
+    #[test]
+    fn every_object_triangle_gets_a_map_with_cover_part() {
+        let stage = stage_b();
+        let maps: Vec<FaceMap> = stage
+            .face_frames
+            .iter()
+            .map(|f| FaceMap {
+                face: f.face,
+                slopes: Arc::new(SlopeMap::test_grooves(
+                    30.0,
+                    100.0,
+                    1.0 + f.face as f32,
+                    20.0,
+                )),
+                rotation_deg: 10.0 * f.face as f32,
+                offset_mm: [0.5, -0.25],
+            })
+            .collect();
+        let part = Placement {
+            cover: Cover::Part,
+            seed: 7,
+            rotation_range_deg: 15.0,
+        };
+        let slots = stage.regions.len() + 1;
+        let placed = place_maps(&maps, &stage.face_frames, &stage.regions, &part).expect("place");
+        let (h, _) = pack(&placed, slots, 1 << 27).expect("pack");
+        let objects = stage.region_of.len();
+        assert!(objects > 0 && objects + 2 == stage.mesh.triangles.len());
+        for (t, &r) in stage.region_of.iter().enumerate() {
+            assert_ne!(r, u32::MAX, "triangle {t} has no region");
+            let flags = h[r as usize + 1].dims[3];
+            assert!(
+                flags & MAP_BUFFER_MASK != 0 && flags & MAP_WRAP != 0,
+                "triangle {t}"
+            );
+        }
+        assert_eq!(h[0].dims[3], 0, "slot 0 (table) has no map");
+        // Inspected faces: their own map, placed in their face frame as with `Faces`.
+        let faces = place_maps(&maps, &stage.face_frames, &stage.regions, &FACES).expect("faces");
+        assert_eq!(faces.len(), 3);
+        for f in &faces {
+            let p = placed
+                .iter()
+                .find(|p| p.region == f.region)
+                .expect("same region");
+            assert!(Arc::ptr_eq(&p.slopes, &f.slopes) && p.wrap && !f.wrap);
+            assert_eq!(
+                (p.centre, p.axis_x, p.axis_up),
+                (f.centre, f.axis_x, f.axis_up)
+            );
+        }
+        // Other regions: seeded, so the same seed places them the same way and another
+        // seed differently.
+        let again = place_maps(&maps, &stage.face_frames, &stage.regions, &part).expect("again");
+        let other = Placement { seed: 8, ..part };
+        let moved = place_maps(&maps, &stage.face_frames, &stage.regions, &other).expect("moved");
+        let centres = |v: &[PlacedMap]| v.iter().map(|p| p.centre).collect::<Vec<_>>();
+        assert_eq!(centres(&placed), centres(&again));
+        assert_ne!(centres(&placed), centres(&moved));
+        // A map on a face the mesh does not have is refused.
+        let mut bad = maps.clone();
+        bad[0].face = 9;
+        assert!(place_maps(&bad, &stage.face_frames, &stage.regions, &part).is_err());
     }
 
     #[test]

@@ -13,6 +13,7 @@ use super::config::{
     TableConfig, TextureConfig, View,
 };
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
+use super::regions::{RegionTolerance, planar_regions, region_per_triangle};
 use super::testbody::{FaceFrame, face_frames};
 use super::{Mesh, MeshError};
 use crate::gpu_interface::{MAT_CONDUCTOR, MAT_TABLE};
@@ -30,6 +31,8 @@ pub enum AssembleError {
     Mesh(#[from] MeshError),
     #[error("texture.path: {0}")]
     Texture(#[from] TextureError),
+    #[error("slope map for face {face}: {message}")]
+    Placement { face: &'static str, message: String },
 }
 
 /// A slope map placed on one inspected face.
@@ -41,6 +44,138 @@ pub struct FaceMap {
     pub rotation_deg: f32,
     /// Map centre relative to the face centre along (u, v), mm.
     pub offset_mm: [f32; 2],
+}
+
+pub use super::config::Cover;
+
+/// How the face maps are spread over the object's planar regions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    pub cover: Cover,
+    /// Seeds the choices for regions without a face map of their own.
+    pub seed: u64,
+    /// Those regions' map rotation is uniform in [-range, range], degrees, from their `u`.
+    pub rotation_range_deg: f32,
+}
+
+impl Default for Placement {
+    fn default() -> Self {
+        Placement {
+            cover: Cover::Part,
+            seed: 0,
+            rotation_range_deg: 0.0,
+        }
+    }
+}
+
+/// A planar region of the object (`scene::regions`), where a slope map is projected.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegionFrame {
+    /// The region's stable id (`PlanarRegion::id`).
+    pub id: u32,
+    /// The inspected face (A, B, C) it holds, else `FACE_OTHER`.
+    pub face: FaceId,
+    pub centre: Vec3,
+    pub normal: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+}
+
+/// A slope map projected onto one region: map centre and axes in world space (mm).
+#[derive(Clone, Debug)]
+pub struct PlacedMap {
+    pub region: u32,
+    pub slopes: Arc<SlopeMap>,
+    pub centre: Vec3,
+    /// Map x axis (image right).
+    pub axis_x: Vec3,
+    /// Map up axis (image -y).
+    pub axis_up: Vec3,
+    /// Repeat the map beyond its edges (else zero slopes outside it).
+    pub wrap: bool,
+    /// Only the region's triangles labelled A, B or C get the map (`Cover::Faces`).
+    pub labelled_only: bool,
+}
+
+/// Spreads the per-face maps over the object's regions (docs/texture.md, "Finishes on
+/// the whole part"):
+/// - a region of an inspected face gets that face's map, placed in the face's frame
+///   (`FaceFrame`: centred on the labelled square) by its rotation and offset;
+/// - with `Cover::Part`, every other region gets one of the maps (the region id, mixed
+///   with the seed, picks it), a rotation uniform in `[-range, range]` from its own `u`
+///   and a centre offset uniform over the map's extent along its own `(u, v)`, all drawn
+///   from `placement.seed` and the region id; maps repeat beyond their edges.
+///
+/// A map on a face the mesh does not have is refused (a typo must not render flat).
+pub fn place_maps(
+    maps: &[FaceMap],
+    face_frames: &[FaceFrame],
+    regions: &[RegionFrame],
+    placement: &Placement,
+) -> Result<Vec<PlacedMap>, AssembleError> {
+    use rand::{Rng, SeedableRng};
+    let mut by_face: Vec<(&FaceMap, &FaceFrame)> = Vec::new();
+    for m in maps {
+        let bad = |message: &str| AssembleError::Placement {
+            face: face_name(m.face),
+            message: message.into(),
+        };
+        let frame = face_frames
+            .iter()
+            .find(|f| f.face == m.face)
+            .ok_or_else(|| bad("the mesh has no such face"))?;
+        if !(m.rotation_deg.is_finite() && m.offset_mm.iter().all(|v| v.is_finite())) {
+            return Err(bad("rotation and offset must be finite"));
+        }
+        if by_face.iter().any(|(o, _)| o.face == m.face) {
+            return Err(bad("two maps on one face"));
+        }
+        by_face.push((m, frame));
+    }
+    let wrap = placement.cover == Cover::Part;
+    let mut out = Vec::new();
+    for r in regions {
+        if let Some((m, f)) = by_face.iter().find(|(m, _)| m.face == r.face) {
+            let (sin, cos) = m.rotation_deg.to_radians().sin_cos();
+            out.push(PlacedMap {
+                region: r.id,
+                slopes: m.slopes.clone(),
+                centre: f.centre + f.u * m.offset_mm[0] + f.v * m.offset_mm[1],
+                axis_x: f.u * cos + f.v * sin,
+                axis_up: f.v * cos - f.u * sin,
+                wrap,
+                labelled_only: !wrap,
+            });
+        } else if wrap && !by_face.is_empty() {
+            let mix = (r.id as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+            let mut rng = rand_pcg::Pcg64::seed_from_u64(placement.seed ^ mix);
+            let (m, _) = by_face[rng.random_range(0..by_face.len())];
+            let range = placement.rotation_range_deg.abs();
+            let rot = if range > 0.0 {
+                rng.random_range(-range..=range)
+            } else {
+                0.0
+            };
+            let s = &m.slopes;
+            let half_mm = |n: usize| (0.5 * n as f64 * s.spacing_um * 1e-3) as f32;
+            let (hx, hy) = (half_mm(s.width), half_mm(s.height));
+            let off = [
+                rng.random_range(-1.0f32..=1.0) * hx,
+                rng.random_range(-1.0f32..=1.0) * hy,
+            ];
+            let (sin, cos) = rot.to_radians().sin_cos();
+            out.push(PlacedMap {
+                region: r.id,
+                slopes: s.clone(),
+                centre: r.centre + r.u * off[0] + r.v * off[1],
+                axis_x: r.u * cos + r.v * sin,
+                axis_up: r.v * cos - r.u * sin,
+                wrap,
+                labelled_only: false,
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// The configured object (built-in test body or mesh file), its inspected faces chosen
@@ -106,8 +241,12 @@ pub struct Stage {
     pub materials: Vec<u32>,
     /// Lambertian albedo of the table.
     pub table_albedo: f32,
-    /// Frames of the object's inspected faces (where slope maps are projected).
+    /// Frames of the object's inspected faces (where views aim and face maps are placed).
     pub face_frames: Vec<FaceFrame>,
+    /// The object's planar regions (`scene::regions`, default tolerances), by id.
+    pub regions: Vec<RegionFrame>,
+    /// Region id of each object triangle (the table's two triangles have none).
+    pub region_of: Vec<u32>,
 }
 
 impl Stage {
@@ -115,6 +254,19 @@ impl Stage {
     /// (the object's position) at its height.
     pub fn new(object: Mesh, centre: [f32; 3], table: &TableConfig) -> Stage {
         let face_frames = face_frames(&object);
+        let found = planar_regions(&object, &RegionTolerance::default());
+        let region_of = region_per_triangle(&object, &found);
+        let regions = found
+            .iter()
+            .map(|r| RegionFrame {
+                id: r.id,
+                face: r.face,
+                centre: r.centre,
+                normal: r.normal,
+                u: r.u,
+                v: r.v,
+            })
+            .collect();
         let mut mesh = object;
         let mut materials = vec![MAT_CONDUCTOR; mesh.triangles.len()];
         let [ox, oy, oz] = centre;
@@ -137,6 +289,8 @@ impl Stage {
             materials,
             table_albedo: table.albedo,
             face_frames,
+            regions,
+            region_of,
         }
     }
 }
@@ -251,6 +405,9 @@ pub struct RenderScene {
     pub view: ViewSetup,
     /// Slope maps on inspected faces; none = shading normal is the geometric normal.
     pub face_maps: Vec<FaceMap>,
+    /// How the face maps spread over the rest of the object (`[texture] cover`; other
+    /// regions unrotated, their offsets drawn from the render seed).
+    pub placement: Placement,
 }
 
 impl RenderScene {
@@ -268,10 +425,16 @@ impl RenderScene {
             &cfg.light,
         )?;
         let face_maps = texture_maps(&cfg.texture, &stage.face_frames)?;
+        let placement = Placement {
+            cover: cfg.texture.cover,
+            seed: cfg.render.seed as u64,
+            rotation_range_deg: 0.0,
+        };
         Ok(RenderScene {
             stage,
             view,
             face_maps,
+            placement,
         })
     }
 }

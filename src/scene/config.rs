@@ -503,6 +503,20 @@ impl Default for RenderConfig {
     }
 }
 
+/// Which triangles of the object a finish covers (`[texture] cover` in scene and job
+/// files; docs/scene-format.md).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Cover {
+    /// Every planar region of the object (default): each region gets a map, repeated
+    /// beyond its edges, so no face has an untextured border.
+    #[default]
+    Part,
+    /// Only the regions of the inspected faces A, B and C, each map clipped to its own
+    /// extent (slopes zero outside: the mirror band of the renderer before issue 11).
+    Faces,
+}
+
 /// Slope maps on the inspected faces (docs/scene-format.md, `[texture]`).
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -525,6 +539,9 @@ pub struct TextureConfig {
     /// Map centre relative to the face centre along (u, v) on faces A, B, C, mm,
     /// [-1000, 1000] each.
     pub offset_mm: [[f32; 2]; 3],
+    /// "part" (default): the map covers every planar region of the object, repeated
+    /// beyond its edges; "faces": only faces A, B, C, clipped to the map.
+    pub cover: Cover,
 }
 
 impl Default for TextureConfig {
@@ -537,6 +554,7 @@ impl Default for TextureConfig {
             groove_max_slope_deg: 30.0,
             rotation_deg: [0.0; 3],
             offset_mm: [[0.0; 2]; 3],
+            cover: Default::default(),
         }
     }
 }
