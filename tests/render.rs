@@ -173,8 +173,14 @@ fn cos_of(alpha: f64, xi: f64) -> f64 {
 }
 
 fn small_cfg(extra: &str) -> SceneConfig {
+    test_cfg("", extra)
+}
+
+/// The paper camera's field of view at 64 x 48, 16 spp: `camera` lines go into
+/// `[camera]`, `extra` after `[render]`.
+fn test_cfg(camera: &str, extra: &str) -> SceneConfig {
     let text = format!(
-        "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[render]\nspp = 16\nbatch_spp = 8\nseed = 3\n{extra}"
+        "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n{camera}[render]\nspp = 16\nbatch_spp = 8\nseed = 3\n{extra}"
     );
     let mut cfg = SceneConfig::parse(&text).expect("test scene");
     cfg.set_resolution(64, 48).expect("size");
@@ -874,12 +880,7 @@ fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
 
 /// `small_cfg` with more `[camera]` fields.
 fn lens_cfg(camera: &str) -> SceneConfig {
-    let text = format!(
-        "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n{camera}[render]\nspp = 16\nbatch_spp = 8\nseed = 3\n"
-    );
-    let mut cfg = SceneConfig::parse(&text).expect("test scene");
-    cfg.set_resolution(64, 48).expect("size");
-    cfg
+    test_cfg(camera, "")
 }
 
 /// Sum of squared differences between horizontally and vertically neighbouring 4 x 4
