@@ -342,5 +342,14 @@ defect_free = 1
         // calibrated face by under 0.1 %; the rest is the pixel grid at the edges).
         let ratio = n as f64 / dn as f64 / (fx / d.fx).powi(2);
         assert!((0.9..1.1).contains(&ratio), "area ratio {ratio}");
+        // The lens reaches the path tracer: without `f_number` (the pinhole) the same
+        // calibrated camera gives the same labels and other radiance (the thin lens
+        // samples its aperture).
+        let (pout, _) = render("[camera]\ncalibration = \"cam.yaml\"", "pinhole");
+        let read = |dir: &std::path::Path, f: &str| {
+            std::fs::read(dir.join("images/000000").join(f)).unwrap()
+        };
+        assert_eq!(read(&out, "faces.png"), read(&pout, "faces.png"));
+        assert_ne!(read(&out, "radiance.exr"), read(&pout, "radiance.exr"));
     }
 }
