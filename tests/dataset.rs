@@ -460,6 +460,48 @@ fn paper_job_uses_the_papers_roughness_and_spiral_exit_lines() {
             toml::Value::Table(f.params.clone()).try_into().unwrap();
         assert!(p.spiral_exit_line, "{}", f.name);
     }
+    // Re-based on the default camera (issue 12): the scene's camera written out with a
+    // lens, the EMVA sensor with auto exposure and vertical blooming; no per-finish
+    // exposure factors (auto exposure), no appleseed-fitted linear step, no post
+    // defocus or threshold blooming (the lens and the sensor do both).
+    let def = synosis::scene::config::CameraConfig::default();
+    let c = &job.camera_config;
+    assert_eq!(
+        (
+            c.width,
+            c.height,
+            c.pixel_um,
+            c.focal_mm,
+            c.working_distance_mm
+        ),
+        (
+            def.width,
+            def.height,
+            def.pixel_um,
+            def.focal_mm,
+            def.working_distance_mm
+        )
+    );
+    assert_eq!(c.f_number, Some(11.0));
+    match &job.sensor.model {
+        dataset::job::SensorModel::Emva(s) => {
+            let d = synosis::scene::config::SensorConfig::default();
+            assert_eq!(s.exposure, d.exposure, "auto");
+            assert_eq!(s.blooming, synosis::scene::config::Blooming::Vertical);
+            let s = synosis::scene::config::SensorConfig {
+                blooming: d.blooming,
+                ..s.clone()
+            };
+            assert_eq!(s, d, "the documented defaults otherwise");
+        }
+        m => panic!("{m:?}"),
+    }
+    assert!(job.finishes.iter().all(|f| f.exposure.is_none()));
+    let steps: Vec<&str> = job.postprocess.iter().map(|s| s.name()).collect();
+    assert_eq!(
+        steps,
+        ["background_noise", "dilate_masks", "visibility_filter"]
+    );
 }
 
 #[test]
