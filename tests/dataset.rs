@@ -1603,6 +1603,10 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
             with("[sensor]\nexposure_jitter_ev = [0.0, 1.0]\nexposure_jitter_probability = 2"),
             "sensor.exposure_jitter_probability",
         ),
+        (
+            with("[sensor]\nexposure_jitter_probability = 0.5"),
+            "only with sensor.exposure_jitter_ev",
+        ),
     ];
     for (text, want) in cases {
         let err = match dataset::prepare_text(&text, "job", tmp.path()) {

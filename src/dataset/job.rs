@@ -831,6 +831,15 @@ impl Job {
             0.0,
             1.0,
         )?;
+        if self.sensor.exposure_jitter_ev.is_none()
+            && self.sensor.exposure_jitter_probability != 1.0
+        {
+            return Err(self.field(
+                "sensor.exposure_jitter_probability",
+                self.sensor.exposure_jitter_probability,
+                "only with sensor.exposure_jitter_ev = [min, max]",
+            ));
+        }
         // The camera and the EMVA sensor: the scene file's own checks (ranges, the
         // sensor's need for `camera.f_number`).
         self.scene_base()
