@@ -460,6 +460,48 @@ fn paper_job_uses_the_papers_roughness_and_spiral_exit_lines() {
             toml::Value::Table(f.params.clone()).try_into().unwrap();
         assert!(p.spiral_exit_line, "{}", f.name);
     }
+    // Re-based on the default camera (issue 12): the scene's camera written out with a
+    // lens, the EMVA sensor with auto exposure and vertical blooming; no per-finish
+    // exposure factors (auto exposure), no appleseed-fitted linear step, no post
+    // defocus or threshold blooming (the lens and the sensor do both).
+    let def = synosis::scene::config::CameraConfig::default();
+    let c = &job.camera_config;
+    assert_eq!(
+        (
+            c.width,
+            c.height,
+            c.pixel_um,
+            c.focal_mm,
+            c.working_distance_mm
+        ),
+        (
+            def.width,
+            def.height,
+            def.pixel_um,
+            def.focal_mm,
+            def.working_distance_mm
+        )
+    );
+    assert_eq!(c.f_number, Some(11.0));
+    match &job.sensor.model {
+        dataset::job::SensorModel::Emva(s) => {
+            let d = synosis::scene::config::SensorConfig::default();
+            assert_eq!(s.exposure, d.exposure, "auto");
+            assert_eq!(s.blooming, synosis::scene::config::Blooming::Vertical);
+            let s = synosis::scene::config::SensorConfig {
+                blooming: d.blooming,
+                ..s.clone()
+            };
+            assert_eq!(s, d, "the documented defaults otherwise");
+        }
+        m => panic!("{m:?}"),
+    }
+    assert!(job.finishes.iter().all(|f| f.exposure.is_none()));
+    let steps: Vec<&str> = job.postprocess.iter().map(|s| s.name()).collect();
+    assert_eq!(
+        steps,
+        ["background_noise", "dilate_masks", "visibility_filter"]
+    );
 }
 
 #[test]
@@ -1514,4 +1556,191 @@ fn realism_report_summarises_a_dataset_folder() {
     }
     assert!(named > 0, "the fixture has no visible defect");
     assert!(html.contains("<svg") && !html.contains("src=\"http"));
+}
+
+/// `[camera]` and the EMVA `[sensor]` in jobs: the scene file's fields and checks, errors
+/// naming the field; the linear `exposure = <number>` stays the old model.
+#[test]
+fn job_camera_and_sensor_are_checked_like_a_scene_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("defects.toml"), DEFECT_SPEC).unwrap();
+    let good = job_text(1, 1);
+    let with = |extra: &str| good.replace("[texture]", &format!("{extra}\n[texture]"));
+    // Old jobs: no [sensor], or a number, is the linear model.
+    for text in [good.clone(), with("[sensor]\nexposure = 2")] {
+        let job = dataset::prepare_text(&text, "job", tmp.path()).unwrap().job;
+        assert!(matches!(
+            job.sensor.model,
+            dataset::job::SensorModel::Linear { .. }
+        ));
+        assert_eq!(job.sensor.exposure_jitter_ev, None);
+    }
+    let emva = with(
+        "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\nbit_depth = 12\nblooming = \"vertical\"",
+    );
+    let job = dataset::prepare_text(&emva, "job", tmp.path()).unwrap().job;
+    match &job.sensor.model {
+        dataset::job::SensorModel::Emva(s) => {
+            assert_eq!(s.bit_depth, 12);
+            assert_eq!(s.quantum_efficiency, 0.6, "scene defaults for the rest");
+        }
+        m => panic!("{m:?}"),
+    }
+    assert_eq!(job.camera_config.f_number, Some(8.0));
+    let cases: Vec<(String, &str)> = vec![
+        (
+            with("[sensor]\nexposure = 1.0\nbit_depth = 12"),
+            "linear model",
+        ),
+        (
+            with("[camera]\nf_number = 8.0\n[sensor]\nbit_depth = 7"),
+            "sensor.bit_depth",
+        ),
+        (
+            with("[camera]\nf_number = 8.0\n[sensor]\nexposure = { ms = -1 }"),
+            "sensor.exposure.ms",
+        ),
+        (
+            with("[camera]\nf_number = 8.0\n[sensor]\ngian = 3"),
+            "unknown field `gian`",
+        ),
+        (with("[sensor]\nexposure = \"auto\""), "camera.f_number"),
+        (with("[camera]\nf_number = 0.1"), "camera.f_number"),
+        (with("[camera]\nview = \"A0\""), "camera.view"),
+        (with("[camera]\nexposure = 2.0"), "camera.exposure"),
+        (with("[camera]\npixel_um = 0"), "camera.pixel_um"),
+        (with("[camera]\ncalibration = \"none.yaml\""), "none.yaml"),
+        (
+            with("[sensor]\nexposure_jitter_ev = [1.0, 0.5]"),
+            "sensor.exposure_jitter_ev[1]",
+        ),
+        (
+            with("[sensor]\nexposure_jitter_ev = [-20.0, 0.5]"),
+            "sensor.exposure_jitter_ev[0]",
+        ),
+        (
+            with("[sensor]\nexposure_jitter_ev = [0.0, 1.0]\nexposure_jitter_probability = 2"),
+            "sensor.exposure_jitter_probability",
+        ),
+        (
+            with("[sensor]\nexposure_jitter_probability = 0.5"),
+            "only with sensor.exposure_jitter_ev",
+        ),
+    ];
+    for (text, want) in cases {
+        let err = match dataset::prepare_text(&text, "job", tmp.path()) {
+            Ok(_) => panic!("accepted a job that should fail on {want}"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.contains(want), "error {err:?} does not name {want:?}");
+    }
+}
+
+/// The EMVA sensor and the random exposure in a job: recorded per image, drawn from the
+/// image's seed, and re-done by `postprocess` from the stored radiance, bit for bit when
+/// nothing changed.
+#[test]
+fn emva_sensor_and_random_exposure_rerun_from_raw_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
+    let text = job_text(1, 1).replace(
+        "[texture]",
+        "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\nexposure_jitter_ev = [-0.5, 1.5]\n[texture]",
+    );
+    std::fs::write(root.join("job.toml"), &text).unwrap();
+    let prep = dataset::prepare(&root.join("job.toml")).unwrap();
+    let out = root.join("out");
+    let run = |out: &Path| {
+        dataset::run(
+            &prep,
+            out,
+            &mut OrthoLabelTestDouble { calls: 0 },
+            &mut FlatTexturesTestDouble { made: 0 },
+            RunOptions::default(),
+        )
+        .unwrap()
+    };
+    run(&out);
+    let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
+    let mut evs = BTreeSet::new();
+    for e in &entries {
+        let ev = e.exposure_ev.expect("recorded");
+        assert!((-0.5..=1.5).contains(&ev), "{ev}");
+        assert_eq!(
+            Some(ev),
+            dataset::camera::exposure_jitter_ev(&prep.job, e.seed)
+        );
+        evs.insert(ev.to_bits());
+        assert!(e.exposure_ms.is_some_and(|t| t > 0.0));
+        // The default camera at 64 x 48 (sensor size kept) with the job's lens.
+        let c = e.camera.as_ref().unwrap();
+        let pitch_mm = 6.9e-3 * 1224.0 / 64.0;
+        assert!((c.fx - 25.0 / pitch_mm).abs() < 1e-3 * c.fx, "{c:?}");
+        assert_eq!((c.width, c.height, c.cx, c.cy), (64, 48, 31.5, 23.5));
+        assert_eq!(c.f_number, Some(8.0));
+    }
+    assert!(evs.len() > entries.len() / 2, "jitter varies per image");
+    // Reproducible: another run into another folder gives the same files.
+    let again = root.join("again");
+    run(&again);
+    assert_same_dataset(&out, &again);
+    // Postprocess re-does exposure and noise from radiance.exr: bit for bit.
+    let before = tree(&out);
+    let n = dataset::postprocess_dir(&out, None).unwrap();
+    assert_eq!(n, entries.len());
+    assert_eq!(before, tree(&out), "postprocess must reproduce the run");
+    assert_eq!(manifest_without_times(&out), manifest_without_times(&again));
+
+    // Without the jitter the auto time is the same for every image's radiance, so the
+    // jittered time is it times 2^ev: the jitter multiplies the auto-chosen time.
+    let pj = root.join("new.toml");
+    std::fs::write(&pj, text.replace("exposure_jitter_ev = [-0.5, 1.5]\n", "")).unwrap();
+    dataset::postprocess_dir(&out, Some(&pj)).unwrap();
+    let plain = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
+    for (a, b) in entries.iter().zip(&plain) {
+        assert_eq!(b.exposure_ev, None);
+        let (ta, tb) = (a.exposure_ms.unwrap(), b.exposure_ms.unwrap());
+        let k = a.exposure_ev.unwrap().exp2();
+        assert!((ta - tb * k).abs() <= 1e-12 * ta, "{ta} vs {tb} x {k}");
+    }
+    // A fixed exposure time changes the images and is recorded (0.002 ms: about 1000
+    // electrons in the brightest pixels here, well under the auto time's 9000).
+    let fixed = text
+        .replace("exposure = \"auto\"", "exposure = { ms = 0.002 }")
+        .replace("exposure_jitter_ev = [-0.5, 1.5]\n", "");
+    std::fs::write(&pj, &fixed).unwrap();
+    dataset::postprocess_dir(&out, Some(&pj)).unwrap();
+    let after = tree(&out);
+    for e in dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap() {
+        assert_eq!(e.exposure_ms, Some(0.002));
+        let k = format!("images/{}/image.png", e.id);
+        assert_ne!(
+            before[&k], after[&k],
+            "{k} did not change with the exposure"
+        );
+    }
+    // The linear model with the jitter: 255 * 2^ev * L per pixel.
+    let linear = job_text(1, 1)
+        .split("[[postprocess]]")
+        .next()
+        .unwrap()
+        .replace(
+            "[texture]",
+            "[camera]\nf_number = 8.0\n[sensor]\nexposure = 1.0\nexposure_jitter_ev = [-0.5, 1.5]\n[texture]",
+        );
+    std::fs::write(&pj, &linear).unwrap();
+    dataset::postprocess_dir(&out, Some(&pj)).unwrap();
+    for e in dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap() {
+        assert_eq!(e.exposure_ms, None);
+        let k = e.exposure_ev.unwrap().exp2();
+        let img = image::open(out.join(&e.image)).unwrap().into_luma8();
+        let (_, _, rad) =
+            synosis::image_io::read_exr_f32(&out.join(format!("images/{}/radiance.exr", e.id)))
+                .unwrap();
+        let scale = (1.0 * k) as f32;
+        for (p, l) in img.as_raw().iter().zip(&rad) {
+            assert_eq!(*p, (255.0 * scale * l).clamp(0.0, 255.0).round() as u8);
+        }
+    }
 }

@@ -101,6 +101,7 @@ fn face_textures_reach_the_image() {
     let render = |r: &mut GpuRenderer, textures: Vec<FaceTexture>| {
         let req = ImageRequest {
             pose: None,
+            camera: &Default::default(),
             mesh: &mesh,
             mesh_key: 1,
             view: "A0",
@@ -191,6 +192,7 @@ rim_width = 0.5
     for view in ["A0", "A20"] {
         let req = ImageRequest {
             pose: None,
+            camera: &Default::default(),
             mesh: &mesh,
             mesh_key: 1,
             view,
@@ -240,5 +242,114 @@ rim_width = 0.5
             at[2] > margin * best_other,
             "{view}: mask edges do not line up with radiance edges: {at:?}"
         );
+    }
+}
+
+/// A job's `[camera]` (an OpenCV calibration with an off-centre principal point and a
+/// thin lens) is the camera the GPU renders with, on both backends: the manifest records
+/// the calibration's intrinsics, and the viewed face (view A0 aims the optical axis at
+/// its centre) sits on the calibrated principal point and has the calibrated size; the
+/// same job without `[camera]` puts it on the image centre with the default focal length.
+#[test]
+fn job_camera_sets_intrinsics_and_lens_on_both_backends() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (w, h) = (64u32, 48u32);
+    let (fx, cx, cy) = (150.0, 24.0, 20.0);
+    std::fs::write(
+        tmp.path().join("cam.yaml"),
+        format!(
+            "%YAML:1.0\n---\nimage_width: {w}\nimage_height: {h}\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ {fx}, 0., {cx}, 0., {fx}, {cy}, 0., 0., 1. ]\ndistortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n   data: [ -0.05, 0., 0., 0., 0. ]\n"
+        ),
+    )
+    .unwrap();
+    let job = |camera: &str| {
+        format!(
+            r#"
+seed = 5
+views = ["A0"]
+{camera}
+[render]
+width = {w}
+height = {h}
+spp = 2
+bounces = 1
+[texture]
+size_px = 80
+spacing_um = 400.0
+[[finish]]
+name = "parallel-d4-ae0.5"
+kind = "milled"
+textures = 1
+params = {{ path = "parallel", head_diameter_mm = 4.0, radial_depth = 0.5 }}
+[[object]]
+name = "body"
+mesh = "testbody-b"
+defective = 0
+defect_free = 1
+"#
+        )
+    };
+    // Centroid and pixel count of face A in faces.png.
+    let face_a = |dir: &std::path::Path| {
+        let faces = image::open(dir.join("images/000000/faces.png"))
+            .unwrap()
+            .into_luma8();
+        let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+        for (x, y, p) in faces.enumerate_pixels() {
+            if p.0[0] == 1 {
+                sx += x as f64 + 0.5;
+                sy += y as f64 + 0.5;
+                n += 1;
+            }
+        }
+        (sx / n as f64, sy / n as f64, n)
+    };
+    for accel in [AccelChoice::Software, AccelChoice::RayQuery] {
+        let mut r = GpuRenderer::new(accel, true).unwrap_or_else(|e| panic!("{e}"));
+        let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+        let mut render = |camera: &str, name: &str| {
+            let prep = dataset::prepare_text(&job(camera), "job", tmp.path()).unwrap();
+            let out = tmp.path().join(format!("{name}-{accel:?}"));
+            dataset::run(&prep, &out, &mut r, &mut textures, Default::default()).unwrap();
+            let e = dataset::read_manifest(&out.join("manifest.jsonl"), false)
+                .unwrap()
+                .remove(0);
+            (out, e)
+        };
+        let (out, e) = render(
+            "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0",
+            "calibrated",
+        );
+        let c = e.camera.unwrap();
+        assert_eq!((c.width, c.height), (w, h));
+        assert_eq!((c.fx, c.fy, c.cx, c.cy), (fx, fx, cx, cy));
+        assert_eq!(c.distortion, [-0.05, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(c.f_number, Some(4.0));
+        assert!(c.calibration.unwrap().ends_with("cam.yaml"));
+        let (ux, uy, n) = face_a(&out);
+        let (dout, de) = render("", "default");
+        let d = de.camera.unwrap();
+        let (dx, dy, dn) = face_a(&dout);
+        println!(
+            "{accel:?}: face A centroid ({ux:.2}, {uy:.2}), {n} px (calibrated, principal point ({}, {})); default ({dx:.2}, {dy:.2}), {dn} px",
+            cx + 0.5,
+            cy + 0.5
+        );
+        // OpenCV's pixel centres are integers; synosis' pixel k spans [k, k + 1].
+        assert!((ux - (cx + 0.5)).abs() < 1.0 && (uy - (cy + 0.5)).abs() < 1.0);
+        assert!((dx - w as f64 / 2.0).abs() < 1.0 && (dy - h as f64 / 2.0).abs() < 1.0);
+        // Area scales with the focal length squared (the barrel distortion shrinks the
+        // calibrated face by under 0.1 %; the rest is the pixel grid at the edges).
+        let ratio = n as f64 / dn as f64 / (fx / d.fx).powi(2);
+        assert!((0.9..1.1).contains(&ratio), "area ratio {ratio}");
+        // The lens reaches the path tracer: without `f_number` (the pinhole) the same
+        // calibrated camera gives the same labels and other radiance (the thin lens
+        // samples its aperture).
+        let (pout, _) = render("[camera]\ncalibration = \"cam.yaml\"", "pinhole");
+        let read = |dir: &std::path::Path, f: &str| {
+            std::fs::read(dir.join("images/000000").join(f)).unwrap()
+        };
+        assert_eq!(read(&out, "faces.png"), read(&pout, "faces.png"));
+        assert_ne!(read(&out, "radiance.exr"), read(&pout, "radiance.exr"));
     }
 }

@@ -21,8 +21,8 @@ use crate::vk::{Context, ContextOptions, Profiler};
 /// so "object" and "table or nothing" (both face 0 in faces.png) can be told apart.
 const FACE_OBJECT_OTHER: u8 = 4;
 
-/// The GPU path tracer + annotation pass, with the scene defaults of `SceneConfig`
-/// (camera, ring light, table, aluminium IOR).
+/// The GPU path tracer + annotation pass, with the scene defaults of `SceneConfig` (ring
+/// light, table, aluminium IOR) and each request's camera.
 pub struct GpuRenderer {
     ctx: Arc<Context>,
     tracer: PathTracer,
@@ -106,8 +106,11 @@ impl ImageRenderer for GpuRenderer {
     }
 
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
+        // The scene defaults with the job's camera (intrinsics and lens).
+        let mut base = self.base.clone();
+        base.camera = req.camera.clone();
         let cfg = super::renderer::render_config(
-            &self.base,
+            &base,
             req.view,
             req.pose,
             req.width,

@@ -37,6 +37,15 @@ pub struct Job {
     pub texture: TextureSettings,
     #[serde(default)]
     pub defects: DefectSettings,
+    /// The camera's intrinsics and lens (`[camera]`, the keys of [`CAMERA_KEYS`] as in a
+    /// scene's `[camera]`), as written; the pose comes from the viewpoints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<toml::Table>,
+    /// `camera` read as a scene camera (the calibration file loaded when the job is read
+    /// with its folder): default pose, the camera's own resolution (the images are
+    /// rendered at `[render] width, height`, see [`Job::image_camera`]).
+    #[serde(skip)]
+    pub camera_config: crate::scene::config::CameraConfig,
     #[serde(default)]
     pub sensor: SensorSettings,
     #[serde(rename = "finish")]
@@ -333,17 +342,116 @@ impl Default for DefectSettings {
     }
 }
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
+/// The keys a job's `[camera]` accepts: a scene camera's intrinsics and lens (the pose
+/// comes from `views`, `plan` and `[[pose]]`).
+pub const CAMERA_KEYS: [&str; 8] = [
+    "width",
+    "height",
+    "pixel_um",
+    "focal_mm",
+    "working_distance_mm",
+    "calibration",
+    "f_number",
+    "focus_distance_mm",
+];
+
+/// `[sensor]`: the linear model (`exposure = <number>`, or no `[sensor]`: exposure 1) or
+/// an EMVA 1288 camera (`exposure = "auto"` or `{ ms = .. }` and / or any field of a
+/// scene's `[sensor]`), plus the per-image random exposure. Kept as written for
+/// serialising.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(try_from = "toml::Table", into = "toml::Table")]
 pub struct SensorSettings {
+    pub model: SensorModel,
+    /// Random exposure per image: EV stops drawn uniformly from [min, max] (factor
+    /// 2^ev on the exposure), each in [-10, 10]. None: off.
+    pub exposure_jitter_ev: Option<[f64; 2]>,
+    /// Probability that an image gets a jitter (else ev = 0), [0, 1]; default 1.
+    pub exposure_jitter_probability: f64,
+    written: toml::Table,
+}
+
+/// How radiance becomes an image.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SensorModel {
     /// Image value (8-bit units, 0..=255) = 255 * exposure * radiance, before the
     /// post-processing steps.
-    pub exposure: f64,
+    Linear { exposure: f64 },
+    /// The EMVA 1288 sensor of a scene's `[sensor]` (same fields, same checks).
+    Emva(crate::scene::config::SensorConfig),
 }
 
 impl Default for SensorSettings {
     fn default() -> Self {
-        SensorSettings { exposure: 1.0 }
+        SensorSettings {
+            model: SensorModel::Linear { exposure: 1.0 },
+            exposure_jitter_ev: None,
+            exposure_jitter_probability: 1.0,
+            written: toml::Table::new(),
+        }
+    }
+}
+
+impl From<SensorSettings> for toml::Table {
+    fn from(s: SensorSettings) -> toml::Table {
+        s.written
+    }
+}
+
+impl TryFrom<toml::Table> for SensorSettings {
+    type Error = String;
+    fn try_from(t: toml::Table) -> std::result::Result<Self, String> {
+        let number = |key: &str, v: &toml::Value| match v {
+            toml::Value::Float(f) => Ok(*f),
+            toml::Value::Integer(i) => Ok(*i as f64),
+            other => Err(format!("sensor.{key} = {other}: must be a number")),
+        };
+        let mut rest = t.clone();
+        let jitter = match rest.remove("exposure_jitter_ev") {
+            None => None,
+            Some(toml::Value::Array(a)) if a.len() == 2 => Some([
+                number("exposure_jitter_ev[0]", &a[0])?,
+                number("exposure_jitter_ev[1]", &a[1])?,
+            ]),
+            Some(other) => {
+                return Err(format!(
+                    "sensor.exposure_jitter_ev = {other}: must be [min, max] in EV stops"
+                ));
+            }
+        };
+        let probability = match rest.remove("exposure_jitter_probability") {
+            None => 1.0,
+            Some(v) => number("exposure_jitter_probability", &v)?,
+        };
+        let model = match rest.get("exposure") {
+            Some(v @ (toml::Value::Float(_) | toml::Value::Integer(_))) => {
+                let exposure = number("exposure", v)?;
+                let others: Vec<&str> = rest
+                    .keys()
+                    .map(String::as_str)
+                    .filter(|k| *k != "exposure")
+                    .collect();
+                if !others.is_empty() {
+                    return Err(format!(
+                        "sensor.exposure = {exposure} is the linear model's factor, but {} are fields of the EMVA 1288 sensor: for that sensor write exposure = \"auto\" or {{ ms = <time> }}, for the linear model remove them",
+                        others.join(", ")
+                    ));
+                }
+                SensorModel::Linear { exposure }
+            }
+            None if rest.is_empty() => SensorModel::Linear { exposure: 1.0 },
+            _ => SensorModel::Emva(
+                toml::Value::Table(rest)
+                    .try_into()
+                    .map_err(|e: toml::de::Error| format!("sensor: {}", e.message()))?,
+            ),
+        };
+        Ok(SensorSettings {
+            model,
+            exposure_jitter_ev: jitter,
+            exposure_jitter_probability: probability,
+            written: t,
+        })
     }
 }
 
@@ -513,6 +621,7 @@ impl Job {
         job.origin = origin.to_string();
         job.default_views_only_alone(text);
         job.resolve_measurements();
+        job.read_camera(text, true)?;
         job.validate()?;
         Ok(job)
     }
@@ -527,6 +636,7 @@ impl Job {
         job.origin = origin.to_string();
         job.default_views_only_alone(text);
         job.resolve_measurements();
+        job.read_camera(text, false)?;
         job.check(false)?;
         Ok(job)
     }
@@ -536,8 +646,9 @@ impl Job {
         let strip = |j: &Job| {
             let mut j = j.clone();
             j.postprocess.clear();
-            // Exposure acts on the stored linear radiance: post-processing re-does it.
-            j.sensor.exposure = 1.0;
+            // Exposure and the sensor act on the stored linear radiance: post-processing
+            // re-does them.
+            j.sensor = SensorSettings::default();
             for f in &mut j.finishes {
                 f.exposure = None;
             }
@@ -546,6 +657,80 @@ impl Job {
             toml::to_string(&j).ok()
         };
         strip(self).is_some() && strip(self) == strip(other)
+    }
+
+    /// Reads `[camera]` into `camera_config` with the scene file's own parser and
+    /// checks (`CameraConfig`); with `load_files`, the calibration file (relative to the
+    /// job) is read too. A stored job (a dataset folder's copy) keeps the calibration's
+    /// path unread: its images' intrinsics are in the manifest.
+    fn read_camera(&mut self, text: &str, load_files: bool) -> Result<()> {
+        let Some(table) = &self.camera else {
+            return Ok(());
+        };
+        for key in table.keys() {
+            if !CAMERA_KEYS.contains(&key.as_str()) {
+                let hint = match key.as_str() {
+                    "view" | "look_at" | "matrix" | "opencv" => {
+                        "; poses come from `views`, `plan` and [[pose]]"
+                    }
+                    "exposure" | "gain" => "; the exposure is `[sensor] exposure`",
+                    _ => "",
+                };
+                return Err(self.field(
+                    format!("camera.{key}"),
+                    table[key].to_string(),
+                    &format!(
+                        "not a job camera key: allowed {}{hint}",
+                        CAMERA_KEYS.join(", ")
+                    ),
+                ));
+            }
+        }
+        let parse_err = |message: String| DatasetError::Parse {
+            file: self.origin.clone(),
+            message,
+        };
+        let mut cam: crate::scene::config::CameraConfig = toml::Value::Table(table.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| parse_err(format!("camera: {}", e.message())))?;
+        if let Some(c) = &cam.calibration
+            && c.is_relative()
+        {
+            cam.calibration = Some(self.base_dir.join(c));
+        }
+        if load_files {
+            cam.load_calibration(text)
+                .map_err(|e| parse_err(e.to_string()))?;
+        }
+        self.camera_config = cam;
+        Ok(())
+    }
+
+    /// A scene configuration with the job's camera and sensor (the scene defaults
+    /// otherwise): what the renderer starts from, and what the scene file's checks run
+    /// on.
+    pub fn scene_base(&self) -> crate::scene::config::SceneConfig {
+        crate::scene::config::SceneConfig {
+            camera: self.camera_config.clone(),
+            sensor: match &self.sensor.model {
+                SensorModel::Emva(s) => Some(s.clone()),
+                SensorModel::Linear { .. } => None,
+            },
+            ..Default::default()
+        }
+    }
+
+    /// The camera at the images' resolution (`[render] width, height`; the sensor keeps
+    /// its physical size, so the pixel pitch and a calibration scale with the image).
+    pub fn image_camera(&self) -> std::result::Result<crate::scene::config::CameraConfig, String> {
+        let mut cfg = self.scene_base();
+        cfg.set_resolution(self.render.width as u32, self.render.height as u32)
+            .map_err(|e| {
+                e.to_string()
+                    .replace("--width", "render.width")
+                    .replace("--height", "render.height")
+            })?;
+        Ok(cfg.camera)
     }
 
     fn resolve_measurements(&mut self) {
@@ -637,7 +822,36 @@ impl Job {
         self.int("texture.size_px", self.texture.size_px, 16, 65_536)?;
         self.real("texture.spacing_um", self.texture.spacing_um, 0.01, 1.0e4)?;
         self.int("texture.cache", self.texture.cache, 1, 1024)?;
-        self.real("sensor.exposure", self.sensor.exposure, 0.0, 1.0e9)?;
+        if let SensorModel::Linear { exposure } = self.sensor.model {
+            self.real("sensor.exposure", exposure, 0.0, 1.0e9)?;
+        }
+        if let Some([lo, hi]) = self.sensor.exposure_jitter_ev {
+            self.real("sensor.exposure_jitter_ev[0]", lo, -10.0, 10.0)?;
+            self.real("sensor.exposure_jitter_ev[1]", hi, lo, 10.0)?;
+        }
+        self.real(
+            "sensor.exposure_jitter_probability",
+            self.sensor.exposure_jitter_probability,
+            0.0,
+            1.0,
+        )?;
+        if self.sensor.exposure_jitter_ev.is_none()
+            && self.sensor.exposure_jitter_probability != 1.0
+        {
+            return Err(self.field(
+                "sensor.exposure_jitter_probability",
+                self.sensor.exposure_jitter_probability,
+                "only with sensor.exposure_jitter_ev = [min, max]",
+            ));
+        }
+        // The camera and the EMVA sensor: the scene file's own checks (ranges, the
+        // sensor's need for `camera.f_number`).
+        self.scene_base()
+            .validate()
+            .map_err(|e| DatasetError::Parse {
+                file: self.origin.clone(),
+                message: e.to_string(),
+            })?;
         if let Some(s) = self.defects.sets {
             self.int("defects.sets", s, 1, MAX_INSTANCES)?;
         }

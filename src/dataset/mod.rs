@@ -4,6 +4,7 @@
 //! manifest that `synosis compare` reads. Resumable, shardable, memory-flat.
 //! See docs/dataset.md.
 
+pub mod camera;
 mod error;
 pub mod files;
 pub mod gpu;

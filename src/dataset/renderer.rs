@@ -80,6 +80,10 @@ pub struct ImageRequest<'a> {
     pub view: &'a str,
     /// The free pose when the viewpoint is a `[[pose]]` (then `view` is only its name).
     pub pose: Option<&'a super::job::JobPose>,
+    /// The camera's intrinsics and lens (the job's `[camera]`, `Job::camera_config`) at
+    /// the camera's own resolution; the image is `width` x `height` of it (sensor size
+    /// kept, as `render_config` does). Its pose fields are not used.
+    pub camera: &'a crate::scene::config::CameraConfig,
     /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
     pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,

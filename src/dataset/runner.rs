@@ -11,6 +11,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use super::camera::{CameraRecord, Exposed, expose};
 use super::error::{DatasetError, Result};
 use super::files;
 use super::job::{Job, builtin_variant};
@@ -22,7 +23,7 @@ use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
 use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
-use crate::render::pixels::{Exposure, quantise_units8};
+use crate::render::pixels::quantise_units8;
 use crate::scene::assemble::Placement;
 use crate::scene::{Degenerates, Mesh, face_frames, testbody};
 
@@ -127,7 +128,7 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
 /// The renderer's own checks of each image's settings, run for every view and every
 /// instance's roughness now, so `check` finds what the first image would fail on.
 fn check_render_settings(job: &Job, plan: &Plan) -> Result<()> {
-    let base = crate::scene::config::SceneConfig::default();
+    let base = job.scene_base();
     let r = &job.render;
     let viewpoints = job.viewpoints();
     let mut cases = Vec::new();
@@ -264,6 +265,18 @@ pub struct ManifestEntry {
     pub bounces: u32,
     pub renderer: String,
     pub noise_sigma: Option<f64>,
+    /// The camera's intrinsics and lens at the image's resolution (OpenCV camera matrix
+    /// and distortion; the pose is `viewpoint` / `pose`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraRecord>,
+    /// The random exposure drawn for this image, EV stops (factor 2^ev;
+    /// `[sensor] exposure_jitter_ev`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_ev: Option<f64>,
+    /// The EMVA 1288 sensor's exposure time of this image, ms (after auto exposure, the
+    /// finish's factor and the jitter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_ms: Option<f64>,
     pub defects: Vec<DefectVisibility>,
     /// File name -> content hash.
     pub files: BTreeMap<String, String>,
@@ -461,7 +474,7 @@ fn run_locked(
         .iter()
         .filter(|i| !done.contains_key(&i.index))
         .collect();
-    let mut ctx = Ctx::new(prep);
+    let mut ctx = Ctx::new(prep)?;
     let already = mine.len() - todo.len();
     for item in todo {
         if opts.fail_after == Some(*rendered) {
@@ -654,7 +667,7 @@ pub fn render_one(
             allowed: format!("the job has images 0..{}", prep.plan.items.len()),
         })?;
     std::fs::create_dir_all(out).map_err(|e| DatasetError::io(out, e))?;
-    let mut ctx = Ctx::new(prep);
+    let mut ctx = Ctx::new(prep)?;
     let entry = ctx.render_item(item, out, renderer, textures)?;
     let v = serde_json::to_value(&entry)
         .map_err(|e| DatasetError::io(out, std::io::Error::other(e)))?;
@@ -679,20 +692,24 @@ fn claim_dir(out: &Path, job_text: &str) -> Result<()> {
     }
 }
 
-/// State kept between images: the current instance's mesh and the texture cache.
+/// State kept between images: the current instance's mesh, the texture cache and the
+/// images' camera.
 struct Ctx<'p> {
     prep: &'p Prepared,
     cache: TextureCache,
     mesh: Option<(usize, Arc<Mesh>)>,
+    camera: CameraRecord,
 }
 
 impl<'p> Ctx<'p> {
-    fn new(prep: &'p Prepared) -> Self {
-        Ctx {
+    fn new(prep: &'p Prepared) -> Result<Self> {
+        let camera = image_camera_record(&prep.job)?;
+        Ok(Ctx {
             prep,
             cache: TextureCache::new(prep.job.texture.cache as usize),
             mesh: None,
-        }
+            camera,
+        })
     }
 
     /// The mesh of an instance: the object, with its defect set imprinted if defective.
@@ -773,6 +790,7 @@ impl<'p> Ctx<'p> {
         };
         let req = ImageRequest {
             pose,
+            camera: &job.camera_config,
             mesh: &mesh,
             mesh_key: match inst.defect_set {
                 Some(_) => (1u64 << 32) | item.instance as u64,
@@ -805,7 +823,12 @@ impl<'p> Ctx<'p> {
         let dir = out.join("images").join(item.id());
         std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
         let mut hashes = write_raw(&dir, &img)?;
-        let frame = raw_frame(job, &finish.name, &img);
+        let (frame, exposed) = raw_frame(job, &finish.name, item.seed, &self.camera, &img)
+            .map_err(|message| DatasetError::Render {
+                index: item.index,
+                id: item.id(),
+                message: format!("[sensor]: {message}"),
+            })?;
         let (post_hashes, mut defects, noise_sigma) =
             write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
         if let Some(k) = inst.defect_set {
@@ -839,6 +862,9 @@ impl<'p> Ctx<'p> {
             bounces: req.bounces,
             renderer: renderer.describe(),
             noise_sigma,
+            camera: Some(self.camera.clone()),
+            exposure_ev: exposed.exposure_ev,
+            exposure_ms: exposed.exposure_ms,
             defects,
             files: hashes,
             sizes,
@@ -905,49 +931,77 @@ fn write_raw(dir: &Path, img: &RenderedImage) -> Result<BTreeMap<String, String>
     Ok(m)
 }
 
-/// The exposure model of a finish's images (`[sensor] exposure` times the finish's
-/// `exposure`; the dataset has no gain). An unknown finish name (a folder of another
-/// job) gets the job's exposure alone.
-fn sensor(job: &Job, finish: &str) -> Exposure {
-    let factor = job
-        .finishes
-        .iter()
-        .find(|f| f.name == finish)
-        .map_or(1.0, |f| f.exposure_factor());
-    Exposure::new((job.sensor.exposure * factor) as f32, 1.0)
+/// The camera record of a job's images (the job's camera at `[render] width, height`).
+fn image_camera_record(job: &Job) -> Result<CameraRecord> {
+    let cam = job.image_camera().map_err(|message| DatasetError::Parse {
+        file: job.origin.clone(),
+        message,
+    })?;
+    Ok(CameraRecord::of(&cam))
 }
 
-fn raw_frame(job: &Job, finish: &str, img: &RenderedImage) -> Frame {
-    Frame {
+/// The frame the post-processing starts from: the rendered labels and the sensor's
+/// image (`camera::expose`: the linear model or the EMVA 1288 sensor, the finish's
+/// exposure factor, the image's random exposure).
+fn raw_frame(
+    job: &Job,
+    finish: &str,
+    image_seed: u64,
+    camera: &CameraRecord,
+    img: &RenderedImage,
+) -> std::result::Result<(Frame, Exposed), String> {
+    let mut exposed = expose(job, finish, image_seed, camera, &img.radiance, &img.face)?;
+    let frame = Frame {
         width: img.width as usize,
         height: img.height as usize,
-        image: sensor(job, finish).units8(&img.radiance),
+        image: std::mem::take(&mut exposed.image),
         class: img.class.clone(),
         instance: img.instance.clone(),
         object: img.object.clone(),
-    }
+    };
+    Ok((frame, exposed))
 }
 
-/// Reads the raw files of an image back into a frame (for `postprocess`).
-fn read_raw_frame(job: &Job, finish: &str, dir: &Path) -> Result<Frame> {
+/// Reads the raw files of an image back into a frame (for `postprocess`) and runs the
+/// sensor step on its radiance, as the run did.
+fn read_raw_frame(
+    job: &Job,
+    e: &ManifestEntry,
+    camera: &CameraRecord,
+    dir: &Path,
+) -> Result<(Frame, Exposed)> {
     let (w, h, radiance) = files::read_exr(&dir.join("radiance.exr"))?;
     let (_, _, class) = files::read_gray8(&dir.join("raw_mask.png"))?;
     let (_, _, instance) = files::read_gray16(&dir.join("raw_instances.png"))?;
     let (_, _, object) = files::read_gray8(&dir.join("object.png"))?;
-    if [class.len(), instance.len(), object.len()]
+    let (_, _, face) = files::read_gray8(&dir.join("faces.png"))?;
+    if [class.len(), instance.len(), object.len(), face.len()]
         .iter()
         .any(|&n| n != w * h)
     {
         return Err(DatasetError::layout(dir, "raw files of different sizes"));
     }
-    Ok(Frame {
-        width: w,
-        height: h,
-        image: sensor(job, finish).units8(&radiance),
+    if (camera.width as usize, camera.height as usize) != (w, h) {
+        return Err(DatasetError::layout(
+            dir,
+            format!(
+                "radiance.exr is {w} x {h}, the camera {} x {}",
+                camera.width, camera.height
+            ),
+        ));
+    }
+    let img = RenderedImage {
+        width: w as u32,
+        height: h as u32,
+        radiance,
         class,
         instance,
+        face,
+        coverage: Vec::new(),
         object: object.iter().map(|&o| (o != 0) as u8).collect(),
-    })
+    };
+    raw_frame(job, &e.finish, e.seed, camera, &img)
+        .map_err(|m| DatasetError::layout(dir, format!("[sensor]: {m}")))
 }
 
 /// Names each defect by the spec entry it was drawn from ("big dent", ...).
@@ -1395,13 +1449,25 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
         job = other;
     }
     let mut n = 0;
+    // Folders written before the manifest recorded the camera: the job's camera (the
+    // calibration of a stored job is not read, so only an uncalibrated one).
+    let job_camera = match &job.camera_config.calibration {
+        None => Some(image_camera_record(&job)?),
+        Some(_) => None,
+    };
     for m in shard_manifests(dir)? {
         let entries = read_manifest(&m, false)?;
         let updated: Vec<ManifestEntry> = entries
             .into_par_iter()
             .map(|mut e| -> Result<ManifestEntry> {
                 let idir = dir.join("images").join(&e.id);
-                let frame = read_raw_frame(&job, &e.finish, &idir)?;
+                let camera = e.camera.clone().or_else(|| job_camera.clone()).ok_or_else(|| {
+                    DatasetError::layout(
+                        &idir,
+                        "the manifest line records no camera and the job's calibration is not read from a dataset folder: render the image again",
+                    )
+                })?;
+                let (frame, exposed) = read_raw_frame(&job, &e, &camera, &idir)?;
                 let (hashes, defects, noise) =
                     write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
                 e.files.extend(hashes);
@@ -1420,6 +1486,8 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
                     })
                     .collect();
                 e.noise_sigma = noise;
+                e.exposure_ev = exposed.exposure_ev;
+                e.exposure_ms = exposed.exposure_ms;
                 Ok(e)
             })
             .collect::<Result<_>>()?;

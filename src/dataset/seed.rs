@@ -16,6 +16,10 @@ pub mod tag {
     pub const SPLIT: u64 = 5;
     pub const POST: u64 = 6;
     pub const REGIONS: u64 = 7;
+    /// The per-image random exposure (`[sensor] exposure_jitter_ev`).
+    pub const EXPOSURE: u64 = 8;
+    /// The EMVA 1288 sensor's noise of an image.
+    pub const SENSOR: u64 = 9;
 }
 
 /// SplitMix64 finaliser (Steele et al. 2014): a bijective 64-bit mixer.
