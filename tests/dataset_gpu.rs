@@ -101,6 +101,7 @@ fn face_textures_reach_the_image() {
     let render = |r: &mut GpuRenderer, textures: Vec<FaceTexture>| {
         let req = ImageRequest {
             pose: None,
+            lights: &[],
             mesh: &mesh,
             mesh_key: 1,
             view: "A0",
@@ -191,6 +192,7 @@ rim_width = 0.5
     for view in ["A0", "A20"] {
         let req = ImageRequest {
             pose: None,
+            lights: &[],
             mesh: &mesh,
             mesh_key: 1,
             view,

@@ -80,6 +80,8 @@ pub struct ImageRequest<'a> {
     pub view: &'a str,
     /// The free pose when the viewpoint is a `[[pose]]` (then `view` is only its name).
     pub pose: Option<&'a super::job::JobPose>,
+    /// The job's `[[light]]` entries (checked); empty: the default ring on the camera.
+    pub lights: &'a [crate::scene::lights::LightEntry],
     /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
     pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,
