@@ -59,7 +59,8 @@ pub struct LightEntry {
     /// Pose: the direction the light points (any length > 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub direction: Option<[f64; 3]>,
-    /// Pose: up (with `position_mm`); default +Z.
+    /// Pose: up (with `position_mm`); default +Z (+Y when `direction` is within 2.6
+    /// degrees of the Z axis).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub up: Option<[f64; 3]>,
     /// Emitted radiance of an area light, W sr^-1 m^-2, [0, 1e6]; default 1.
@@ -544,9 +545,15 @@ impl LightEntry {
                 format!("{d:?}: each component finite, in [-1e6, 1e6]"),
             ));
         }
+        // Default up: +Z, or +Y for a light pointing (nearly) straight up or down.
+        let dv = DVec3::from(d);
+        let default_up = if dv.length() > 0.0 && dv.normalize().z.abs() > 0.999 {
+            [0.0, 1.0, 0.0]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
         let (position, forward, up) =
-            look_frame(p, DVec3::from(d), self.up.unwrap_or([0.0, 0.0, 1.0]))
-                .map_err(|m| err("position_mm", m))?;
+            look_frame(p, dv, self.up.unwrap_or(default_up)).map_err(|m| err("position_mm", m))?;
         Ok(LightMount::Free {
             position,
             forward,
@@ -880,7 +887,7 @@ mod tests {
                 "give one",
             ),
             (
-                "kind = \"spot\"\nposition_mm = [0, 0, 1]\ndirection = [0, 0, 1]",
+                "kind = \"spot\"\nposition_mm = [0, 0, 1]\ndirection = [1, 0, 0]\nup = [2, 0, 0]",
                 "light[3].position_mm",
                 "parallel",
             ),
