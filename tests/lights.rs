@@ -331,3 +331,57 @@ fn bad_lights_are_refused_by_name() {
         assert!(e.contains(want), "{text}: {e}");
     }
 }
+
+/// A dataset job's `[[light]]` entries replace the default ring: an explicit ring on the
+/// camera renders the same bytes as none, a bar next to it changes the image, and a bad
+/// entry is refused when the job is read, naming the field.
+#[test]
+fn job_lights_replace_the_default_ring() {
+    use synosis::dataset::gpu::GpuRenderer;
+    use synosis::dataset::{self, RunOptions, Shard};
+    let base = "seed = 5\nviews = [\"A0\"]\n[render]\nwidth = 32\nheight = 24\nspp = 2\nbounces = 2\n\
+        [material]\nalpha = [0.2, 0.3]\n[texture]\nsize_px = 80\nspacing_um = 400.0\ncache = 1\n\
+        [[object]]\nname = \"testbody-b\"\nmesh = \"testbody-b\"\ndefective = 0\ndefect_free = 1\n\
+        [[finish]]\nname = \"sandblasted-2.5bar\"\nkind = \"sandblasted\"\ntextures = 1\n\
+        exemplar = { pressure_bar = 2.5 }\n";
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let mut r = GpuRenderer::new(synosis::trace::AccelChoice::Auto, true).unwrap();
+    let mut run = |text: &str| {
+        let prep = dataset::prepare_text(text, "lights", scenes).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("ds");
+        let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+        let opts = RunOptions {
+            shard: Shard { index: 0, count: 1 },
+            fail_after: None,
+            progress: None,
+        };
+        assert_eq!(
+            dataset::run(&prep, &out, &mut r, &mut textures, opts)
+                .unwrap()
+                .rendered,
+            1
+        );
+        std::fs::read(out.join("images/000000/radiance.exr")).unwrap()
+    };
+    let ring = "[[light]]\nkind = \"ring\"\non_camera = true\n";
+    let bar = "[[light]]\nkind = \"bar\"\nposition_mm = [60, 0, 120]\ndirection = [-0.5, 0, -1]\nradiance = 2.0\n";
+    let none = run(base);
+    assert!(
+        run(&format!("{base}{ring}")) == none,
+        "explicit ring != default"
+    );
+    assert!(
+        run(&format!("{base}{ring}{bar}")) != none,
+        "the bar changed nothing"
+    );
+    let bad = format!("{base}[[light]]\nkind = \"spot\"\non_camera = true\nhalf_angle_deg = 100\n");
+    let e = dataset::prepare_text(&bad, "lights", scenes)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("light[0].half_angle_deg") && e.contains("(0, 90]"),
+        "{e}"
+    );
+}
