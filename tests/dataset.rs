@@ -1493,6 +1493,25 @@ fn realism_report_summarises_a_dataset_folder() {
         }
         let pixels: u64 = r.histogram.iter().sum();
         assert!(pixels > 0 && r.p01_p99.0 <= r.p01_p99.1);
+        // Per spec entry: the counts add up to the per-class ones.
+        let by_kind: usize = r.kinds.values().map(|k| k.1).sum();
+        assert_eq!(by_kind, r.kept(1).1 + r.kept(2).1);
     }
+    // Every defect is named by the spec entry of its instance in the defect set.
+    let mut named = 0;
+    for e in &entries {
+        let Some(k) = e.defect_set else { continue };
+        for d in &e.defects {
+            let want = f.prep.defect_sets[k]
+                .defects
+                .iter()
+                .find(|x| x.instance == d.instance)
+                .map(|x| x.name.clone());
+            assert!(want.is_some(), "instance {} not in set {k}", d.instance);
+            assert_eq!(d.kind, want);
+            named += 1;
+        }
+    }
+    assert!(named > 0, "the fixture has no visible defect");
     assert!(html.contains("<svg") && !html.contains("src=\"http"));
 }

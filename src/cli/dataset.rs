@@ -276,20 +276,27 @@ fn run_job(a: RunArgs) -> Result<()> {
 }
 
 fn print_report(reports: &[dataset::report::FinishReport], out: &std::path::Path) {
-    println!("finish\timages\tgrey_p1\tgrey_p99\trho_peak_db\tdents_kept\tscratches_kept");
+    println!(
+        "finish\timages\tgrey_p1\tgrey_p99\trho_peak_db\tdents_kept\tscratches_kept\tkept_by_spec_entry"
+    );
     for r in reports {
         let mut db: Vec<f64> = r.texture.iter().map(|t| t.1.peak_over_floor_db).collect();
         db.sort_by(f64::total_cmp);
         let (dk, dn) = r.kept(1);
         let (sk, sn) = r.kept(2);
         println!(
-            "{}\t{}\t{}\t{}\t{}\t{dk}/{dn}\t{sk}/{sn}",
+            "{}\t{}\t{}\t{}\t{}\t{dk}/{dn}\t{sk}/{sn}\t{}",
             r.name,
             r.images,
             r.p01_p99.0,
             r.p01_p99.1,
             db.get(db.len() / 2)
-                .map_or("-".into(), |d| format!("{d:.1}"))
+                .map_or("-".into(), |d| format!("{d:.1}")),
+            r.kinds
+                .iter()
+                .map(|(k, (kept, all))| format!("{k} {kept}/{all}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     eprintln!("report: {}", out.join("report.html").display());

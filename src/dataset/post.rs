@@ -190,6 +190,10 @@ pub struct DefectVisibility {
     /// image if there is no filter step).
     pub visibility: f64,
     pub kept: bool,
+    /// The defect spec entry it was drawn from ("big dent", ...; docs/defects.md), filled
+    /// in by the dataset runner from the instance's defect set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
 }
 
 /// The result of the post-processing of one image.
@@ -280,6 +284,7 @@ pub fn apply(steps: &[PostStep], texture_type: &str, seed: u64, mut f: Frame) ->
             pixels,
             visibility: vis.get(&instance).copied().unwrap_or(0.0),
             kept: kept.contains(&instance),
+            kind: None,
         })
         .collect();
     PostResult {

@@ -50,6 +50,8 @@ pub struct FinishReport {
     pub texture: Vec<(usize, TextureVisibility)>,
     /// Per defect: class, visibility, kept.
     pub defects: Vec<(u8, f64, bool)>,
+    /// Per defect spec entry ("big dent", ...; from the manifest): kept, all.
+    pub kinds: BTreeMap<String, (usize, usize)>,
     /// Example PNGs (relative to the report).
     pub examples: Vec<String>,
 }
@@ -247,6 +249,11 @@ pub fn write_report(
         }
         for d in &e.defects {
             fr.defects.push((d.class, d.visibility, d.kept));
+            if let Some(k) = &d.kind {
+                let e = fr.kinds.entry(k.clone()).or_insert((0, 0));
+                e.0 += d.kept as usize;
+                e.1 += 1;
+            }
         }
         let finish = job.finishes.iter().find(|f| f.name == e.finish);
         if let Some(f) = finish.filter(|f| f.kind == FinishKind::Milled)
@@ -445,7 +452,8 @@ fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> S
         let (sk, sn) = r.kept(2);
         let _ = write!(
             s,
-            "<p>Kept by the filter: dents {dk} of {dn}, scratches {sk} of {sn}.</p>"
+            "<p>Kept by the filter: dents {dk} of {dn}, scratches {sk} of {sn}{}.</p>",
+            kinds_text(&r.kinds)
         );
         if !r.texture.is_empty() {
             s.push_str("<p>Milling marks (spectral peak at rho over the noise floor): ");
@@ -461,6 +469,18 @@ fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> S
     }
     s.push_str("</body></html>\n");
     s
+}
+
+/// "; by spec entry: big dent 2/3, ..." (empty without spec entries).
+pub fn kinds_text(kinds: &BTreeMap<String, (usize, usize)>) -> String {
+    if kinds.is_empty() {
+        return String::new();
+    }
+    let parts: Vec<String> = kinds
+        .iter()
+        .map(|(k, (kept, all))| format!("{k} {kept}/{all}"))
+        .collect();
+    format!("; by spec entry: {}", parts.join(", "))
 }
 
 fn median_db(t: &[(usize, TextureVisibility)]) -> Option<f64> {

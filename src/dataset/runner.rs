@@ -806,8 +806,11 @@ impl<'p> Ctx<'p> {
         std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
         let mut hashes = write_raw(&dir, &img)?;
         let frame = raw_frame(job, &finish.name, &img);
-        let (post_hashes, defects, noise_sigma) =
+        let (post_hashes, mut defects, noise_sigma) =
             write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
+        if let Some(k) = inst.defect_set {
+            name_defects(&mut defects, &self.prep.defect_sets[k]);
+        }
         hashes.extend(post_hashes);
         let sizes = file_sizes(&dir, &hashes)?;
         stage("write", &mut stages);
@@ -945,6 +948,17 @@ fn read_raw_frame(job: &Job, finish: &str, dir: &Path) -> Result<Frame> {
         instance,
         object: object.iter().map(|&o| (o != 0) as u8).collect(),
     })
+}
+
+/// Names each defect by the spec entry it was drawn from ("big dent", ...).
+fn name_defects(defects: &mut [DefectVisibility], set: &DefectSet) {
+    for d in defects {
+        d.kind = set
+            .defects
+            .iter()
+            .find(|x| x.instance == d.instance)
+            .map(|x| x.name.clone());
+    }
 }
 
 type PostFiles = (BTreeMap<String, String>, Vec<DefectVisibility>, Option<f64>);
@@ -1392,7 +1406,19 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
                     write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
                 e.files.extend(hashes);
                 e.sizes = file_sizes(&idir, &e.files)?;
-                e.defects = defects;
+                // The raw labels are unchanged, so each instance keeps its spec entry.
+                let kinds: BTreeMap<u16, Option<String>> = e
+                    .defects
+                    .iter()
+                    .map(|d| (d.instance, d.kind.clone()))
+                    .collect();
+                e.defects = defects
+                    .into_iter()
+                    .map(|mut d| {
+                        d.kind = kinds.get(&d.instance).cloned().flatten();
+                        d
+                    })
+                    .collect();
                 e.noise_sigma = noise;
                 Ok(e)
             })
