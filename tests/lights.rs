@@ -60,12 +60,12 @@ fn render_plate(cfg: &SceneConfig, backend: Backend) -> (RenderScene, Radiance) 
 }
 
 /// Irradiance (W m^-2) at p (normal +z) from every light of `l`: the area lights'
-/// triangles integrated with 36 nodes each (cos_p cos_l / r^2, radiance per light), the
+/// triangles integrated with 144 nodes each (cos_p cos_l / r^2, radiance per light), the
 /// spots in closed form I(theta) cos_p / r^2 with r in metres (smoothstep soft edge).
 fn irradiance(l: &LightGeometry, p: Vec3) -> f64 {
     let p = p.as_dvec3();
     let mut e = 0.0f64;
-    let n = 6;
+    let n = 12;
     for &(t, _) in &l.lights {
         let [a, b, c] = l.corners(t).map(|v| v.as_dvec3());
         let nl = (b - a).cross(c - a);
@@ -174,7 +174,7 @@ fn each_kind_matches_the_irradiance_integral() {
         ),
     ];
     for (i, (name, lights)) in kinds.iter().enumerate() {
-        let cfg = plate_cfg(lights, 16, 12, 4096);
+        let cfg = plate_cfg(lights, 16, 12, 2048);
         for backend in common::BACKENDS {
             let (s, img) = render_plate(&cfg, backend);
             let mut worst = 0.0f64;
