@@ -1,9 +1,10 @@
 #version 460
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
-// object, Lambertian table, ring light (emissive triangles of a tessellated torus).
-// Next-event estimation on the light (uniform by area over its triangles) combined with
-// BSDF sampling by MIS (power heuristic), Russian roulette after 3 bounces. Each
+// object, Lambertian table, lights (area lights as emissive triangles: ring, bar, panel,
+// dome; spot lights as points, common/lights.glsl). Next-event estimation (a light by
+// power, then a point on it) combined with BSDF sampling by MIS (power heuristic; spot
+// lights by NEE only), Russian roulette after 3 bounces. Each
 // dispatch adds `sample_count` samples per pixel into `accum` (a running sum).
 // See docs/rendering.md for every approximation and its parameter.
 #include "common/trace.glsl"
@@ -18,13 +19,11 @@ layout(local_size_x = TILE, local_size_y = TILE) in;
 layout(std430, set = 0, binding = PT_GEOMETRY) readonly buffer Geometry { Tri tris[]; };
 layout(std430, set = 0, binding = PT_MATERIALS) readonly buffer Materials { uint mats[]; };
 layout(std430, set = 0, binding = PT_LIGHT_GEOMETRY) readonly buffer LightGeometry { Tri light_tris[]; };
-// x: triangle index, y: float bits of the inclusive area CDF.
+// Per light triangle: x: its emitter, y: float bits of the inclusive area CDF within it.
 layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 lights[]; };
 #include "common/ggx.glsl"
 
-// See PathParams in src/gpu_interface.in. Ring layout for facing sampling: first light
-// triangle, ring segments, triangles per segment (all light triangles are one ring,
-// segment by segment).
+// See PathParams in src/gpu_interface.in.
 layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams prm; };
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
@@ -55,17 +54,8 @@ float power_heuristic(float a, float b) {
     return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
 }
 
-uint pick_light(float u) {
-    uint lo = 0u, hi = prm.light_count - 1u;
-    while (lo < hi) {
-        uint mid = (lo + hi) / 2u;
-        if (u < uintBitsToFloat(lights[mid].y)) hi = mid; else lo = mid + 1u;
-    }
-    return lights[lo].x;
-}
-
-// Triangles are numbered object (with the table) first, then the view's light: the
-// object's live in `tris`, the light's in `light_tris` (a second trace level).
+// Triangles are numbered object (with the table) first, then the view's lights: the
+// object's live in `tris`, the lights' in `light_tris` (a second trace level).
 // (Member by member: the two blocks' Tri are distinct SPIR-V types.)
 Tri fetch_tri(uint prim) {
     Tri t;
@@ -86,58 +76,7 @@ uint mat_word(uint prim) {
 
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 
-// Facing sampling: selection weight of one light triangle seen from x (normal n), an
-// estimate of its contribution from the centroid: area cos_l cos_x / d^2, each cosine
-// floored at 0.05 so every triangle keeps a non-zero probability (unbiased even where
-// the centroid faces away but part of the triangle does not).
-float light_weight(uint tri, vec3 x, vec3 n) {
-    Tri lt = fetch_tri(tri);
-    vec3 nl = tri_normal(lt);
-    float area2 = length(nl);
-    vec3 to = (lt.a.xyz + lt.b.xyz + lt.c.xyz) * (1.0 / 3.0) - x;
-    float d2 = max(dot(to, to), 1e-12);
-    vec3 w = to * inversesqrt(d2);
-    float cl = max(-dot(nl, w) / area2, 0.0) + 0.05;
-    float cx = max(dot(n, w), 0.0) + 0.05;
-    return area2 * cl * cx / d2;
-}
-
-// Sum of the weights of one ring segment's triangles.
-float segment_weight(uint seg, vec3 x, vec3 n) {
-    uint base = prm.light_first + seg * prm.segment_tris;
-    float sum = 0.0;
-    for (uint k = 0u; k < prm.segment_tris; k++) sum += light_weight(base + k, x, n);
-    return sum;
-}
-
-// Area pdf of a point on light triangle `tri`, as chosen from x with normal n.
-float light_area_pdf(uint tri, vec3 x, vec3 n) {
-    if (prm.light_sampling != LIGHT_FACING) return 1.0 / prm.light_area;
-    // Only ring triangles can be chosen; anything else has pdf 0 (and no out-of-range reads).
-    if (tri < prm.light_first) return 0.0;
-    uint seg = (tri - prm.light_first) / prm.segment_tris;
-    if (seg >= prm.ring_segments) return 0.0;
-    float wsum = segment_weight(seg, x, n);
-    float area = 0.5 * length(tri_normal(fetch_tri(tri)));
-    return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(prm.ring_segments) * area) : 0.0;
-}
-
-// Picks a light triangle with u in [0, 1): uniform by area from the CDF, or (facing) a
-// ring segment uniformly (they have equal areas) and within it a triangle by weight.
-uint choose_light(float u, vec3 x, vec3 n) {
-    if (prm.light_sampling != LIGHT_FACING) return pick_light(u);
-    float fs = u * float(prm.ring_segments);
-    uint seg = min(uint(fs), prm.ring_segments - 1u);
-    float target = clamp(fs - float(seg), 0.0, 1.0) * segment_weight(seg, x, n);
-    uint base = prm.light_first + seg * prm.segment_tris;
-    float acc = 0.0;
-    uint k = 0u;
-    for (; k + 1u < prm.segment_tris; k++) {
-        acc += light_weight(base + k, x, n);
-        if (acc > target) break;
-    }
-    return base + k;
-}
+#include "common/lights.glsl"
 
 // Steepest slope a map may give (85 degrees): keeps the shading normal off the tangent
 // plane so its frame stays well conditioned.
@@ -276,7 +215,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                     float pdf_light = h.t * h.t / cos_l * light_area_pdf(h.prim, o, prev_n);
                     w = power_heuristic(prev_pdf, pdf_light);
                 }
-                L += T * prm.radiance * w;
+                L += T * tri_radiance(h.prim) * w;
             }
             break;
         }
@@ -298,30 +237,50 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
         vec3 origin = offset_ray(p, ng);
 
-        // Next-event estimation on the ring light.
-        if (prm.light_count > 0u && prm.radiance > 0.0) {
-            uint li = choose_light(sample_1d(rng), origin, ng);
-            Tri lt = fetch_tri(li);
+        // Next-event estimation: a light by power, then a point on it (a spot light is
+        // a point: no MIS, it cannot be hit).
+        if (prm.emitter_count > 0u) {
+            float ue = sample_1d(rng);
+            uint ei = choose_emitter(ue);
+            LightBlock e = emitters[ei];
             vec2 ul = sample_2d(rng);
-            float su = sqrt(ul.x);
-            float u2 = ul.y;
-            vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
-            vec3 to = q - origin;
-            float dist2 = dot(to, to);
-            float dist = sqrt(dist2);
-            vec3 wi_w = to / dist;
-            float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
-            vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
-            if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
-                float pdf_b;
-                float f = surface_eval(mat, cond, wo, wi, pdf_b);
-                if (f > 0.0) {
-                    Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
-                    bool visible = s.prim == NO_HIT
-                        || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
-                    if (visible) {
-                        float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
-                        L += T * f * prm.radiance * power_heuristic(pdf_light, pdf_b) / pdf_light;
+            if (e.shape.z == LIGHT_SPOT) {
+                vec3 to = e.pos.xyz - origin;
+                float dist2 = dot(to, to);
+                float dist = sqrt(dist2);
+                vec3 wi_w = to / dist;
+                float I = spot_intensity(e, -wi_w);
+                vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
+                    float pdf_b;
+                    float f = surface_eval(mat, cond, wo, wi, pdf_b);
+                    if (f > 0.0 && trace(origin, wi_w, 0.0, dist).prim == NO_HIT) {
+                        L += T * f * I / (dist2 * emitter_pdf(ei));
+                    }
+                }
+            } else {
+                uint li = choose_light(e, ue, origin, ng);
+                Tri lt = fetch_tri(li);
+                float su = sqrt(ul.x);
+                float u2 = ul.y;
+                vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
+                vec3 to = q - origin;
+                float dist2 = dot(to, to);
+                float dist = sqrt(dist2);
+                vec3 wi_w = to / dist;
+                float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
+                vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
+                    float pdf_b;
+                    float f = surface_eval(mat, cond, wo, wi, pdf_b);
+                    if (f > 0.0) {
+                        Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
+                        bool visible = s.prim == NO_HIT
+                            || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
+                        if (visible) {
+                            float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
+                            L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
+                        }
                     }
                 }
             }

@@ -93,8 +93,10 @@ mod tests {
         assert_eq!(std::mem::size_of::<PathPush>(), 32);
         // Push constants: 128 bytes is all Vulkan guarantees.
         assert_eq!(std::mem::size_of::<ImagePush>(), 128);
-        assert_eq!(PathTraceBinding::COUNT, 11);
+        assert_eq!(PathTraceBinding::COUNT, 12);
         assert_eq!(PathTraceBinding::LightGeometry.at(2), 12);
+        assert_eq!(PathTraceBinding::LightList.at(2), 13);
+        assert_eq!(std::mem::size_of::<LightBlock>(), 64);
     }
 
     #[test]
@@ -104,6 +106,8 @@ mod tests {
             "struct PathParams",
             "struct CameraBlock",
             "#define PT_LIGHT_GEOMETRY",
+            "struct LightBlock",
+            "#define PT_LIGHT_LIST",
         ] {
             assert!(glsl.contains(name), "{name} missing from interface.glsl");
         }

@@ -102,6 +102,7 @@ fn face_textures_reach_the_image() {
         let req = ImageRequest {
             pose: None,
             camera: &Default::default(),
+            lights: &[],
             mesh: &mesh,
             mesh_key: 1,
             view: "A0",
@@ -193,6 +194,7 @@ rim_width = 0.5
         let req = ImageRequest {
             pose: None,
             camera: &Default::default(),
+            lights: &[],
             mesh: &mesh,
             mesh_key: 1,
             view,

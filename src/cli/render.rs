@@ -180,14 +180,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     })?;
     let mean = img.data.iter().map(|&v| v as f64).sum::<f64>() / img.data.len().max(1) as f64;
     println!(
-        "{} view {}: {}x{}, {} spp ({:?} sampler, {:?} light sampling, texture {}), {} bounces, {} in {:.1} s (GPU {:.0} ms), mean radiance {:.4}",
+        "{} view {}: {}x{}, {} spp ({:?} sampler, {}, texture {}), {} bounces, {} in {:.1} s (GPU {:.0} ms), mean radiance {:.4}",
         a.scene.display(),
         cfg.camera.describe_pose(),
         w,
         h,
         cfg.render.spp,
         cfg.render.sampler,
-        cfg.light.sampling,
+        cfg.light.describe(),
         cfg.texture.kind,
         cfg.render.max_bounces,
         backend.name(),

@@ -120,6 +120,11 @@ impl ImageRenderer for GpuRenderer {
             req.seed,
             req.alpha,
         )?;
+        let mut cfg = cfg;
+        if !req.lights.is_empty() {
+            // The job's lights replace the default ring.
+            cfg.light.list = Some(req.lights.to_vec());
+        }
         let pose = cfg.camera.pose().map_err(|e| e.to_string())?;
         let profiler = Profiler::new();
         let tracer = &self.tracer;

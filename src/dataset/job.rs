@@ -54,6 +54,9 @@ pub struct Job {
     pub objects: Vec<Object>,
     #[serde(default)]
     pub split: SplitRatios,
+    /// The lights (`[[light]]`, as in a scene file); empty: the ring on the camera.
+    #[serde(default, rename = "light", skip_serializing_if = "Vec::is_empty")]
+    pub lights: Vec<crate::scene::lights::LightEntry>,
     /// Post-processing steps, applied in this order.
     #[serde(default, rename = "postprocess")]
     pub postprocess: Vec<PostStep>,
@@ -795,6 +798,10 @@ impl Job {
         self.int("render.spp", r.spp, 1, 1 << 16)?;
         self.int("render.bounces", r.bounces, 1, 64)?;
         self.check_viewpoints()?;
+        crate::scene::lights::resolve_all(&self.lights).map_err(|e| DatasetError::Parse {
+            file: self.origin.clone(),
+            message: e.to_string(),
+        })?;
         if let (Some(r), Some(a)) = (self.material.roughness, self.material.alpha) {
             return Err(self.field(
                 "material.roughness / material.alpha",

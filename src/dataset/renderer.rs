@@ -84,6 +84,8 @@ pub struct ImageRequest<'a> {
     /// the camera's own resolution; the image is `width` x `height` of it (sensor size
     /// kept, as `render_config` does). Its pose fields are not used.
     pub camera: &'a crate::scene::config::CameraConfig,
+    /// The job's `[[light]]` entries (checked); empty: the default ring on the camera.
+    pub lights: &'a [crate::scene::lights::LightEntry],
     /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
     pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,

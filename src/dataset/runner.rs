@@ -791,6 +791,7 @@ impl<'p> Ctx<'p> {
         let req = ImageRequest {
             pose,
             camera: &job.camera_config,
+            lights: &job.lights,
             mesh: &mesh,
             mesh_key: match inst.defect_set {
                 Some(_) => (1u64 << 32) | item.instance as u64,

@@ -7,12 +7,16 @@ use ash::vk;
 use super::RenderError;
 use super::annotate::{Annotation, AnnotationTargets, record_annotate};
 use super::gpu_scene::GpuScene;
-use super::settings::{LightSampling, RenderSettings};
+use super::settings::RenderSettings;
 use super::tracer::PathTracer;
-use crate::gpu_interface::{PathParams, PathPush, PathTraceBinding as B, TILE, TileBlock};
+use crate::gpu_interface::{
+    LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, PathParams, PathPush,
+    PathTraceBinding as B, TILE, TileBlock,
+};
 use crate::graph::Graph;
 use crate::scene::Camera;
-use crate::scene::assemble::{LightGeometry, ViewSetup};
+use crate::scene::assemble::{EmitterSampling, LightGeometry, ViewSetup};
+use crate::scene::lights::MM2_PER_M2;
 use crate::trace::{TraceScene, scramble_multiplier};
 use crate::vk::{Buffer, MemoryKind, Profiler};
 
@@ -77,6 +81,7 @@ pub struct View<'s> {
     scene: &'s GpuScene,
     trace: TraceScene,
     lights: Buffer,
+    emitters: Buffer,
     params: Buffer,
     accum: Buffer,
     annotation: Option<(AnnotationTargets, u32)>,
@@ -104,15 +109,24 @@ impl<'s> View<'s> {
         let light = &setup.light;
         let trace = TraceScene::layered(ctx, scene.geometry.clone(), &light.tris, profiler)?;
         let light_words: Vec<[u32; 2]> = if light.lights.is_empty() {
-            vec![[0, 0]] // a binding may not be empty; light_count = 0 keeps it unread
+            vec![[0, 0]] // a binding may not be empty; no light triangle: never read
         } else {
             light
                 .lights
                 .iter()
-                .map(|&(t, c)| [t, c.to_bits()])
+                .zip(&light.owner)
+                .map(|(&(_, c), &e)| [e, c.to_bits()])
                 .collect()
         };
-        let params = path_params(scene, cam, light, settings);
+        let mut blocks = light_blocks(light);
+        let emitting = light.selection().iter().any(|&p| p > 0.0);
+        if blocks.is_empty() {
+            blocks.push(LightBlock::default()); // a binding may not be empty; never read
+        }
+        let mut params = path_params(scene, cam, light, settings);
+        if !emitting {
+            params.emitter_count = 0;
+        }
         let annotation = match annotate_grid {
             Some(grid) => Some((AnnotationTargets::new(ctx, width, height)?, grid)),
             None => None,
@@ -123,6 +137,7 @@ impl<'s> View<'s> {
             scene,
             trace,
             lights: Buffer::from_slice(ctx, "lights", &light_words, storage)?,
+            emitters: Buffer::from_slice(ctx, "light list", &blocks, storage)?,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
             annotation,
@@ -148,6 +163,7 @@ impl<'s> View<'s> {
         let ltris = g.import(self.trace.second_shade_tris());
         let mats = g.import(&self.scene.materials);
         let lts = g.import(&self.lights);
+        let ems = g.import(&self.emitters);
         let en = g.import(&tracer.energy);
         let pr = g.import(&self.params);
         let mut acc = g.import(&self.accum);
@@ -195,6 +211,7 @@ impl<'s> View<'s> {
                 .read(B::Slopes1.at(off), &mb)
                 .read(B::Slopes2.at(off), &mc)
                 .read(B::LightGeometry.at(off), &ltris)
+                .read(B::LightList.at(off), &ems)
                 .push(&push)
                 .submit();
         }
@@ -224,7 +241,6 @@ fn path_params(
         n: m.ior_n,
         k: m.ior_k,
     };
-    let one_ring = matches!(light.ring_segments, [a, t] if a > 0 && t > 0 && a * t == light.lights.len() as u32);
     PathParams {
         cam: camera_block(cam),
         width: cam.width,
@@ -238,18 +254,57 @@ fn path_params(
         comp: m.energy_compensation as u32,
         light_count: light.lights.len() as u32,
         sample_gen: s.sampler as u32,
-        // Not one ring of equal segments: uniform by area.
-        light_sampling: if one_ring {
-            light.sampling as u32
-        } else {
-            LightSampling::Uniform as u32
-        },
+        emitter_count: light.emitters.len() as u32,
         table_albedo: scene.table_albedo,
-        radiance: light.radiance,
-        light_area: light.area,
         light_first: scene.triangle_count,
-        ring_segments: light.ring_segments[0],
-        segment_tris: light.ring_segments[1],
         ..Default::default()
     }
+}
+
+/// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,
+/// `View::new` turns next-event estimation off (as it always was for zero radiance).
+fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
+    let sel = light.selection();
+    // Inclusive CDF; from the last light that can be chosen on, exactly 1.
+    let last = sel.iter().rposition(|&p| p > 0.0).unwrap_or(0);
+    let mut acc = 0.0f64;
+    light
+        .emitters
+        .iter()
+        .zip(&sel)
+        .enumerate()
+        .map(|(i, (e, &p))| {
+            acc += p;
+            let cdf = if i >= last { 1.0 } else { acc as f32 };
+            let (kind, segments) = match e.sampling {
+                EmitterSampling::Uniform => (LIGHT_UNIFORM, 0),
+                EmitterSampling::Facing([segments, per]) if segments * per == e.tri_count => {
+                    (LIGHT_FACING, segments)
+                }
+                // Not one ring of equal segments: uniform by area.
+                EmitterSampling::Facing(_) => (LIGHT_UNIFORM, 0),
+                EmitterSampling::Spot { .. } => (LIGHT_SPOT, 0),
+            };
+            let (pos, dir, emit_x) = match e.sampling {
+                EmitterSampling::Spot {
+                    position,
+                    axis,
+                    intensity_w_sr,
+                    cos_edge,
+                    cos_inner,
+                } => (
+                    position.extend(cos_edge).into(),
+                    axis.extend(cos_inner).into(),
+                    (intensity_w_sr as f64 * MM2_PER_M2) as f32,
+                ),
+                _ => ([0.0; 4], [0.0; 4], e.radiance),
+            };
+            LightBlock {
+                pos,
+                dir,
+                emit: [emit_x, e.area, 0.0, cdf],
+                shape: [e.first_tri, e.tri_count, kind, segments],
+            }
+        })
+        .collect()
 }

@@ -7,11 +7,12 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use super::camera::{Camera, ring_light};
+use super::camera::Camera;
 use super::config::{
     CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, Pose, SceneConfig,
     TableConfig, TextureConfig, View,
 };
+use super::lights::{LightShape, LightSpec};
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
 use super::regions::{RegionTolerance, planar_regions, region_per_triangle};
 use super::testbody::{FaceFrame, face_frames};
@@ -309,40 +310,120 @@ impl Stage {
     }
 }
 
-/// The emissive triangles of a view (the ring light around the camera), numbered after
-/// the stage's triangles.
+/// The lights of a view: the area lights' emissive triangles (all lights' in one soup,
+/// light by light), numbered after the stage's triangles, and one [`Emitter`] per light.
 #[derive(Clone, Debug)]
 pub struct LightGeometry {
     pub tris: TriangleSoup,
     /// Index of the first light triangle in the scene (= the stage's triangle count).
     pub first: u32,
-    /// (scene triangle index, inclusive area CDF) of each light triangle.
+    /// (scene triangle index, inclusive area CDF within its emitter) of each light
+    /// triangle.
     pub lights: Vec<(u32, f32)>,
-    /// Total emitting area, mm^2.
+    /// The emitter of each light triangle (index into `emitters`).
+    pub owner: Vec<u32>,
+    /// The lights, in scene order.
+    pub emitters: Vec<Emitter>,
+}
+
+/// How next-event estimation samples one light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EmitterSampling {
+    /// A triangle by area.
+    Uniform,
+    /// A ring: a segment uniformly, then a triangle of it by the "facing" weight;
+    /// [segments, triangles per segment].
+    Facing([u32; 2]),
+    /// A point light (no triangles): position, unit axis, intensity (W sr^-1), cosines
+    /// of the cone edge and of the inner edge of its soft falloff.
+    Spot {
+        position: Vec3,
+        axis: Vec3,
+        intensity_w_sr: f32,
+        cos_edge: f32,
+        cos_inner: f32,
+    },
+}
+
+/// One light of a view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Emitter {
+    /// Its triangles: `first_tri .. first_tri + tri_count`, counted in the light soup.
+    pub first_tri: u32,
+    pub tri_count: u32,
+    /// Emitting area, mm^2 (0 for the spot).
     pub area: f32,
-    /// Ring layout: [segments, triangles per segment], in order (facing sampling).
-    pub ring_segments: [u32; 2],
-    /// Emitted radiance (the scene's unit).
+    /// Radiance, W sr^-1 m^-2 (area lights).
     pub radiance: f32,
-    pub sampling: LightSampling,
+    /// Power, W (choosing among lights: `LightSpec::power_w`).
+    pub power_w: f64,
+    pub sampling: EmitterSampling,
 }
 
 impl LightGeometry {
     /// The ring light of `light` mounted on `camera` (axis along its view direction).
     pub fn ring(camera: &Camera, light: &LightConfig, first: u32) -> LightGeometry {
-        let (positions, triangles) = ring_light(camera.eye, camera.forward, light);
-        let mut lights = Vec::with_capacity(triangles.len());
-        let mut area = 0.0f64;
-        for (k, t) in triangles.iter().enumerate() {
-            let [a, b, c] = t.map(|i| positions[i as usize].as_dvec3());
-            area += 0.5 * (b - a).cross(c - a).length();
-            lights.push((first + k as u32, area as f32));
-        }
-        for l in &mut lights {
-            l.1 /= area as f32;
-        }
-        if let Some(last) = lights.last_mut() {
-            last.1 = 1.0;
+        LightGeometry::build(camera, &[LightSpec::legacy_ring(light)], first)
+    }
+
+    /// The lights `specs` for `camera` (lights on the camera follow it), their
+    /// triangles numbered from `first`.
+    pub fn build(camera: &Camera, specs: &[LightSpec], first: u32) -> LightGeometry {
+        let mut positions: Vec<Vec3> = Vec::new();
+        let mut triangles: Vec<[u32; 3]> = Vec::new();
+        let mut lights = Vec::new();
+        let mut owner = Vec::new();
+        let mut emitters = Vec::with_capacity(specs.len());
+        for (e, spec) in specs.iter().enumerate() {
+            let (pos, tris) = spec.triangles(camera);
+            let base = positions.len() as u32;
+            let first_tri = triangles.len() as u32;
+            // Area CDF as the single ring light always had it: f64 sums, then f32
+            // divided by the f32 total, the last exactly 1.
+            let start = lights.len();
+            let mut area = 0.0f64;
+            for (k, t) in tris.iter().enumerate() {
+                let [a, b, c] = t.map(|i| pos[i as usize].as_dvec3());
+                area += 0.5 * (b - a).cross(c - a).length();
+                lights.push((first + first_tri + k as u32, area as f32));
+            }
+            for l in &mut lights[start..] {
+                l.1 /= area as f32;
+            }
+            if let Some(last) = lights[start..].last_mut() {
+                last.1 = 1.0;
+            }
+            owner.extend(std::iter::repeat_n(e as u32, tris.len()));
+            let sampling = match &spec.shape {
+                LightShape::Ring(r) if r.sampling == LightSampling::Facing => {
+                    EmitterSampling::Facing([r.segments_major, 2 * r.segments_minor])
+                }
+                LightShape::Spot {
+                    intensity_w_sr,
+                    half_angle_deg,
+                    falloff_deg,
+                } => {
+                    let f = spec.frame(camera);
+                    EmitterSampling::Spot {
+                        position: f.position.as_vec3(),
+                        axis: f.forward.as_vec3(),
+                        intensity_w_sr: *intensity_w_sr,
+                        cos_edge: half_angle_deg.to_radians().cos(),
+                        cos_inner: (half_angle_deg - falloff_deg).to_radians().cos(),
+                    }
+                }
+                _ => EmitterSampling::Uniform,
+            };
+            emitters.push(Emitter {
+                first_tri,
+                tri_count: tris.len() as u32,
+                area: area as f32,
+                radiance: spec.radiance,
+                power_w: spec.power_w(area),
+                sampling,
+            });
+            positions.extend(pos);
+            triangles.extend(tris.iter().map(|t| t.map(|i| i + base)));
         }
         LightGeometry {
             tris: TriangleSoup {
@@ -351,16 +432,29 @@ impl LightGeometry {
             },
             first,
             lights,
-            area: area as f32,
-            ring_segments: [light.segments_major, 2 * light.segments_minor],
-            radiance: light.radiance,
-            sampling: light.sampling,
+            owner,
+            emitters,
         }
+    }
+
+    /// Probability with which next-event estimation chooses each emitter: proportional
+    /// to its power (docs/rendering.md, "Lights"); all zero when no light emits.
+    pub fn selection(&self) -> Vec<f64> {
+        let total: f64 = self.emitters.iter().map(|e| e.power_w).sum();
+        self.emitters
+            .iter()
+            .map(|e| if total > 0.0 { e.power_w / total } else { 0.0 })
+            .collect()
     }
 
     /// Corners of scene triangle `t` (a light triangle).
     pub fn corners(&self, t: u32) -> [Vec3; 3] {
         self.tris.triangles[(t - self.first) as usize].map(|i| self.tris.positions[i as usize])
+    }
+
+    /// Radiance of scene triangle `t` (a light triangle).
+    pub fn radiance_of(&self, t: u32) -> f32 {
+        self.emitters[self.owner[(t - self.first) as usize] as usize].radiance
     }
 }
 
@@ -387,7 +481,7 @@ impl ViewSetup {
             .find(|f| f.face == view.face)
             .ok_or(AssembleError::NoFace(face_name(view.face)))?;
         let camera = Camera::for_view(frame, view, camera);
-        let light = LightGeometry::ring(&camera, light, first_light);
+        let light = LightGeometry::build(&camera, &light.specs()?, first_light);
         Ok(ViewSetup { camera, light })
     }
 }
@@ -407,7 +501,7 @@ impl ViewSetup {
         }
         let camera =
             Camera::for_pose(face_frames, pose, camera).expect("a free pose needs no face frame");
-        let light = LightGeometry::ring(&camera, light, first_light);
+        let light = LightGeometry::build(&camera, &light.specs()?, first_light);
         Ok(ViewSetup { camera, light })
     }
 }

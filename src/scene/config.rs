@@ -29,6 +29,13 @@ pub enum ConfigError {
         field: &'static str,
         message: String,
     },
+    /// A `[[light]]` entry (index from 0) has a bad field.
+    #[error("light[{index}].{field}: {message}")]
+    Light {
+        index: usize,
+        field: &'static str,
+        message: String,
+    },
     #[error(transparent)]
     Calibration(#[from] crate::scene::calibration::CalibrationError),
 }
@@ -40,6 +47,9 @@ pub struct SceneConfig {
     pub object: ObjectConfig,
     pub material: MaterialConfig,
     pub table: TableConfig,
+    /// `[light]` (one ring on the camera, the old form) or `[[light]]` entries (kept in
+    /// `light.list`); [`LightConfig::specs`] gives the checked lights.
+    #[serde(deserialize_with = "light_section")]
     pub light: LightConfig,
     pub camera: CameraConfig,
     pub render: RenderConfig,
@@ -175,8 +185,9 @@ impl Default for TableConfig {
     }
 }
 
-/// The ring light: a diffusely emitting torus centred on the camera, axis = view axis.
-#[derive(Clone, Debug, Deserialize)]
+/// The ring light: a diffusely emitting torus centred on the camera, axis = view axis
+/// (`[light]`); or, with `list`, the scene's `[[light]]` entries.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LightConfig {
     /// Distance from the torus centre to the tube centre, mm, (0, 10000].
@@ -190,10 +201,66 @@ pub struct LightConfig {
     pub segments_minor: u32,
     /// Next-event estimation: "facing" (default) or "uniform" (docs/rendering.md).
     pub sampling: LightSampling,
+    /// The `[[light]]` entries when the file has a list instead of `[light]`; then the
+    /// fields above are unused. `Some(empty)`: no lights.
+    #[serde(skip)]
+    pub list: Option<Vec<crate::scene::lights::LightEntry>>,
+}
+
+impl LightConfig {
+    /// The lights in words, for logs: "Facing light sampling" for `[light]` (as always),
+    /// else the kinds of the `[[light]]` entries.
+    pub fn describe(&self) -> String {
+        match &self.list {
+            None => format!("{:?} light sampling", self.sampling),
+            Some(list) => {
+                let kinds: Vec<&str> = list.iter().map(|e| e.kind.name()).collect();
+                format!("lights [{}]", kinds.join(", "))
+            }
+        }
+    }
+
+    /// The scene's lights, checked: the `[[light]]` entries, else the `[light]` ring on
+    /// the camera.
+    pub fn specs(&self) -> Result<Vec<crate::scene::lights::LightSpec>, ConfigError> {
+        use crate::scene::lights::{LightSpec, resolve_all};
+        match &self.list {
+            Some(list) => resolve_all(list),
+            None => Ok(vec![LightSpec::legacy_ring(self)]),
+        }
+    }
+}
+
+/// `light` as a table (`[light]`, the ring on the camera) or an array of tables
+/// (`[[light]]`, kept in `LightConfig::list`); errors name the entry.
+fn light_section<'de, D: serde::Deserializer<'de>>(d: D) -> Result<LightConfig, D::Error> {
+    use serde::de::Error;
+    match toml::Value::deserialize(d)? {
+        toml::Value::Array(items) => {
+            let mut list = Vec::with_capacity(items.len());
+            for (i, v) in items.into_iter().enumerate() {
+                list.push(
+                    v.try_into()
+                        .map_err(|e| D::Error::custom(format!("light[{i}]: {e}")))?,
+                );
+            }
+            Ok(LightConfig {
+                list: Some(list),
+                ..LightConfig::default()
+            })
+        }
+        v @ toml::Value::Table(_) => v
+            .try_into()
+            .map_err(|e| D::Error::custom(format!("light: {e}"))),
+        other => Err(D::Error::custom(format!(
+            "light: a table `[light]` or a list `[[light]]`, not {}",
+            other.type_str()
+        ))),
+    }
 }
 
 /// How the path tracer picks points on the ring light (ids match path_trace.comp).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LightSampling {
     /// Uniform by area over all triangles of the tessellated torus.
@@ -213,6 +280,7 @@ impl Default for LightConfig {
             segments_major: 96,
             segments_minor: 16,
             sampling: LightSampling::Facing,
+            list: None,
         }
     }
 }
@@ -1139,6 +1207,7 @@ impl SceneConfig {
             "[8, 1024]",
         )?;
         range_u("light.segments_minor", l.segments_minor, 4, 256, "[4, 256]")?;
+        l.specs()?;
         let c = &self.camera;
         range_u("camera.width", c.width, 1, 16384, "[1, 16384]")?;
         range_u("camera.height", c.height, 1, 16384, "[1, 16384]")?;

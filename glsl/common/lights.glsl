@@ -1,0 +1,118 @@
+// The scene's lights for path_trace.comp (docs/rendering.md, "Lights"). Included after
+// the Params, Lights and LightGeometry buffers and fetch_tri / tri_normal.
+//
+// `emitters[e]` (LightBlock, src/gpu_interface.in) describes light e: its triangles
+// (shape.x: first light triangle, counted from prm.light_first; shape.y: how many),
+// shape.z its sampling (LIGHT_UNIFORM: by area; LIGHT_FACING: ring segments, shape.w of
+// them; LIGHT_SPOT: a point light, no triangles), emit.x its radiance (area light) or
+// intensity times 1e6 mm^2/m^2 (spot), emit.y its area (mm^2), emit.w the inclusive CDF
+// of choosing it (by power); pos / dir the spot's position and axis, w: cos of the cone
+// edge and of the inner edge of the soft falloff. `lights[k]`: emitter of light triangle
+// k (x) and the inclusive area CDF of k within its emitter (y, float bits).
+
+layout(std430, set = 0, binding = PT_LIGHT_LIST) readonly buffer LightList { LightBlock emitters[]; };
+
+// Probability of choosing emitter e.
+float emitter_pdf(uint e) {
+    float lo = e == 0u ? 0.0 : emitters[e - 1u].emit.w;
+    return emitters[e].emit.w - lo;
+}
+
+// Chooses an emitter with u in [0, 1) by the CDF and rescales u to [0, 1) within the
+// chosen interval (one light: u unchanged).
+uint choose_emitter(inout float u) {
+    uint e = 0u;
+    while (e + 1u < prm.emitter_count && !(u < emitters[e].emit.w)) e++;
+    float lo = e == 0u ? 0.0 : emitters[e - 1u].emit.w;
+    float p = emitters[e].emit.w - lo;
+    if (p > 0.0) u = clamp((u - lo) / p, 0.0, 0.99999994);
+    return e;
+}
+
+// Emitter of scene triangle `tri` (a light triangle).
+uint emitter_of(uint tri) { return lights[tri - prm.light_first].x; }
+
+// Radiance of light triangle `tri`.
+float tri_radiance(uint tri) { return emitters[emitter_of(tri)].emit.x; }
+
+// A triangle of area light e by area, from its CDF.
+uint pick_area_tri(LightBlock e, float u) {
+    uint lo = e.shape.x, hi = e.shape.x + e.shape.y - 1u;
+    while (lo < hi) {
+        uint mid = (lo + hi) / 2u;
+        if (u < uintBitsToFloat(lights[mid].y)) hi = mid; else lo = mid + 1u;
+    }
+    return prm.light_first + lo;
+}
+
+// Facing sampling: selection weight of one light triangle seen from x (normal n), an
+// estimate of its contribution from the centroid: area cos_l cos_x / d^2, each cosine
+// floored at 0.05 so every triangle keeps a non-zero probability (unbiased even where
+// the centroid faces away but part of the triangle does not).
+float light_weight(uint tri, vec3 x, vec3 n) {
+    Tri lt = fetch_tri(tri);
+    vec3 nl = tri_normal(lt);
+    float area2 = length(nl);
+    vec3 to = (lt.a.xyz + lt.b.xyz + lt.c.xyz) * (1.0 / 3.0) - x;
+    float d2 = max(dot(to, to), 1e-12);
+    vec3 w = to * inversesqrt(d2);
+    float cl = max(-dot(nl, w) / area2, 0.0) + 0.05;
+    float cx = max(dot(n, w), 0.0) + 0.05;
+    return area2 * cl * cx / d2;
+}
+
+// Sum of the weights of one ring segment's triangles (segment_tris each, from `base`).
+float segment_weight(uint base, uint segment_tris, vec3 x, vec3 n) {
+    float sum = 0.0;
+    for (uint k = 0u; k < segment_tris; k++) sum += light_weight(base + k, x, n);
+    return sum;
+}
+
+// Area pdf of a point on light triangle `tri`, as chosen from x with normal n: the
+// probability of choosing its emitter times the area pdf within it.
+float light_area_pdf(uint tri, vec3 x, vec3 n) {
+    if (tri < prm.light_first) return 0.0;
+    uint ei = emitter_of(tri);
+    LightBlock e = emitters[ei];
+    float sel = emitter_pdf(ei);
+    if (e.shape.z != LIGHT_FACING) return (1.0 / e.emit.y) * sel;
+    uint segments = e.shape.w;
+    uint segment_tris = e.shape.y / segments;
+    uint k = tri - prm.light_first - e.shape.x;
+    uint seg = k / segment_tris;
+    if (seg >= segments) return 0.0;
+    uint base = prm.light_first + e.shape.x + seg * segment_tris;
+    float wsum = segment_weight(base, segment_tris, x, n);
+    float area = 0.5 * length(tri_normal(fetch_tri(tri)));
+    return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(segments) * area) * sel : 0.0;
+}
+
+// Picks a triangle of area light e with u in [0, 1): by area from its CDF, or (facing) a
+// ring segment uniformly (they have equal areas) and within it a triangle by weight.
+uint choose_light(LightBlock e, float u, vec3 x, vec3 n) {
+    if (e.shape.z != LIGHT_FACING) return pick_area_tri(e, u);
+    uint segments = e.shape.w;
+    uint segment_tris = e.shape.y / segments;
+    float fs = u * float(segments);
+    uint seg = min(uint(fs), segments - 1u);
+    uint base = prm.light_first + e.shape.x + seg * segment_tris;
+    float target = clamp(fs - float(seg), 0.0, 1.0) * segment_weight(base, segment_tris, x, n);
+    float acc = 0.0;
+    uint k = 0u;
+    for (; k + 1u < segment_tris; k++) {
+        acc += light_weight(base + k, x, n);
+        if (acc > target) break;
+    }
+    return base + k;
+}
+
+// Intensity of spot e towards direction w (unit, from the light), times 1e6 mm^2/m^2:
+// full inside the inner cone, zero beyond the edge, smoothstep between.
+float spot_intensity(LightBlock e, vec3 w) {
+    float c = dot(w, e.dir.xyz);
+    float c_edge = e.pos.w, c_inner = e.dir.w;
+    if (c >= c_inner) return e.emit.x;
+    if (c <= c_edge) return 0.0;
+    float t = (c - c_edge) / (c_inner - c_edge);
+    return e.emit.x * t * t * (3.0 - 2.0 * t);
+}
