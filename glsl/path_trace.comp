@@ -1,7 +1,7 @@
 #version 460
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
-// object, Lambertian table, ring light (emissive triangles of a tessellated torus).
+// object (materials per region: common/material.glsl), Lambertian table, ring light (emissive triangles of a tessellated torus).
 // Next-event estimation on the light (uniform by area over its triangles) combined with
 // BSDF sampling by MIS (power heuristic), Russian roulette after 3 bounces. Each
 // dispatch adds `sample_count` samples per pixel into `accum` (a running sum).
@@ -28,6 +28,7 @@ layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 ligh
 layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams prm; };
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
+#include "common/material.glsl"
 
 // Slope maps, one header per slot: slot 0 (table, light) never has a map, slot r + 1 is
 // planar region r of the object; see src/render/slope.rs. MapHeader: origin (xyz map
@@ -221,26 +222,6 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
-// f * cos and pdf of the surface at a hit, in the local frame (normal +z).
-float surface_eval(uint mat, Conductor c, vec3 wo, vec3 wi, out float pdf) {
-    if (mat == MAT_TABLE) {
-        pdf = wi.z > 0.0 ? wi.z / PI : 0.0;
-        return wi.z > 0.0 && wo.z > 0.0 ? prm.table_albedo / PI * wi.z : 0.0;
-    }
-    pdf = conductor_pdf(c, wo, wi);
-    return conductor_eval_cos(c, wo, wi);
-}
-
-bool surface_sample(uint mat, Conductor c, vec3 wo, vec3 u, out vec3 wi, out float weight, out float pdf) {
-    if (mat == MAT_TABLE) {
-        wi = cosine_hemisphere(u.y, u.z);
-        pdf = wi.z / PI;
-        weight = prm.table_albedo;
-        return wi.z > 0.0 && wo.z > 0.0;
-    }
-    return conductor_sample(c, wo, u, wi, weight, pdf);
-}
-
 float radiance_sample(uint pixel, uint px, uint py, uint s) {
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec2 jitter = sample_2d(rng);
@@ -281,15 +262,17 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
             break;
         }
         if (depth == prm.max_bounces) break;
+        Surface surf = surface_of(mat, cond);
         // The hit point from the barycentrics is as exact as the triangle itself,
         // unlike o + t d whose error grows with the distance travelled.
         vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
         if (dot(ng, d) > 0.0) ng = -ng;
-        // Shading frame: the slope-mapped normal (conductor with a map), bent
+        // Shading frame: the slope-mapped normal (object material with a map; entries
+        // with finish = "none" have slot 0), bent
         // towards the viewer if needed. Side and visibility tests use ng: directions below
         // the geometric surface are never lit nor continued (no light leaks).
         vec3 ns = ng;
-        if (mat == MAT_CONDUCTOR && slot != 0u && ((word & MAT_LABELLED) != 0u
+        if (mat != MAT_TABLE && slot != 0u && ((word & MAT_LABELLED) != 0u
                 || (map_headers[slot].dims.w & MAP_LABELLED_ONLY) == 0u)) {
             ns = bend_towards_viewer(shading_normal(slot, p, ng), ng, -d);
         }
@@ -314,7 +297,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
             vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
             if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                 float pdf_b;
-                float f = surface_eval(mat, cond, wo, wi, pdf_b);
+                float f = surface_eval(surf, wo, wi, pdf_b);
                 if (f > 0.0) {
                     Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
                     bool visible = s.prim == NO_HIT
@@ -332,7 +315,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         vec3 u = vec3(u_lobe, sample_2d(rng));
         vec3 wi;
         float weight, pdf;
-        if (!surface_sample(mat, cond, wo, u, wi, weight, pdf)) break;
+        if (!surface_sample(surf, wo, u, wi, weight, pdf)) break;
         T *= weight;
         if (!(T > 0.0)) break;
         if (depth >= 3u) {

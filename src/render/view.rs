@@ -147,6 +147,7 @@ impl<'s> View<'s> {
         let geo = g.import(self.trace.shade_tris());
         let ltris = g.import(self.trace.second_shade_tris());
         let mats = g.import(&self.scene.materials);
+        let surf = g.import(&self.scene.surfaces);
         let lts = g.import(&self.lights);
         let en = g.import(&tracer.energy);
         let pr = g.import(&self.params);
@@ -195,6 +196,7 @@ impl<'s> View<'s> {
                 .read(B::Slopes1.at(off), &mb)
                 .read(B::Slopes2.at(off), &mc)
                 .read(B::LightGeometry.at(off), &ltris)
+                .read(B::Surfaces.at(off), &surf)
                 .push(&push)
                 .submit();
         }
