@@ -685,7 +685,7 @@ mod tests {
         for (sel, want) in [
             ("\"region:999\"", "allowed region:0 to region:"),
             (
-                "{ normal = [0, 0, -1], tolerance_deg = 0 }",
+                "{ normal = [0.3, 0.7, 0.1], tolerance_deg = 0 }",
                 "chooses no triangle",
             ),
             ("{ gltf_material = \"Steel\" }", "not a glTF file"),
