@@ -1,10 +1,11 @@
 #version 460
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
-// object, Lambertian table, lights (area lights as emissive triangles: ring, bar, panel,
-// dome; spot lights as points, common/lights.glsl). Next-event estimation (a light by
-// power, then a point on it) combined with BSDF sampling by MIS (power heuristic; spot
-// lights by NEE only), Russian roulette after 3 bounces. Each
+// object (materials per region: common/material.glsl), Lambertian table, lights (area
+// lights as emissive triangles: ring, bar, panel, dome; spot lights as points,
+// common/lights.glsl). Next-event estimation (a light by power, then a point on it)
+// combined with BSDF sampling by MIS (power heuristic; spot lights by NEE only), Russian
+// roulette after 3 bounces. Each
 // dispatch adds `sample_count` samples per pixel into `accum` (a running sum).
 // See docs/rendering.md for every approximation and its parameter.
 #include "common/trace.glsl"
@@ -27,6 +28,7 @@ layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 ligh
 layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams prm; };
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
+#include "common/material.glsl"
 
 // Slope maps, one header per slot: slot 0 (table, light) never has a map, slot r + 1 is
 // planar region r of the object; see src/render/slope.rs. MapHeader: origin (xyz map
@@ -160,26 +162,6 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
-// f * cos and pdf of the surface at a hit, in the local frame (normal +z).
-float surface_eval(uint mat, Conductor c, vec3 wo, vec3 wi, out float pdf) {
-    if (mat == MAT_TABLE) {
-        pdf = wi.z > 0.0 ? wi.z / PI : 0.0;
-        return wi.z > 0.0 && wo.z > 0.0 ? prm.table_albedo / PI * wi.z : 0.0;
-    }
-    pdf = conductor_pdf(c, wo, wi);
-    return conductor_eval_cos(c, wo, wi);
-}
-
-bool surface_sample(uint mat, Conductor c, vec3 wo, vec3 u, out vec3 wi, out float weight, out float pdf) {
-    if (mat == MAT_TABLE) {
-        wi = cosine_hemisphere(u.y, u.z);
-        pdf = wi.z / PI;
-        weight = prm.table_albedo;
-        return wi.z > 0.0 && wo.z > 0.0;
-    }
-    return conductor_sample(c, wo, u, wi, weight, pdf);
-}
-
 float radiance_sample(uint pixel, uint px, uint py, uint s) {
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec2 jitter = sample_2d(rng);
@@ -220,15 +202,17 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
             break;
         }
         if (depth == prm.max_bounces) break;
+        Surface surf = surface_of(mat, cond);
         // The hit point from the barycentrics is as exact as the triangle itself,
         // unlike o + t d whose error grows with the distance travelled.
         vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
         if (dot(ng, d) > 0.0) ng = -ng;
-        // Shading frame: the slope-mapped normal (conductor with a map), bent
+        // Shading frame: the slope-mapped normal (object material with a map; entries
+        // with finish = "none" have slot 0), bent
         // towards the viewer if needed. Side and visibility tests use ng: directions below
         // the geometric surface are never lit nor continued (no light leaks).
         vec3 ns = ng;
-        if (mat == MAT_CONDUCTOR && slot != 0u && ((word & MAT_LABELLED) != 0u
+        if (mat != MAT_TABLE && slot != 0u && ((word & MAT_LABELLED) != 0u
                 || (map_headers[slot].dims.w & MAP_LABELLED_ONLY) == 0u)) {
             ns = bend_towards_viewer(shading_normal(slot, p, ng), ng, -d);
         }
@@ -253,7 +237,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                 vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
                 if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                     float pdf_b;
-                    float f = surface_eval(mat, cond, wo, wi, pdf_b);
+                    float f = surface_eval(surf, wo, wi, pdf_b);
                     if (f > 0.0 && trace(origin, wi_w, 0.0, dist).prim == NO_HIT) {
                         L += T * f * I / (dist2 * emitter_pdf(ei));
                     }
@@ -272,7 +256,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                 vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
                 if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                     float pdf_b;
-                    float f = surface_eval(mat, cond, wo, wi, pdf_b);
+                    float f = surface_eval(surf, wo, wi, pdf_b);
                     if (f > 0.0) {
                         Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
                         bool visible = s.prim == NO_HIT
@@ -280,6 +264,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                         if (visible) {
                             float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
                             L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
+                        }
                         }
                     }
                 }
@@ -291,7 +276,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         vec3 u = vec3(u_lobe, sample_2d(rng));
         vec3 wi;
         float weight, pdf;
-        if (!surface_sample(mat, cond, wo, u, wi, weight, pdf)) break;
+        if (!surface_sample(surf, wo, u, wi, weight, pdf)) break;
         T *= weight;
         if (!(T > 0.0)) break;
         if (depth >= 3u) {

@@ -10,7 +10,6 @@ use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::{RenderScene, load_object, path_trace};
 use synosis::scene::config::SceneConfig;
 use synosis::scene::{Camera, Variant, face_frames, testbody};
-use synosis::trace::Backend;
 
 fn cfg(camera: &str) -> SceneConfig {
     let text = format!("[camera]\n{camera}\n[render]\nspp = 4\nbatch_spp = 4\nseed = 9\n");
@@ -59,15 +58,18 @@ fn look_at_and_matrix_equal_to_a_view_give_the_same_image() {
         let scene = RenderScene::assemble(&object, c).unwrap();
         cams.push(scene.view.camera);
         if k < 2 {
-            let img =
-                path_trace(&ctx, &scene, c, Backend::RayQuery, &tables, None, |_| {}).unwrap();
-            assert!(img.data.iter().any(|&v| v > 0.0));
-            imgs.push(img.data);
+            // Both backends: [view RQ, view SW, look_at RQ, look_at SW].
+            for backend in common::BACKENDS {
+                let img = path_trace(&ctx, &scene, c, backend, &tables, None, |_| {}).unwrap();
+                assert!(img.data.iter().any(|&v| v > 0.0));
+                imgs.push(img.data);
+            }
         }
     }
     common::assert_clean(&ctx);
     assert_eq!(cams[0], cams[1], "look_at gives the view's camera exactly");
-    assert!(imgs[0] == imgs[1], "and the identical image");
+    assert!(imgs[0] == imgs[2], "and the identical image (ray query)");
+    assert!(imgs[1] == imgs[3], "and the identical image (software)");
     let (a, m): (Camera, Camera) = (cams[0], cams[2]);
     for (x, y) in [
         (a.eye, m.eye),

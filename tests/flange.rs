@@ -51,47 +51,50 @@ fn flange_job_renders_plans_and_poses_and_resumes() {
         .replace("spp = 4", "spp = 1")
         .replace("defect_free = 2", "defect_free = 1");
     let prep = dataset::prepare_text(&text, "flange", scenes()).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("ds");
-    let mut r = GpuRenderer::new(AccelChoice::Auto, true).unwrap();
-    let mut run = || {
-        let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
-        let opts = RunOptions {
-            shard: Shard { index: 0, count: 1 },
-            fail_after: None,
-            progress: None,
+    // Both trace backends.
+    for accel in [AccelChoice::RayQuery, AccelChoice::Software] {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join(format!("ds-{accel:?}"));
+        let mut r = GpuRenderer::new(accel, true).unwrap();
+        let mut run = || {
+            let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+            let opts = RunOptions {
+                shard: Shard { index: 0, count: 1 },
+                fail_after: None,
+                progress: None,
+            };
+            dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap()
         };
-        dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap()
-    };
-    assert_eq!(run().rendered, 4);
-    let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
-    let names: Vec<&str> = entries.iter().map(|e| e.viewpoint.as_str()).collect();
-    assert_eq!(names, ["A20", "A20@120", "A20@240", "overview"]);
-    assert!(entries[..3].iter().all(|e| e.pose.is_none()));
-    assert!(
-        entries[3]
-            .pose
-            .as_ref()
-            .is_some_and(|p| p.look_at.is_some())
-    );
-    // Face A (the top annulus) is seen in every image; the ring views differ.
-    for e in &entries {
-        let faces = image::open(out.join(&e.faces)).unwrap().to_luma8();
+        assert_eq!(run().rendered, 4);
+        let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
+        let names: Vec<&str> = entries.iter().map(|e| e.viewpoint.as_str()).collect();
+        assert_eq!(names, ["A20", "A20@120", "A20@240", "overview"]);
+        assert!(entries[..3].iter().all(|e| e.pose.is_none()));
         assert!(
-            faces.pixels().any(|p| p.0[0] == 1),
-            "{}: face A visible",
-            e.viewpoint
+            entries[3]
+                .pose
+                .as_ref()
+                .is_some_and(|p| p.look_at.is_some())
         );
+        // Face A (the top annulus) is seen in every image; the ring views differ.
+        for e in &entries {
+            let faces = image::open(out.join(&e.faces)).unwrap().to_luma8();
+            assert!(
+                faces.pixels().any(|p| p.0[0] == 1),
+                "{}: face A visible",
+                e.viewpoint
+            );
+        }
+        let img = |k: usize| {
+            std::fs::read(
+                out.join("images")
+                    .join(format!("{k:06}"))
+                    .join("radiance.exr"),
+            )
+            .unwrap()
+        };
+        assert!(img(0) != img(1));
+        // Resumable: a second run renders nothing.
+        assert_eq!(run().rendered, 0);
     }
-    let img = |k: usize| {
-        std::fs::read(
-            out.join("images")
-                .join(format!("{k:06}"))
-                .join("radiance.exr"),
-        )
-        .unwrap()
-    };
-    assert!(img(0) != img(1));
-    // Resumable: a second run renders nothing.
-    assert_eq!(run().rendered, 0);
 }

@@ -52,7 +52,7 @@ fn plate_cfg(materials: &str) -> SceneConfig {
     let text = format!(
         "[camera]\nlook_at = {{ eye = [0, 0, 100], target = [0, 0, 10], up = [0, 1, 0] }}\n\
          [material]\nenergy_compensation = false\n{materials}\
-         [render]\nspp = 2048\nbatch_spp = 512\nmax_bounces = 1\nseed = 5\n"
+         [render]\nspp = 512\nbatch_spp = 512\nmax_bounces = 1\nseed = 5\n"
     );
     let mut cfg = SceneConfig::parse(&text).expect("plate scene");
     cfg.set_resolution(16, 12).expect("size");
@@ -296,4 +296,36 @@ fn gltf_material_names_select_triangles() {
         "{e}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// scenes/flange-materials.toml: face A takes entry 0, the 96 chamfer facets entry 1
+/// (without a finish), every other triangle `[material]`.
+#[test]
+fn flange_materials_scene_selects_face_and_chamfer() {
+    use synosis::gpu_interface::MAT_REGION_FIRST;
+    use synosis::render::path_trace::MAT_CONDUCTOR;
+    let path = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/flange-materials.toml"
+    ));
+    let cfg = SceneConfig::load(path).expect("scene");
+    let object = load_object(&cfg).expect("object");
+    let scene = RenderScene::assemble(&object, &cfg).expect("scene");
+    let st = &scene.stage;
+    assert_eq!(st.surfaces.len(), 2);
+    assert_eq!(st.surfaces[1].alpha, 0.02);
+    let mut chamfer_regions = std::collections::BTreeSet::new();
+    for t in 0..object.triangles.len() {
+        let n = object.area_normal(t).normalize();
+        let m = st.materials[t];
+        if object.labels[t].face == FACE_A {
+            assert_eq!(m, MAT_REGION_FIRST, "triangle {t} on A");
+        } else if n.z > 0.5 && n.z < 0.9 {
+            assert_eq!(m, MAT_REGION_FIRST + 1, "chamfer triangle {t}");
+            chamfer_regions.insert(st.region_of[t]);
+        } else {
+            assert_eq!(m, MAT_CONDUCTOR, "triangle {t}");
+        }
+    }
+    assert_eq!(chamfer_regions.len(), 96, "the chamfer's facets");
 }

@@ -15,7 +15,6 @@ use synosis::scene::{
     Degenerates, GltfUnitDefault, Mesh, MeshError, MeshUnit, Variant, export_mesh, load_mesh,
     testbody,
 };
-use synosis::trace::Backend;
 
 fn load(path: &Path, unit: Option<MeshUnit>) -> Mesh {
     load_mesh(path, unit, GltfUnitDefault::Spec, Degenerates::Reject)
@@ -277,22 +276,28 @@ fn glb_and_stl_render_the_same_image() {
     let a = regions.iter().find(|r| r.face == 1).unwrap().id;
     let ctx = common::gpu();
     let tables = EnergyTables::compute();
-    let mut images = Vec::new();
-    for file in ["part.glb", "part.stl"] {
-        let text = format!(
-            "[object]\npath = {:?}\nunit = \"mm\"\ninspect = [\"region:{a}\"]\n[camera]\nview = \"A10\"\n[render]\nspp = 4\nbatch_spp = 4\nseed = 5\n",
-            d.join(file)
+    for backend in common::BACKENDS {
+        let mut images = Vec::new();
+        for file in ["part.glb", "part.stl"] {
+            let text = format!(
+                "[object]\npath = {:?}\nunit = \"mm\"\ninspect = [\"region:{a}\"]\n[camera]\nview = \"A10\"\n[render]\nspp = 4\nbatch_spp = 4\nseed = 5\n",
+                d.join(file)
+            );
+            let mut cfg = SceneConfig::parse(&text).expect("scene");
+            cfg.set_resolution(48, 40).unwrap();
+            let object = load_object(&cfg).expect("object");
+            let scene = RenderScene::assemble(&object, &cfg).expect("scene");
+            let img =
+                path_trace(&ctx, &scene, &cfg, backend, &tables, None, |_| {}).expect("render");
+            assert!(img.data.iter().any(|&v| v > 0.0));
+            images.push((scene.view.camera, img.data));
+        }
+        common::assert_clean(&ctx);
+        assert_eq!(images[0].0, images[1].0, "the same camera");
+        assert!(
+            images[0].1 == images[1].1,
+            "{}: the same image",
+            backend.name()
         );
-        let mut cfg = SceneConfig::parse(&text).expect("scene");
-        cfg.set_resolution(48, 40).unwrap();
-        let object = load_object(&cfg).expect("object");
-        let scene = RenderScene::assemble(&object, &cfg).expect("scene");
-        let img = path_trace(&ctx, &scene, &cfg, Backend::RayQuery, &tables, None, |_| {})
-            .expect("render");
-        assert!(img.data.iter().any(|&v| v > 0.0));
-        images.push((scene.view.camera, img.data));
     }
-    common::assert_clean(&ctx);
-    assert_eq!(images[0].0, images[1].0, "the same camera");
-    assert!(images[0].1 == images[1].1, "the same image");
 }

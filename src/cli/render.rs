@@ -103,6 +103,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         );
     }
     let scene = RenderScene::assemble(&object, &cfg)?;
+    print_region_materials(&scene.stage);
     let tables = profiler.cpu("energy tables", EnergyTables::compute);
     let ctx = profiler.cpu("Vulkan init", || {
         Context::new(&ContextOptions {
@@ -201,4 +202,28 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(())
+}
+
+/// On stderr: what each `[[material.region]]` entry got (triangles, material).
+fn print_region_materials(stage: &synosis::scene::assemble::Stage) {
+    use synosis::gpu_interface::MAT_REGION_FIRST;
+    use synosis::scene::materials::SurfaceKind;
+    for (i, m) in stage.surfaces.iter().enumerate() {
+        let id = MAT_REGION_FIRST + i as u32;
+        let n = stage.materials.iter().filter(|&&x| x == id).count();
+        let what = match m.kind {
+            SurfaceKind::Diffuse => format!("diffuse, albedo {}", m.albedo),
+            SurfaceKind::Conductor => format!(
+                "conductor{}, n {} k {}, alpha {}",
+                m.preset.map_or(String::new(), |p| format!(" {}", p.name())),
+                m.ior_n,
+                m.ior_k,
+                m.alpha
+            ),
+        };
+        eprintln!(
+            "material.region entry {i}: {n} triangles, {what}, finish {:?}",
+            m.finish
+        );
+    }
 }

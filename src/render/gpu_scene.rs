@@ -11,9 +11,11 @@ use super::RenderError;
 use super::slope::{self, FaceMap, Placement};
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
-    LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAT_LABELLED, MAT_MAP_SHIFT, MAT_SLOT_MASK,
+    LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAT_LABELLED, MAT_MAP_SHIFT, MAT_REGION_FIRST,
+    MAT_SLOT_MASK, SURFACE_CONDUCTOR, SURFACE_DIFFUSE, SurfaceBlock,
 };
 use crate::scene::assemble::{RegionFrame, Stage, place_maps};
+use crate::scene::materials::{Finish, SurfaceKind, SurfaceMaterial};
 use crate::scene::mesh::{FACE_A, FACE_C};
 use crate::scene::{FaceFrame, TriLabel};
 use crate::trace::TraceGeometry;
@@ -48,6 +50,8 @@ struct MapKey {
 pub struct GpuScene {
     pub(crate) geometry: Arc<TraceGeometry>,
     pub(crate) materials: Buffer,
+    /// The material table (`SurfaceBlock` per `[[material.region]]` entry).
+    pub(crate) surfaces: Buffer,
     pub(crate) labels: Buffer,
     maps: MapBuffers,
     face_frames: Vec<FaceFrame>,
@@ -88,7 +92,17 @@ impl GpuScene {
             .zip(&stage.mesh.labels)
             .enumerate()
             .map(|(t, (&m, l))| {
-                let slot = stage.region_of.get(t).map_or(0, |&r| r.wrapping_add(1));
+                // A material without the finish (`finish = "none"`) gets no slope map.
+                let bare = m >= MAT_REGION_FIRST
+                    && stage
+                        .surfaces
+                        .get((m - MAT_REGION_FIRST) as usize)
+                        .is_none_or(|s| s.finish == Finish::None);
+                let slot = if bare {
+                    0
+                } else {
+                    stage.region_of.get(t).map_or(0, |&r| r.wrapping_add(1))
+                };
                 let labelled = (FACE_A..=FACE_C).contains(&l.face) as u32 * MAT_LABELLED;
                 m | (slot & MAT_SLOT_MASK) << MAT_MAP_SHIFT | labelled
             })
@@ -103,6 +117,12 @@ impl GpuScene {
         Ok(GpuScene {
             geometry,
             materials: Buffer::from_slice(ctx, "materials", &mat_words, storage)?,
+            surfaces: Buffer::from_slice(
+                ctx,
+                "material table",
+                &surface_blocks(&stage.surfaces),
+                storage,
+            )?,
             labels: Buffer::from_slice(ctx, "triangle labels", &labels, storage)?,
             maps,
             face_frames: stage.face_frames.clone(),
@@ -147,6 +167,34 @@ impl GpuScene {
     pub fn built_count() -> usize {
         BUILT.load(Ordering::Relaxed)
     }
+}
+
+/// The shader's material table; one unused entry when there is none (a binding may not
+/// be empty). The Fresnel average of a conductor is computed here, per entry (the
+/// energy tables E, E_avg are for F = 1 and serve every IOR; see energy.rs).
+pub fn surface_blocks(surfaces: &[SurfaceMaterial]) -> Vec<SurfaceBlock> {
+    if surfaces.is_empty() {
+        return vec![SurfaceBlock::default()];
+    }
+    surfaces
+        .iter()
+        .map(|s| SurfaceBlock {
+            kind: match s.kind {
+                SurfaceKind::Conductor => SURFACE_CONDUCTOR,
+                SurfaceKind::Diffuse => SURFACE_DIFFUSE,
+            },
+            alpha: s.alpha,
+            ior_n: s.ior_n,
+            ior_k: s.ior_k,
+            f_avg: super::bsdf::Fresnel::Conductor {
+                n: s.ior_n,
+                k: s.ior_k,
+            }
+            .average(),
+            albedo: s.albedo,
+            ..Default::default()
+        })
+        .collect()
 }
 
 fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {

@@ -162,6 +162,7 @@ impl<'s> View<'s> {
         let geo = g.import(self.trace.shade_tris());
         let ltris = g.import(self.trace.second_shade_tris());
         let mats = g.import(&self.scene.materials);
+        let surf = g.import(&self.scene.surfaces);
         let lts = g.import(&self.lights);
         let ems = g.import(&self.emitters);
         let en = g.import(&tracer.energy);
@@ -212,6 +213,7 @@ impl<'s> View<'s> {
                 .read(B::Slopes2.at(off), &mc)
                 .read(B::LightGeometry.at(off), &ltris)
                 .read(B::LightList.at(off), &ems)
+                .read(B::Surfaces.at(off), &surf)
                 .push(&push)
                 .submit();
         }

@@ -13,11 +13,12 @@ use super::config::{
     TableConfig, TextureConfig, View,
 };
 use super::lights::{LightShape, LightSpec};
+use super::materials::{GltfMaterials, RegionMaterial, SurfaceMaterial};
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
 use super::regions::{RegionTolerance, planar_regions, region_per_triangle};
 use super::testbody::{FaceFrame, face_frames};
 use super::{Mesh, MeshError};
-use crate::gpu_interface::{MAT_CONDUCTOR, MAT_TABLE};
+use crate::gpu_interface::{MAT_CONDUCTOR, MAT_REGION_FIRST, MAT_TABLE};
 use crate::texture::{SlopeMap, TextureError};
 use crate::trace::TriangleSoup;
 
@@ -252,6 +253,9 @@ pub struct Stage {
     pub regions: Vec<RegionFrame>,
     /// Region id of each object triangle (the table's two triangles have none).
     pub region_of: Vec<u32>,
+    /// The `[[material.region]]` entries: triangle material `MAT_REGION_FIRST + i` is
+    /// entry i (`scene::materials`); empty: every object triangle is `[material]`'s.
+    pub surfaces: Vec<SurfaceMaterial>,
 }
 
 impl Stage {
@@ -296,6 +300,7 @@ impl Stage {
             face_frames,
             regions,
             region_of,
+            surfaces: Vec::new(),
         }
     }
 
@@ -307,6 +312,30 @@ impl Stage {
                 *r = u32::MAX;
             }
         }
+    }
+
+    /// Gives the object's triangles the materials `entries` select (the earlier entry
+    /// wins; unselected triangles keep the `[material]` conductor). `gltf`: the glTF
+    /// material of each object triangle, for `gltf_material` selectors. Replaces any
+    /// entries set before.
+    pub fn set_region_materials(
+        &mut self,
+        entries: &[RegionMaterial],
+        gltf: Option<&GltfMaterials>,
+    ) -> Result<(), AssembleError> {
+        let normals: Vec<Vec3> = self.regions.iter().map(|r| r.normal).collect();
+        let per =
+            super::materials::assign(entries, &self.mesh.labels, &normals, &self.region_of, gltf)?;
+        for (t, m) in per.iter().enumerate() {
+            if self.materials[t] == MAT_CONDUCTOR || self.materials[t] >= MAT_REGION_FIRST {
+                self.materials[t] = match m {
+                    Some(i) => MAT_REGION_FIRST + *i as u32,
+                    None => MAT_CONDUCTOR,
+                };
+            }
+        }
+        self.surfaces = entries.iter().map(|e| e.material.clone()).collect();
+        Ok(())
     }
 }
 
@@ -523,6 +552,20 @@ impl RenderScene {
     /// configured view, the ring light and the `[texture]` maps.
     pub fn assemble(object: &Mesh, cfg: &SceneConfig) -> Result<RenderScene, AssembleError> {
         let mut stage = Stage::new(object.clone(), cfg.object.position_mm, &cfg.table);
+        let entries =
+            super::materials::resolve(&cfg.material.region, &cfg.material, cfg.wavelength_nm())?;
+        if !entries.is_empty() {
+            let gltf = if entries.iter().any(|e| {
+                e.selectors
+                    .iter()
+                    .any(|s| matches!(s, super::materials::RegionSelector::Gltf(_)))
+            }) {
+                object_gltf_materials(&cfg.object)?
+            } else {
+                None
+            };
+            stage.set_region_materials(&entries, gltf.as_ref())?;
+        }
         if cfg.texture.defects == DefectSurface::Burnished {
             stage.burnish_defects();
         }
@@ -549,6 +592,24 @@ impl RenderScene {
             placement,
         })
     }
+}
+
+/// The glTF material of each triangle of the configured object when it is a glTF file
+/// (read again from the file: the object's triangles are the file's, in order, since
+/// scene objects refuse degenerate triangles); None for other formats and built-ins.
+fn object_gltf_materials(cfg: &ObjectConfig) -> Result<Option<GltfMaterials>, AssembleError> {
+    use super::mesh_io::{MeshFormat, load_mesh};
+    let path = match cfg.path.as_ref().or(cfg.gltf.as_ref()) {
+        Some(p) if MeshFormat::of(p)? == MeshFormat::Gltf => p,
+        _ => return Ok(None),
+    };
+    let loaded = load_mesh(
+        path,
+        cfg.unit,
+        super::mesh_io::GltfUnitDefault::Spec,
+        super::Degenerates::Reject,
+    )?;
+    Ok(loaded.imported.materials)
 }
 
 /// The maps `[texture]` asks for: none for "flat"; for "test-grooves" one groove map,

@@ -116,6 +116,9 @@ pub struct MaterialConfig {
     pub ior_k: f32,
     /// Kulla-Conty multiple-scattering energy compensation.
     pub energy_compensation: bool,
+    /// Materials for parts of the object (`[[material.region]]`, `scene::materials`);
+    /// triangles no entry selects keep this conductor.
+    pub region: Vec<crate::scene::materials::RegionMaterialConfig>,
 }
 
 impl Default for MaterialConfig {
@@ -126,6 +129,7 @@ impl Default for MaterialConfig {
             ior_n: AL_N_550,
             ior_k: AL_K_550,
             energy_compensation: true,
+            region: Vec::new(),
         }
     }
 }
@@ -139,6 +143,7 @@ struct MaterialRaw {
     ior_n: Option<f32>,
     ior_k: Option<f32>,
     energy_compensation: Option<bool>,
+    region: Vec<crate::scene::materials::RegionMaterialConfig>,
 }
 
 impl TryFrom<MaterialRaw> for MaterialConfig {
@@ -162,6 +167,7 @@ impl TryFrom<MaterialRaw> for MaterialConfig {
             ior_n: r.ior_n.unwrap_or(d.ior_n),
             ior_k: r.ior_k.unwrap_or(d.ior_k),
             energy_compensation: r.energy_compensation.unwrap_or(d.energy_compensation),
+            region: r.region,
         })
     }
 }
@@ -1099,6 +1105,11 @@ impl SceneConfig {
         Ok(cfg)
     }
 
+    /// The camera's wavelength, nm: `sensor.wavelength_nm`, else 550.
+    pub fn wavelength_nm(&self) -> f64 {
+        self.sensor.as_ref().map_or(550.0, |s| s.wavelength_nm)
+    }
+
     /// Checks every field against its documented range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let o = &self.object;
@@ -1169,6 +1180,7 @@ impl SceneConfig {
         range_f("material.alpha", m.alpha, 0.0, 1.0, true, "(0, 1]")?;
         range_f("material.ior_n", m.ior_n, 0.0, 10.0, true, "(0, 10]")?;
         range_f("material.ior_k", m.ior_k, 0.0, 20.0, false, "[0, 20]")?;
+        crate::scene::materials::resolve(&m.region, m, self.wavelength_nm())?;
         let t = &self.table;
         range_f("table.albedo", t.albedo, 0.0, 1.0, false, "[0, 1]")?;
         range_f(

@@ -73,6 +73,8 @@ pub struct Imported {
     /// glTF `asset.generator` (None for other formats or when absent): files synosis
     /// wrote say "synosis <version>" and are in millimetres (docs/mesh-format.md).
     pub generator: Option<String>,
+    /// glTF only: each triangle's material name (`[[material.region]]` selects by it).
+    pub materials: Option<crate::scene::materials::GltfMaterials>,
 }
 
 #[derive(serde::Deserialize, Default)]
@@ -128,6 +130,19 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
     let mut stack: Vec<(gltf::Node, Mat4)> =
         roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
     let mut shared = std::collections::HashMap::new();
+    // Material index per triangle (u32::MAX: none) and the names, in the file's order;
+    // an unnamed material is called "material <index>".
+    let names: Vec<String> = gltf
+        .document
+        .materials()
+        .map(|m| {
+            m.name().map_or_else(
+                || format!("material {}", m.index().unwrap_or(0)),
+                str::to_string,
+            )
+        })
+        .collect();
+    let mut tri_material: Vec<u32> = Vec::new();
     while let Some((node, parent)) = stack.pop() {
         let local = Mat4::from_cols_array_2d(&node.transform().matrix());
         let world = parent * local;
@@ -140,6 +155,7 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
                 continue;
             }
             let label = primitive_label(path, &node, &gmesh, &prim)?;
+            let material = prim.material().index().map_or(u32::MAX, |i| i as u32);
             let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
             let Some(pos_accessor) = prim.get(&gltf::Semantic::Positions) else {
                 return Err(malformed(format!(
@@ -190,12 +206,29 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
                 };
                 mesh.triangles.push(tri.map(|i| i + base));
                 mesh.labels.push(label);
+                tri_material.push(material);
             }
         }
     }
     let generator = gltf.document.as_json().asset.generator.clone();
+    // The degenerate triangles check_imported drops, dropped here from the materials too.
+    if degenerates == Degenerates::Drop {
+        let mut keep = vec![true; tri_material.len()];
+        for t in mesh.degenerate_triangles() {
+            keep[t] = false;
+        }
+        let mut k = 0;
+        tri_material.retain(|_| {
+            k += 1;
+            keep[k - 1]
+        });
+    }
     let mut imported = check_imported(path, mesh, degenerates)?;
     imported.generator = generator;
+    imported.materials = Some(crate::scene::materials::GltfMaterials {
+        names,
+        of_triangle: tri_material,
+    });
     Ok(imported)
 }
 
@@ -240,6 +273,7 @@ pub(crate) fn check_imported(
         mesh,
         dropped_degenerate,
         generator: None,
+        materials: None,
     })
 }
 

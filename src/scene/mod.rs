@@ -9,6 +9,7 @@ pub mod flange;
 pub mod gltf_io;
 pub mod inspect;
 pub mod lights;
+pub mod materials;
 pub mod mesh;
 pub mod mesh_io;
 pub mod procedural;
