@@ -11,7 +11,7 @@ use crate::render::annotate::DEFAULT_COVERAGE_GRID;
 use crate::render::energy::EnergyTables;
 use crate::render::slope::FaceMap;
 use crate::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
-use crate::scene::assemble::{Stage, ViewSetup};
+use crate::scene::assemble::{DefectSurface, Stage, ViewSetup};
 use crate::scene::config::SceneConfig;
 use crate::scene::mesh::FACE_OTHER;
 use crate::trace::{AccelChoice, resolve};
@@ -70,9 +70,12 @@ fn scene_for<'c>(
                 l.face = FACE_OBJECT_OTHER;
             }
         }
-        let stage = profiler.cpu("stage (planar regions)", || {
+        let mut stage = profiler.cpu("stage (planar regions)", || {
             Stage::new(object, base.object.position_mm, &base.table)
         });
+        if req.placement.defects == DefectSurface::Burnished {
+            stage.burnish_defects();
+        }
         let scene = GpuScene::new(tracer, &stage, Some(profiler)).map_err(|e| e.to_string())?;
         *cached = Some((req.mesh_key, scene));
     }

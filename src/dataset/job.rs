@@ -259,6 +259,9 @@ pub struct MappingSettings {
     /// [-rotation_deg, rotation_deg], offset over the whole map, maps repeated beyond
     /// their edges); "faces": only A, B and C, each map clipped (before issue 11).
     pub cover: crate::scene::assemble::Cover,
+    /// "textured" (default): dents and scratches carry the finish; "burnished": the
+    /// smooth surface of the tool (docs/texture.md, "Defect surfaces").
+    pub defects: crate::scene::assemble::DefectSurface,
 }
 
 impl Default for MappingSettings {
@@ -267,6 +270,7 @@ impl Default for MappingSettings {
             rotation_deg: 15.0,
             translation_px: FaceTranslation::default(),
             cover: Default::default(),
+            defects: Default::default(),
         }
     }
 }

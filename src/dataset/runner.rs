@@ -803,6 +803,7 @@ impl<'p> Ctx<'p> {
                 cover: job.mapping.cover,
                 seed: derive(inst.seed, &[tag::REGIONS]),
                 rotation_range_deg: job.mapping.rotation_deg as f32,
+                defects: job.mapping.defects,
             },
             width: job.render.width as u32,
             height: job.render.height as u32,

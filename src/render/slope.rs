@@ -259,6 +259,7 @@ mod tests {
         cover: Cover::Faces,
         seed: 0,
         rotation_range_deg: 0.0,
+        defects: crate::scene::assemble::DefectSurface::Textured,
     };
 
     #[test]
@@ -343,6 +344,39 @@ mod tests {
         assert_eq!(f16_bits(-2.0), 0xc000);
         assert_eq!(f16_bits(1e9), 0x7bff);
         assert_eq!(f16_bits(0.0), 0);
+    }
+
+    /// `burnished`: the defect triangles leave their regions (no map), the rest keep them.
+    #[test]
+    fn burnished_defects_get_no_map() {
+        let mut mesh = crate::scene::testbody(crate::scene::Variant::B);
+        // Mark every third triangle of face A as a dent.
+        let marked: Vec<usize> = (0..mesh.labels.len())
+            .filter(|&t| mesh.labels[t].face == crate::scene::mesh::FACE_A)
+            .step_by(3)
+            .collect();
+        assert!(!marked.is_empty());
+        for &t in &marked {
+            mesh.labels[t].class = 1;
+        }
+        let table = crate::scene::config::TableConfig::default();
+        let textured = Stage::new(mesh.clone(), [0.0; 3], &table);
+        let mut burnished = Stage::new(mesh, [0.0; 3], &table);
+        burnished.burnish_defects();
+        assert_eq!(textured.regions, burnished.regions);
+        for (t, (&a, &b)) in textured
+            .region_of
+            .iter()
+            .zip(&burnished.region_of)
+            .enumerate()
+        {
+            assert_ne!(a, u32::MAX, "triangle {t}");
+            if marked.contains(&t) {
+                assert_eq!(b, u32::MAX, "defect triangle {t} keeps a region");
+            } else {
+                assert_eq!(a, b, "triangle {t}");
+            }
+        }
     }
 
     fn stage_b() -> Stage {
@@ -440,6 +474,7 @@ mod tests {
             cover: Cover::Part,
             seed: 7,
             rotation_range_deg: 15.0,
+            ..FACES
         };
         let slots = stage.regions.len() + 1;
         let placed = place_maps(&maps, &stage.face_frames, &stage.regions, &part).expect("place");

@@ -46,7 +46,7 @@ pub struct FaceMap {
     pub offset_mm: [f32; 2],
 }
 
-pub use super::config::Cover;
+pub use super::config::{Cover, DefectSurface};
 
 /// How the face maps are spread over the object's planar regions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,6 +56,9 @@ pub struct Placement {
     pub seed: u64,
     /// Those regions' map rotation is uniform in [-range, range], degrees, from their `u`.
     pub rotation_range_deg: f32,
+    /// Whether dents and scratches carry the map (applied when the stage is built,
+    /// [`Stage::burnish_defects`]).
+    pub defects: DefectSurface,
 }
 
 impl Default for Placement {
@@ -64,6 +67,7 @@ impl Default for Placement {
             cover: Cover::Part,
             seed: 0,
             rotation_range_deg: 0.0,
+            defects: DefectSurface::Textured,
         }
     }
 }
@@ -293,6 +297,16 @@ impl Stage {
             region_of,
         }
     }
+
+    /// Takes the defect triangles (class != 0) out of their regions, so no slope map
+    /// reaches them (`DefectSurface::Burnished`): the region geometry is unchanged.
+    pub fn burnish_defects(&mut self) {
+        for (r, l) in self.region_of.iter_mut().zip(&self.mesh.labels) {
+            if l.class != 0 {
+                *r = u32::MAX;
+            }
+        }
+    }
 }
 
 /// The emissive triangles of a view (the ring light around the camera), numbered after
@@ -414,7 +428,10 @@ impl RenderScene {
     /// The scene `cfg` describes around `object` (already translated): table, the
     /// configured view, the ring light and the `[texture]` maps.
     pub fn assemble(object: &Mesh, cfg: &SceneConfig) -> Result<RenderScene, AssembleError> {
-        let stage = Stage::new(object.clone(), cfg.object.position_mm, &cfg.table);
+        let mut stage = Stage::new(object.clone(), cfg.object.position_mm, &cfg.table);
+        if cfg.texture.defects == DefectSurface::Burnished {
+            stage.burnish_defects();
+        }
         let pose = cfg.camera.pose()?;
         let first_light = stage.mesh.triangles.len() as u32;
         let view = ViewSetup::for_pose(
@@ -429,6 +446,7 @@ impl RenderScene {
             cover: cfg.texture.cover,
             seed: cfg.render.seed as u64,
             rotation_range_deg: 0.0,
+            defects: cfg.texture.defects,
         };
         Ok(RenderScene {
             stage,

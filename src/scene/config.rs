@@ -803,6 +803,20 @@ pub enum Cover {
     Faces,
 }
 
+/// What the finish does on the surfaces of dents and scratches (`[texture] defects` in
+/// scene files, `[mapping] defects` in jobs; docs/texture.md, "Defect surfaces").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DefectSurface {
+    /// The finish's slope map continues over the defect's triangles, in its region's
+    /// plane (default; the renderer before this option).
+    #[default]
+    Textured,
+    /// No slope map on defect triangles: the smooth surface of the denting or scratching
+    /// tool (a polished, hard tip) with the object's material and roughness.
+    Burnished,
+}
+
 /// Slope maps on the inspected faces (docs/scene-format.md, `[texture]`).
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -828,6 +842,8 @@ pub struct TextureConfig {
     /// "part" (default): the map covers every planar region of the object, repeated
     /// beyond its edges; "faces": only faces A, B, C, clipped to the map.
     pub cover: Cover,
+    /// "textured" (default) or "burnished": whether dents and scratches carry the map.
+    pub defects: DefectSurface,
 }
 
 impl Default for TextureConfig {
@@ -841,6 +857,7 @@ impl Default for TextureConfig {
             rotation_deg: [0.0; 3],
             offset_mm: [[0.0; 2]; 3],
             cover: Default::default(),
+            defects: Default::default(),
         }
     }
 }
