@@ -1679,6 +1679,7 @@ fn emva_sensor_and_random_exposure_rerun_from_raw_files() {
         assert!((c.fx - 25.0 / pitch_mm).abs() < 1e-3 * c.fx, "{c:?}");
         assert_eq!((c.width, c.height, c.cx, c.cy), (64, 48, 31.5, 23.5));
         assert_eq!(c.f_number, Some(8.0));
+        assert_eq!(c.working_distance_mm, 90.0);
     }
     assert!(evs.len() > entries.len() / 2, "jitter varies per image");
     // Reproducible: another run into another folder gives the same files.

@@ -36,6 +36,10 @@ pub struct CameraRecord {
     pub pixel_um: f32,
     /// Focal length, mm.
     pub focal_mm: f32,
+    /// Distance of the face-relative views' pinhole from the face centre, mm (free
+    /// poses place the camera themselves). Default 0 for records without it.
+    #[serde(default)]
+    pub working_distance_mm: f32,
     /// Working f-number; None: pinhole.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub f_number: Option<f64>,
@@ -78,6 +82,7 @@ impl CameraRecord {
             distortion: [d.k1, d.k2, d.p1, d.p2, d.k3],
             pixel_um: cam.pixel_um,
             focal_mm: cam.focal_mm,
+            working_distance_mm: cam.working_distance_mm,
             f_number: cam.f_number,
             focus_distance_mm: cam.focus_distance_mm,
             calibration: cam.calibration.as_ref().map(|p| p.display().to_string()),
