@@ -265,7 +265,6 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                             float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
                             L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
                         }
-                        }
                     }
                 }
             }
