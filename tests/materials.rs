@@ -64,7 +64,9 @@ fn plate_cfg(materials: &str) -> SceneConfig {
 fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
     let mut e = 0.0f64;
     let n = 6;
-    for &(t, _) in &s.view.light.lights {
+    let light = &s.view.light;
+    for (k, &(t, _)) in light.lights.iter().enumerate() {
+        let radiance = light.emitters[light.owner[k] as usize].radiance;
         let [a, b, c] = s.view.light.corners(t).map(|v| v.as_dvec3());
         let nl = (b - a).cross(c - a);
         let area = 0.5 * nl.length();
@@ -89,7 +91,7 @@ fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
                 }
             }
         }
-        e += s.view.light.radiance as f64 * sum * area / (n * n) as f64;
+        e += radiance as f64 * sum * area / (n * n) as f64;
     }
     e
 }

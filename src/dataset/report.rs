@@ -261,7 +261,22 @@ pub fn write_report(
                 toml::Value::Table(f.params.clone()).try_into::<crate::texture::MilledParams>()
             && let Some((face, deg)) = super::job::parse_view(&e.viewpoint)
         {
-            let rho_px = p.rho_mm() / pixel_mm(e.width);
+            // The footprint of a pixel at the working distance: from the image's recorded
+            // camera (the job's `[camera]`), else the default camera at this width.
+            // (Records written before the working distance was recorded read 0: the
+            // default camera's distance then.)
+            let footprint = e.camera.as_ref().map_or_else(
+                || pixel_mm(e.width),
+                |c| {
+                    let wd = if c.working_distance_mm > 0.0 {
+                        c.working_distance_mm
+                    } else {
+                        CameraConfig::default().working_distance_mm
+                    };
+                    wd as f64 / c.fx.max(1e-9)
+                },
+            );
+            let rho_px = p.rho_mm() / footprint;
             if let Some(t) =
                 texture_visibility(w, h, &img, &faces, face, rho_px, deg.to_radians().cos())
             {
