@@ -63,36 +63,8 @@ fn render_plate(cfg: &SceneConfig, backend: Backend) -> (RenderScene, Radiance) 
 /// triangles integrated with 144 nodes each (cos_p cos_l / r^2, radiance per light), the
 /// spots in closed form I(theta) cos_p / r^2 with r in metres (smoothstep soft edge).
 fn irradiance(l: &LightGeometry, p: Vec3) -> f64 {
+    let mut e = common::light_integral(l, p, 12, |w| w.z);
     let p = p.as_dvec3();
-    let mut e = 0.0f64;
-    let n = 12;
-    for &(t, _) in &l.lights {
-        let [a, b, c] = l.corners(t).map(|v| v.as_dvec3());
-        let nl = (b - a).cross(c - a);
-        let area = 0.5 * nl.length();
-        let nl = nl.normalize();
-        let mut sum = 0.0;
-        for i in 0..n {
-            for j in 0..n - i {
-                for up in [false, true] {
-                    if up && i + j + 1 >= n {
-                        continue;
-                    }
-                    let k = if up { 2.0 / 3.0 } else { 1.0 / 3.0 };
-                    let (fi, fj) = (i as f64 + k, j as f64 + k);
-                    let q = a + (b - a) * (fi / n as f64) + (c - a) * (fj / n as f64);
-                    let d = q - p;
-                    let r2 = d.length_squared();
-                    let w = d / r2.sqrt();
-                    let cos_l = -nl.dot(w);
-                    if w.z > 0.0 && cos_l > 0.0 {
-                        sum += w.z * cos_l / r2;
-                    }
-                }
-            }
-        }
-        e += l.radiance_of(t) as f64 * sum * area / (n * n) as f64;
-    }
     for em in &l.emitters {
         if let EmitterSampling::Spot {
             position,

@@ -62,38 +62,7 @@ fn plate_cfg(materials: &str) -> SceneConfig {
 /// Integral over the ring light of radiance * g(wi) * cos_l / r^2 dA at p (normal +z),
 /// 36 nodes per light triangle.
 fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
-    let mut e = 0.0f64;
-    let n = 6;
-    let light = &s.view.light;
-    for (k, &(t, _)) in light.lights.iter().enumerate() {
-        let radiance = light.emitters[light.owner[k] as usize].radiance;
-        let [a, b, c] = s.view.light.corners(t).map(|v| v.as_dvec3());
-        let nl = (b - a).cross(c - a);
-        let area = 0.5 * nl.length();
-        let nl = nl.normalize();
-        let mut sum = 0.0;
-        for i in 0..n {
-            for j in 0..n - i {
-                for up in [false, true] {
-                    if up && i + j + 1 >= n {
-                        continue;
-                    }
-                    let k = if up { 2.0 / 3.0 } else { 1.0 / 3.0 };
-                    let (u, v) = ((i as f64 + k) / n as f64, (j as f64 + k) / n as f64);
-                    let q = a + (b - a) * u + (c - a) * v;
-                    let d = q - p.as_dvec3();
-                    let r2 = d.length_squared();
-                    let w = d / r2.sqrt();
-                    let cos_l = -nl.dot(w);
-                    if w.z > 0.0 && cos_l > 0.0 {
-                        sum += g(w.as_vec3()) * cos_l / r2;
-                    }
-                }
-            }
-        }
-        e += radiance as f64 * sum * area / (n * n) as f64;
-    }
-    e
+    common::light_integral(&s.view.light, p, 6, |w| g(w.as_vec3()))
 }
 
 fn f0(n: f32, k: f32) -> f64 {

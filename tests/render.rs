@@ -385,7 +385,6 @@ fn diffuse_plate_matches_irradiance_integral() {
     cfg.set_resolution(16, 12).expect("size");
     let scene = RenderScene::assemble(&plate, &cfg).expect("scene");
     let cam = scene.view.camera;
-    let radiance = cfg.light.radiance as f64;
     use synosis::scene::config::LightSampling;
     let base_cfg = cfg;
     for (backend, sampling) in [
@@ -419,9 +418,7 @@ fn diffuse_plate_matches_irradiance_integral() {
                                 py as f32 + (b as f32 + 0.5) / 3.0,
                             );
                             let t = (10.0 - cam.eye.z) / d.z;
-                            expect += irradiance(&s, cam.eye + d * t, radiance)
-                                / std::f64::consts::PI
-                                / 81.0;
+                            expect += irradiance(&s, cam.eye + d * t) / std::f64::consts::PI / 81.0;
                         }
                     }
                 }
@@ -443,43 +440,8 @@ fn diffuse_plate_matches_irradiance_integral() {
 }
 
 /// Irradiance at p (normal +z) from the emissive triangles, 64 nodes per triangle.
-fn irradiance(s: &RenderScene, p: Vec3, radiance: f64) -> f64 {
-    let mut e = 0.0f64;
-    let n = 8;
-    for &(t, _) in &s.view.light.lights {
-        let [a, b, c] = s.view.light.corners(t).map(|v| v.as_dvec3());
-        let nl = (b - a).cross(c - a);
-        let area = 0.5 * nl.length();
-        let nl = nl.normalize();
-        // Subdivide the triangle into n^2 similar ones and use their centroids.
-        let mut sum = 0.0;
-        for i in 0..n {
-            for j in 0..n - i {
-                for up in [false, true] {
-                    if up && i + j + 1 >= n {
-                        continue;
-                    }
-                    let (fi, fj) = (i as f64, j as f64);
-                    let (u, v) = if up {
-                        ((fi + 2.0 / 3.0) / n as f64, (fj + 2.0 / 3.0) / n as f64)
-                    } else {
-                        ((fi + 1.0 / 3.0) / n as f64, (fj + 1.0 / 3.0) / n as f64)
-                    };
-                    let q = a + (b - a) * u + (c - a) * v;
-                    let d = q - p.as_dvec3();
-                    let r2 = d.length_squared();
-                    let w = d / r2.sqrt();
-                    let cos_p = w.z;
-                    let cos_l = -nl.dot(w);
-                    if cos_p > 0.0 && cos_l > 0.0 {
-                        sum += cos_p * cos_l / r2;
-                    }
-                }
-            }
-        }
-        e += radiance * sum * area / (n * n) as f64;
-    }
-    e
+fn irradiance(s: &RenderScene, p: Vec3) -> f64 {
+    common::light_integral(&s.view.light, p, 8, |w| w.z)
 }
 
 /// A slope map of zeros must render bit for bit as no map (same random numbers, same
@@ -846,36 +808,7 @@ fn conductor_plate_matches_rust_bsdf_integral() {
 /// Integral over the light triangles of radiance * g(wi) * cos_l / r^2 dA at p (normal +z),
 /// 36 nodes per triangle; g is f * cos_i in the frame whose normal is +z.
 fn light_integral(s: &RenderScene, p: Vec3, g: impl Fn(Vec3) -> f64) -> f64 {
-    let mut e = 0.0f64;
-    let n = 6;
-    for &(t, _) in &s.view.light.lights {
-        let [a, b, c] = s.view.light.corners(t).map(|v| v.as_dvec3());
-        let nl = (b - a).cross(c - a);
-        let area = 0.5 * nl.length();
-        let nl = nl.normalize();
-        let mut sum = 0.0;
-        for i in 0..n {
-            for j in 0..n - i {
-                for up in [false, true] {
-                    if up && i + j + 1 >= n {
-                        continue;
-                    }
-                    let (fi, fj) = (i as f64, j as f64);
-                    let k = if up { 2.0 / 3.0 } else { 1.0 / 3.0 };
-                    let q = a + (b - a) * ((fi + k) / n as f64) + (c - a) * ((fj + k) / n as f64);
-                    let d = q - p.as_dvec3();
-                    let r2 = d.length_squared();
-                    let w = d / r2.sqrt();
-                    let cos_l = -nl.dot(w);
-                    if w.z > 0.0 && cos_l > 0.0 {
-                        sum += g(w.as_vec3()) * cos_l / r2;
-                    }
-                }
-            }
-        }
-        e += sum * area / (n * n) as f64;
-    }
-    e
+    common::light_integral(&s.view.light, p, 6, |w| g(w.as_vec3()))
 }
 
 /// `small_cfg` with more `[camera]` fields.

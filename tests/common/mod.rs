@@ -62,3 +62,45 @@ pub fn run_small_smoke(
     };
     dataset::run(&prep, out, renderer, &mut textures, opts).unwrap()
 }
+
+/// Integral over the area lights' triangles of radiance * g(wi) * cos_l / r^2 dA at `p`
+/// (receiver normal +z: only directions above it count, wi pointing to the light, world
+/// units): each triangle split into n^2 similar ones, one node at each centroid. With
+/// g = wi.z it is the irradiance; with g = f * cos_i a BSDF's direct light.
+pub fn light_integral(
+    light: &synosis::scene::assemble::LightGeometry,
+    p: glam::Vec3,
+    n: usize,
+    g: impl Fn(glam::DVec3) -> f64,
+) -> f64 {
+    let p = p.as_dvec3();
+    let mut e = 0.0f64;
+    for &(t, _) in &light.lights {
+        let [a, b, c] = light.corners(t).map(|v| v.as_dvec3());
+        let nl = (b - a).cross(c - a);
+        let area = 0.5 * nl.length();
+        let nl = nl.normalize();
+        let mut sum = 0.0;
+        for i in 0..n {
+            for j in 0..n - i {
+                for up in [false, true] {
+                    if up && i + j + 1 >= n {
+                        continue;
+                    }
+                    let k = if up { 2.0 / 3.0 } else { 1.0 / 3.0 };
+                    let (u, v) = ((i as f64 + k) / n as f64, (j as f64 + k) / n as f64);
+                    let q = a + (b - a) * u + (c - a) * v;
+                    let d = q - p;
+                    let r2 = d.length_squared();
+                    let w = d / r2.sqrt();
+                    let cos_l = -nl.dot(w);
+                    if w.z > 0.0 && cos_l > 0.0 {
+                        sum += g(w) * cos_l / r2;
+                    }
+                }
+            }
+        }
+        e += light.radiance_of(t) as f64 * sum * area / (n * n) as f64;
+    }
+    e
+}
