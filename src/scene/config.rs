@@ -657,18 +657,9 @@ impl Default for SensorConfig {
 impl SensorConfig {
     /// Checks every field against its documented range.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        // (A non-finite or out-of-f32 value is not finite as f32: range_f refuses it.)
         let f = |field, v: f64, lo: f64, hi: f64, lo_open: bool, range| {
-            range_f(field, v as f32, lo as f32, hi as f32, lo_open, range).and_then(|_| {
-                if v.is_finite() {
-                    Ok(())
-                } else {
-                    Err(ConfigError::Range {
-                        field,
-                        value: v.to_string(),
-                        range,
-                    })
-                }
-            })
+            range_f(field, v as f32, lo as f32, hi as f32, lo_open, range)
         };
         if let ExposureSetting::Fixed { ms } = self.exposure {
             f("sensor.exposure.ms", ms, 0.0, 1e6, true, "(0, 1e6] ms")?;
