@@ -292,11 +292,7 @@ fn print_report(reports: &[dataset::report::FinishReport], out: &std::path::Path
             r.p01_p99.1,
             db.get(db.len() / 2)
                 .map_or("-".into(), |d| format!("{d:.1}")),
-            r.kinds
-                .iter()
-                .map(|(k, (kept, all))| format!("{k} {kept}/{all}"))
-                .collect::<Vec<_>>()
-                .join(", ")
+            dataset::report::kinds_list(&r.kinds)
         );
     }
     eprintln!("report: {}", out.join("report.html").display());

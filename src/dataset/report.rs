@@ -486,16 +486,21 @@ fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> S
     s
 }
 
+/// "big dent 2/3, flat scratch 1/2" (kept / all per defect spec entry).
+pub fn kinds_list(kinds: &BTreeMap<String, (usize, usize)>) -> String {
+    kinds
+        .iter()
+        .map(|(k, (kept, all))| format!("{k} {kept}/{all}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// "; by spec entry: big dent 2/3, ..." (empty without spec entries).
-pub fn kinds_text(kinds: &BTreeMap<String, (usize, usize)>) -> String {
+fn kinds_text(kinds: &BTreeMap<String, (usize, usize)>) -> String {
     if kinds.is_empty() {
         return String::new();
     }
-    let parts: Vec<String> = kinds
-        .iter()
-        .map(|(k, (kept, all))| format!("{k} {kept}/{all}"))
-        .collect();
-    format!("; by spec entry: {}", parts.join(", "))
+    format!("; by spec entry: {}", kinds_list(kinds))
 }
 
 fn median_db(t: &[(usize, TextureVisibility)]) -> Option<f64> {
