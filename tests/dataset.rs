@@ -1745,3 +1745,92 @@ fn emva_sensor_and_random_exposure_rerun_from_raw_files() {
         }
     }
 }
+
+/// A sensor deeper than 8 bit writes its codes unscaled into a 16-bit image.png (as
+/// `synosis render` does), records `bit_depth` in the manifest, and `postprocess`,
+/// the realism report and `compare`'s reader read it back at the right scale.
+#[test]
+fn deep_sensor_writes_16_bit_codes() {
+    use synosis::dataset::report::{folder_entries, write_report};
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
+    // No post-processing steps: image.png is the sensor's image.
+    let text = job_text(1, 1)
+        .split("[[postprocess]]")
+        .next()
+        .unwrap()
+        .replace(
+            "[texture]",
+            "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\nbit_depth = 12\ngain_dn_per_electron = 0.4\n[texture]",
+        );
+    std::fs::write(root.join("job.toml"), &text).unwrap();
+    let prep = dataset::prepare(&root.join("job.toml")).unwrap();
+    let out = root.join("out");
+    dataset::run(
+        &prep,
+        &out,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+        RunOptions::default(),
+    )
+    .unwrap();
+    let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
+    let mut fine = 0usize;
+    for e in &entries {
+        assert_eq!(e.bit_depth, Some(12));
+        let dec = png::Decoder::new(std::io::BufReader::new(
+            std::fs::File::open(out.join(&e.image)).unwrap(),
+        ));
+        let reader = dec.read_info().unwrap();
+        assert_eq!(reader.info().bit_depth, png::BitDepth::Sixteen, "{}", e.id);
+        let codes: Vec<u16> = image::open(out.join(&e.image))
+            .unwrap()
+            .into_luma16()
+            .into_raw();
+        // The sensor's own image, recomputed from the stored radiance and faces: its
+        // 8-bit units are code * 255 / 4095, so every pixel is a whole code.
+        let dir = out.join("images").join(&e.id);
+        let (_, _, rad) = synosis::image_io::read_exr_f32(&dir.join("radiance.exr")).unwrap();
+        let faces = image::open(dir.join("faces.png"))
+            .unwrap()
+            .into_luma8()
+            .into_raw();
+        let exposed = dataset::camera::expose(
+            &prep.job,
+            &e.finish,
+            e.seed,
+            e.camera.as_ref().unwrap(),
+            &rad,
+            &faces,
+        )
+        .unwrap();
+        assert_eq!(exposed.exposure_ms, e.exposure_ms);
+        for (&c, &u) in codes.iter().zip(&exposed.image) {
+            assert!(c <= 4095, "code {c} above 12 bit");
+            let want = u as f64 * 4095.0 / 255.0;
+            assert!((want - c as f64).abs() < 1e-3, "code {c} vs {want}");
+            fine += (c % 16 != 0) as usize;
+        }
+        // compare's reader: 4095 -> 255.
+        let g = synosis::metrics::GrayImage::load_codes(&out.join(&e.image), e.bit_depth).unwrap();
+        for (&c, &v) in codes.iter().zip(&g.data) {
+            assert!((v as f64 - c as f64 * 255.0 / 4095.0).abs() < 1e-4);
+        }
+    }
+    // More than 8 bits of the codes are used (not an 8-bit image scaled up).
+    assert!(fine > 0, "every code is a multiple of 16");
+    // Postprocess from radiance.exr reproduces the run bit for bit.
+    let before = tree(&out);
+    dataset::postprocess_dir(&out, None).unwrap();
+    assert_eq!(before, tree(&out));
+    // The report reads the 12-bit codes at 8-bit scale: its histogram reaches the top
+    // decile (auto exposure puts the 99.5th percentile at 90 % of saturation).
+    let entries = folder_entries(&out).unwrap();
+    let reports = write_report(&out, &prep.job, &entries, 1, &out.join("report")).unwrap();
+    let top: u64 = reports
+        .iter()
+        .map(|r| r.histogram[200..].iter().sum::<u64>())
+        .sum();
+    assert!(top > 0, "the report read 12-bit codes as 8-bit values");
+}

@@ -384,6 +384,17 @@ pub enum SensorModel {
     Emva(crate::scene::config::SensorConfig),
 }
 
+impl SensorModel {
+    /// The bit depth of image.png's codes: 8 for the linear model, the sensor's ADC depth
+    /// for EMVA 1288 (10, 12, 16: a 16-bit PNG with the codes unscaled).
+    pub fn image_bit_depth(&self) -> u32 {
+        match self {
+            SensorModel::Linear { .. } => 8,
+            SensorModel::Emva(s) => s.bit_depth,
+        }
+    }
+}
+
 impl Default for SensorSettings {
     fn default() -> Self {
         SensorSettings {

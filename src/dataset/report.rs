@@ -73,6 +73,26 @@ fn read_gray(dir: &Path, rel: &str) -> Result<(usize, usize, Vec<u8>)> {
     Ok((w as usize, h as usize, img.into_raw()))
 }
 
+/// image.png in 8-bit units: 8-bit codes as they are, the 16-bit PNG of a deeper sensor
+/// (`bit_depth` 10, 12, 16: codes unscaled) as round(code * 255 / (2^bit_depth - 1)).
+fn read_image8(dir: &Path, rel: &str, bit_depth: Option<u32>) -> Result<(usize, usize, Vec<u8>)> {
+    let Some(bits) = bit_depth.filter(|&b| b > 8) else {
+        return read_gray(dir, rel);
+    };
+    let path = dir.join(rel);
+    let img = image::open(&path)
+        .map_err(|e| DatasetError::io(&path, std::io::Error::other(e)))?
+        .into_luma16();
+    let (w, h) = img.dimensions();
+    let top = ((1u64 << bits.min(16)) - 1) as f64;
+    let data = img
+        .into_raw()
+        .into_iter()
+        .map(|c| (c as f64 * 255.0 / top).round().min(255.0) as u8)
+        .collect();
+    Ok((w as usize, h as usize, data))
+}
+
 /// The spectrum measure of [`TextureVisibility`] on the pixels of `face` in `image`.
 /// The crop is the largest square of side 2^k (16 ..= 512) around the face's pixel
 /// centroid that lies at least 98 % on the face; the crop is levelled (best-fit plane
@@ -237,7 +257,7 @@ pub fn write_report(
             continue;
         };
         let base = Path::new(&e.image).parent().unwrap_or(Path::new("."));
-        let (w, h, img) = read_gray(dir, &e.image)?;
+        let (w, h, img) = read_image8(dir, &e.image, e.bit_depth)?;
         let (_, _, object) = read_gray(dir, &base.join("object.png").to_string_lossy())?;
         let (_, _, faces) = read_gray(dir, &e.faces)?;
         let (_, _, mask) = read_gray(dir, &base.join("mask.png").to_string_lossy())?;

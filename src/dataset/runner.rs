@@ -23,7 +23,7 @@ use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
 use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
-use crate::render::pixels::quantise_units8;
+use crate::render::pixels::{quantise_units_deep, quantise_units8};
 use crate::scene::assemble::Placement;
 use crate::scene::{Degenerates, Mesh, face_frames, testbody};
 
@@ -277,6 +277,10 @@ pub struct ManifestEntry {
     /// finish's factor and the jitter).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure_ms: Option<f64>,
+    /// The bit depth of image.png's codes when it is deeper than 8 (an EMVA sensor of 10,
+    /// 12 or 16 bit: a 16-bit PNG with the codes unscaled, 0 ..= 2^bit_depth - 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bit_depth: Option<u32>,
     pub defects: Vec<DefectVisibility>,
     /// File name -> content hash.
     pub files: BTreeMap<String, String>,
@@ -866,6 +870,7 @@ impl<'p> Ctx<'p> {
             camera: Some(self.camera.clone()),
             exposure_ev: exposed.exposure_ev,
             exposure_ms: exposed.exposure_ms,
+            bit_depth: Some(job.sensor.model.image_bit_depth()).filter(|&b| b > 8),
             defects,
             files: hashes,
             sizes,
@@ -1036,10 +1041,14 @@ fn write_post(
     let f = &r.frame;
     let (w, h) = (f.width, f.height);
     let mut m = BTreeMap::new();
-    m.insert(
-        "image.png".into(),
-        files::write_gray8(&dir.join("image.png"), w, h, &quantise_units8(&f.image))?,
-    );
+    let bits = job.sensor.model.image_bit_depth();
+    let png = dir.join("image.png");
+    let hash = if bits > 8 {
+        files::write_gray16(&png, w, h, &quantise_units_deep(&f.image, bits))?
+    } else {
+        files::write_gray8(&png, w, h, &quantise_units8(&f.image))?
+    };
+    m.insert("image.png".into(), hash);
     m.insert(
         "mask.png".into(),
         files::write_gray8(&dir.join("mask.png"), w, h, &f.class)?,
@@ -1489,6 +1498,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
                 e.noise_sigma = noise;
                 e.exposure_ev = exposed.exposure_ev;
                 e.exposure_ms = exposed.exposure_ms;
+                e.bit_depth = Some(job.sensor.model.image_bit_depth()).filter(|&b| b > 8);
                 Ok(e)
             })
             .collect::<Result<_>>()?;

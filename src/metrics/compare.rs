@@ -270,7 +270,7 @@ fn resolve_alignment(
                 let per: Vec<(String, Moments)> = side
                     .par_iter()
                     .map(|smp| {
-                        let img = GrayImage::load(&smp.image)?;
+                        let img = smp.load_image()?;
                         check_size(&img, &vdata[vp].mask, smp)?;
                         let mut m = Moments::default();
                         for &i in ix {
@@ -333,7 +333,7 @@ fn prepare(
     s: &Sample,
     align: Alignment,
 ) -> Result<Prepared, MetricsError> {
-    let raw = GrayImage::load(&s.image)?;
+    let raw = s.load_image()?;
     check_size(&raw, &vd.mask, s)?;
     let hist = Histogram::of(&raw, Some(&vd.indices)).aligned(align);
     let img = if align == Alignment::IDENTITY {

@@ -17,6 +17,10 @@ pub struct Sample {
     pub viewpoint: String,
     pub finish: String,
     pub faces: FaceSource,
+    /// The bit depth of a 16-bit PNG's codes when it is not 16 (a synthetic dataset of a
+    /// 10- or 12-bit sensor records it as `bit_depth`): codes are scaled by
+    /// 255 / (2^bit_depth - 1) instead of 1 / 257.
+    pub bit_depth: Option<u32>,
 }
 
 #[derive(Clone, Debug)]
@@ -34,6 +38,11 @@ impl Sample {
     /// ("sandblasted-2.5bar" -> "sandblasted").
     pub fn texture(&self) -> String {
         texture_of(&self.finish)
+    }
+
+    /// The image in 8-bit units (see [`super::gray::GrayImage::load_codes`]).
+    pub fn load_image(&self) -> Result<super::gray::GrayImage, MetricsError> {
+        super::gray::GrayImage::load_codes(&self.image, self.bit_depth)
     }
 
     /// Masks of the given faces (`face_labels[i]` has id `i + 1`), in order.
@@ -94,6 +103,8 @@ struct ManifestLine {
     faces: String,
     viewpoint: String,
     finish: String,
+    #[serde(default)]
+    bit_depth: Option<u32>,
 }
 
 fn load_synthetic(dir: &Path, manifest: &Path) -> Result<Vec<Sample>, MetricsError> {
@@ -120,6 +131,7 @@ fn load_synthetic(dir: &Path, manifest: &Path) -> Result<Vec<Sample>, MetricsErr
             viewpoint: m.viewpoint.trim().to_string(),
             finish: m.finish.trim().to_string(),
             faces: FaceSource::FaceIds(dir.join(&m.faces)),
+            bit_depth: m.bit_depth,
         });
     }
     if out.is_empty() {
@@ -186,6 +198,7 @@ fn load_real(dir: &Path, index: &Path) -> Result<Vec<Sample>, MetricsError> {
             viewpoint: viewpoint.to_string(),
             finish: finish.to_string(),
             faces: FaceSource::LabelMe { json, labels },
+            bit_depth: None,
         });
     }
     if out.is_empty() {

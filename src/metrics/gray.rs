@@ -44,8 +44,23 @@ impl GrayImage {
 
     /// Decodes an 8- or 16-bit grayscale PNG (an alpha channel is ignored).
     pub fn load(path: &Path) -> Result<Self, MetricsError> {
+        Self::load_codes(path, None)
+    }
+
+    /// As [`Self::load`], but the codes of a 16-bit PNG have `bit_depth` bits (10, 12: a
+    /// deep sensor's codes written unscaled) and are scaled by 255 / (2^bit_depth - 1), so
+    /// the top code is 255. `None` or 16: 1 / 257. 8-bit PNGs are read as they are.
+    pub fn load_codes(path: &Path, bit_depth: Option<u32>) -> Result<Self, MetricsError> {
         let img = open(path)?;
         let (width, height) = (img.width() as usize, img.height() as usize);
+        let top = match bit_depth {
+            Some(b @ 1..=15) => Some(((1u32 << b) - 1) as f64),
+            _ => None,
+        };
+        let from16 = |v: u16| match top {
+            Some(t) => (f64::from(v) * 255.0 / t) as f32,
+            None => from16(v),
+        };
         let data = match img {
             DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(f32::from).collect(),
             DynamicImage::ImageLumaA8(b) => b.pixels().map(|p| f32::from(p.0[0])).collect(),

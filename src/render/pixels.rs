@@ -81,9 +81,40 @@ pub fn quantise_units8(image: &[f32]) -> Vec<u8> {
         .collect()
 }
 
+/// An 8-bit-unit image to the codes of a `bit_depth`-bit sensor (10, 12 or 16; written
+/// to a 16-bit PNG unscaled, as `synosis render` does): NaN gives 0, then
+/// `round(v * (2^bit_depth - 1) / 255)` clamped to [0, 2^bit_depth - 1]. The inverse of
+/// the sensor step's `code * 255 / (2^bit_depth - 1)`, exact for every code.
+pub fn quantise_units_deep(image: &[f32], bit_depth: u32) -> Vec<u16> {
+    let top = ((1u64 << bit_depth.clamp(1, 16)) - 1) as f64;
+    image
+        .iter()
+        .map(|&v| {
+            if v.is_nan() {
+                0
+            } else {
+                (v as f64 * top / FULL_SCALE as f64).clamp(0.0, top).round() as u16
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn deep_codes_survive_the_8_bit_unit_scale() {
+        for bits in [10u32, 12, 16] {
+            let top = (1u32 << bits) - 1;
+            let scale = (FULL_SCALE as f64 / top as f64) as f32;
+            let codes: Vec<u16> = (0..=top).map(|c| c as u16).collect();
+            let units: Vec<f32> = codes.iter().map(|&c| c as f32 * scale).collect();
+            assert_eq!(quantise_units_deep(&units, bits), codes, "{bits} bit");
+        }
+        let q = quantise_units_deep(&[f32::NAN, -3.0, 300.0, 127.5], 12);
+        assert_eq!(q, vec![0, 0, 4095, 2048]);
+    }
 
     /// `render/sensor.rs` as it was (the `synosis render` route).
     fn old_sensor8(radiance: &[f32], exposure: f32, gain: f32) -> Vec<u8> {
