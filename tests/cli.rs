@@ -181,13 +181,47 @@ fn render_and_dataset_run_write_their_files_and_report_on_stdout() {
 
     let job = tiny_job(dp);
     let job = job.to_str().unwrap();
-    let o = synosis(&["dataset", "run", job, "--out", "ds", "--quiet"], dp);
+    let o = synosis(
+        &[
+            "dataset",
+            "run",
+            job,
+            "--out",
+            "ds",
+            "--quiet",
+            "--profile",
+            "run.json",
+        ],
+        dp,
+    );
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert!(
         text(&o.stdout).contains("1 images (0 already done, 1 rendered); dataset finished"),
         "{}",
         text(&o.stdout)
     );
+    // The run's timeline: the image and its stages on the runner's thread, the GPU's
+    // passes, and the busy share on stderr.
+    let trace: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dp.join("run.json")).unwrap()).unwrap();
+    let events = trace["traceEvents"].as_array().unwrap();
+    let named = |n: &str| events.iter().any(|e| e["ph"] == "X" && e["name"] == n);
+    for n in [
+        "image 000000",
+        "defects",
+        "textures",
+        "render",
+        "write",
+        "path trace",
+        "annotate",
+    ] {
+        assert!(named(n), "no span {n} in the profile");
+    }
+    assert!(
+        events.iter().any(|e| e["ph"] == "X" && e["cat"] == "gpu"),
+        "no GPU pass in the profile"
+    );
+    assert!(text(&o.stderr).contains("GPU busy"), "{}", text(&o.stderr));
     for f in [
         "job.toml",
         "manifest.jsonl",
@@ -248,5 +282,67 @@ fn render_with_calibration_lens_and_sensor() {
     assert_fails(
         &synosis(&["render", "s.toml", "--out", "out2", "--png16"], dp),
         &["--png16", "bit_depth"],
+    );
+}
+
+/// `synosis bench-gpu` (what `tools/bench-gpu` runs) on lavapipe at a tiny size: the table
+/// with each stage and the GPU busy share, the JSON beside it, and the Chrome trace.
+#[test]
+fn bench_gpu_writes_its_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let dp = dir.path();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let job = root.join("scenes/smoke-dataset.toml");
+    let o = synosis(
+        &[
+            "bench-gpu",
+            "--job",
+            job.to_str().unwrap(),
+            "--out",
+            "data",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--spp",
+            "1",
+            "--rays-side",
+            "32",
+            "--json",
+            "b.json",
+            "--profile",
+            "run.json",
+        ],
+        dp,
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let table = text(&o.stdout);
+    for row in [
+        "| per image |",
+        "| stage textures |",
+        "| stage render.path_trace_gpu |",
+        "| stage write |",
+        "| GPU busy |",
+        "| rays (",
+    ] {
+        assert!(table.contains(row), "no row {row} in\n{table}");
+    }
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dp.join("b.json")).unwrap()).unwrap();
+    let busy = v["gpu_busy_fraction"].as_f64().unwrap();
+    assert!(busy > 0.0 && busy <= 1.0, "{busy}");
+    assert!(v["images"].as_u64().unwrap() > 0);
+    assert!(v["rays"]["primary_mrays_s"].as_f64().unwrap() > 0.0);
+    assert!(dp.join("run.json").is_file());
+    // A non-empty work folder is refused before any work.
+    let o = synosis(
+        &["bench-gpu", "--job", job.to_str().unwrap(), "--out", "data"],
+        dp,
+    );
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("must be empty"),
+        "{}",
+        text(&o.stderr)
     );
 }

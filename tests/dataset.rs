@@ -250,6 +250,7 @@ fn run_all(
             shard,
             fail_after,
             progress: None,
+            ..Default::default()
         },
     )
 }

@@ -62,6 +62,7 @@ fn flange_job_renders_plans_and_poses_and_resumes() {
                 shard: Shard { index: 0, count: 1 },
                 fail_after: None,
                 progress: None,
+                ..Default::default()
             };
             dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap()
         };

@@ -327,6 +327,7 @@ fn job_lights_replace_the_default_ring() {
             shard: Shard { index: 0, count: 1 },
             fail_after: None,
             progress: None,
+            ..Default::default()
         };
         assert_eq!(
             dataset::run(&prep, &out, &mut r, &mut textures, opts)

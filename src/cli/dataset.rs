@@ -91,6 +91,11 @@ struct RunArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Write the run's timeline as a Chrome trace (Perfetto, chrome://tracing): each image
+    /// and its stages on the runner's thread, the renderer's CPU phases, the GPU passes;
+    /// the GPU's busy share of the run goes to stderr.
+    #[arg(long)]
+    profile: Option<PathBuf>,
 }
 
 fn resolve_shard(a: &RunArgs) -> Result<Shard> {
@@ -227,9 +232,18 @@ fn run_job(a: RunArgs) -> Result<()> {
     // Everything is checked before the renderer starts or a file is written.
     synosis::util::check_writable_dir(&a.out)
         .with_context(|| format!("--out {}", a.out.display()))?;
-    let prep = dataset::prepare(&a.job).with_context(|| format!("job {}", a.job.display()))?;
+    if let Some(p) = &a.profile
+        && let Some(dir) = p.parent()
+    {
+        synosis::util::check_writable_dir(dir)
+            .with_context(|| format!("--profile {}", p.display()))?;
+    }
+    let profiler = synosis::vk::Profiler::new();
+    let prep = profiler
+        .cpu("prepare job", || dataset::prepare(&a.job))
+        .with_context(|| format!("job {}", a.job.display()))?;
     super::accel_from_env()?;
-    let mut renderer = gpu_renderer()?;
+    let mut renderer = profiler.cpu("Vulkan init, pipelines, energy tables", gpu_renderer)?;
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -246,7 +260,7 @@ fn run_job(a: RunArgs) -> Result<()> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
-    let report = dataset::run(
+    let result = dataset::run(
         &prep,
         &a.out,
         &mut renderer,
@@ -255,10 +269,26 @@ fn run_job(a: RunArgs) -> Result<()> {
             shard,
             fail_after: None,
             progress: Some(&mut progress),
+            profiler: a.profile.as_ref().map(|_| &profiler),
         },
-    )
-    .with_context(|| format!("dataset run into {}", a.out.display()))?;
+    );
     bar.finish_and_clear();
+    // The profile is written even when the run stopped on an error (up to the error).
+    if let Some(p) = &a.profile {
+        profiler
+            .write_chrome_trace(p)
+            .with_context(|| format!("writing {}", p.display()))?;
+        let wall = profiler.now_us() / 1e3;
+        let gpu = profiler.busy_ms("gpu");
+        eprintln!(
+            "profile {}: {:.0} ms wall, GPU busy {:.0} ms ({:.1} %)",
+            p.display(),
+            wall,
+            gpu,
+            100.0 * gpu / wall.max(1e-9)
+        );
+    }
+    let report = result.with_context(|| format!("dataset run into {}", a.out.display()))?;
     println!(
         "shard {}/{}: {} images ({} already done, {} rendered){}",
         shard.index,

@@ -1,5 +1,6 @@
 //! Subcommands. Each lives in its own file with a clap `Args` struct and a `run`.
 
+mod bench;
 mod dataset;
 mod defects;
 mod gpu;
@@ -41,6 +42,9 @@ pub enum Command {
     Compare(metrics::CompareArgs),
     /// Dataset jobs: run (sharded, resumable), merge, postprocess, render-one, check.
     Dataset(dataset::DatasetArgs),
+    /// Time a dataset job on this Vulkan device: images per hour, stage split, GPU busy
+    /// share, peak memory, ray throughput (a Markdown table on stdout).
+    BenchGpu(bench::BenchGpuArgs),
 }
 
 /// The error and its causes on one line, each once: a library error that already shows
@@ -88,5 +92,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(a) => metrics::run_compare(a),
         Command::Render(a) => render::run(a),
         Command::Dataset(a) => dataset::run(a),
+        Command::BenchGpu(a) => bench::run(a),
     }
 }

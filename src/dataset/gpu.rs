@@ -30,6 +30,8 @@ pub struct GpuRenderer {
     cached: Option<(u64, GpuScene)>,
     base: SceneConfig,
     stages: Vec<(String, f64)>,
+    /// The timeline of the last image (CPU phases, GPU passes).
+    profile: Option<Profiler>,
 }
 
 impl GpuRenderer {
@@ -50,6 +52,7 @@ impl GpuRenderer {
             cached: None,
             base: SceneConfig::default(),
             stages: Vec::new(),
+            profile: None,
         })
     }
 }
@@ -105,6 +108,10 @@ impl ImageRenderer for GpuRenderer {
         self.stages.clone()
     }
 
+    fn last_profile(&self) -> Option<&Profiler> {
+        self.profile.as_ref()
+    }
+
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
         // The scene defaults with the job's camera (intrinsics and lens).
         let mut base = self.base.clone();
@@ -126,6 +133,7 @@ impl ImageRenderer for GpuRenderer {
             cfg.light.list = Some(req.lights.to_vec());
         }
         let pose = cfg.camera.pose().map_err(|e| e.to_string())?;
+        self.profile = None;
         let profiler = Profiler::new();
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
@@ -160,6 +168,7 @@ impl ImageRenderer for GpuRenderer {
             ("render.path_trace_gpu".into(), secs(&["path trace"])),
             ("render.annotate_gpu".into(), secs(&["annotate"])),
         ];
+        self.profile = Some(profiler);
         self.ctx.check_validation().map_err(|e| e.to_string())?;
         let ann = frame
             .annotation

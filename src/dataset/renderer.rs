@@ -171,4 +171,9 @@ pub trait ImageRenderer {
     fn last_stages(&self) -> Vec<(String, f64)> {
         Vec::new()
     }
+    /// The timeline of the last `render` call (CPU phases, GPU passes) for a run's
+    /// profile (`dataset run --profile`); none by default.
+    fn last_profile(&self) -> Option<&crate::vk::Profiler> {
+        None
+    }
 }

@@ -26,6 +26,7 @@ use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
 use crate::render::pixels::{quantise_units_deep, quantise_units8};
 use crate::scene::assemble::Placement;
 use crate::scene::{Degenerates, Mesh, face_frames, testbody};
+use crate::vk::Profiler;
 
 /// A job with everything loaded and checked: meshes, defect sets, the plan.
 pub struct Prepared {
@@ -224,7 +225,8 @@ impl Shard {
         (count > 0 && index < count).then_some(Shard { index, count })
     }
 
-    fn file_name(&self) -> String {
+    /// The shard's manifest file name (`manifests/shard-i-of-n.jsonl`).
+    pub fn file_name(&self) -> String {
         format!("shard-{}-of-{}.jsonl", self.index, self.count)
     }
 
@@ -322,6 +324,9 @@ pub struct RunOptions<'a> {
     pub fail_after: Option<usize>,
     /// Called after each image: (done in this shard, total in this shard).
     pub progress: Option<&'a mut dyn FnMut(usize, usize)>,
+    /// Collects the run's timeline (`dataset run --profile`): each image and its stages
+    /// on the runner's thread, the renderer's CPU phases and GPU passes.
+    pub profiler: Option<&'a Profiler>,
 }
 
 impl Default for RunOptions<'_> {
@@ -330,6 +335,7 @@ impl Default for RunOptions<'_> {
             shard: Shard::ALL,
             fail_after: None,
             progress: None,
+            profiler: None,
         }
     }
 }
@@ -478,7 +484,7 @@ fn run_locked(
         .iter()
         .filter(|i| !done.contains_key(&i.index))
         .collect();
-    let mut ctx = Ctx::new(prep)?;
+    let mut ctx = Ctx::new(prep, opts.profiler)?;
     let already = mine.len() - todo.len();
     for item in todo {
         if opts.fail_after == Some(*rendered) {
@@ -671,7 +677,7 @@ pub fn render_one(
             allowed: format!("the job has images 0..{}", prep.plan.items.len()),
         })?;
     std::fs::create_dir_all(out).map_err(|e| DatasetError::io(out, e))?;
-    let mut ctx = Ctx::new(prep)?;
+    let mut ctx = Ctx::new(prep, None)?;
     let entry = ctx.render_item(item, out, renderer, textures)?;
     let v = serde_json::to_value(&entry)
         .map_err(|e| DatasetError::io(out, std::io::Error::other(e)))?;
@@ -703,16 +709,18 @@ struct Ctx<'p> {
     cache: TextureCache,
     mesh: Option<(usize, Arc<Mesh>)>,
     camera: CameraRecord,
+    profiler: Option<&'p Profiler>,
 }
 
 impl<'p> Ctx<'p> {
-    fn new(prep: &'p Prepared) -> Result<Self> {
+    fn new(prep: &'p Prepared, profiler: Option<&'p Profiler>) -> Result<Self> {
         let camera = image_camera_record(&prep.job)?;
         Ok(Ctx {
             prep,
             cache: TextureCache::new(prep.job.texture.cache as usize),
             mesh: None,
             camera,
+            profiler,
         })
     }
 
@@ -755,8 +763,14 @@ impl<'p> Ctx<'p> {
         let params = plan::instance_params(job, inst);
         let mut stages = BTreeMap::new();
         let mut lap = Instant::now();
+        let profiler = self.profiler;
+        let image_start_us = profiler.map(Profiler::now_us);
         let mut stage = |name: &str, stages: &mut BTreeMap<String, f64>| {
-            stages.insert(name.to_string(), lap.elapsed().as_secs_f64());
+            let secs = lap.elapsed().as_secs_f64();
+            stages.insert(name.to_string(), secs);
+            if let Some(p) = profiler {
+                p.cpu_span(name, p.now_us() - secs * 1e6, secs * 1e6);
+            }
             lap = Instant::now();
         };
         let mesh = self.mesh(item.instance)?;
@@ -822,6 +836,9 @@ impl<'p> Ctx<'p> {
             message,
         };
         let img = renderer.render(&req).map_err(fail)?;
+        if let (Some(p), Some(r)) = (profiler, renderer.last_profile()) {
+            p.absorb(r);
+        }
         img.check(&req).map_err(fail)?;
         stage("render", &mut stages);
         stages.extend(renderer.last_stages());
@@ -842,6 +859,9 @@ impl<'p> Ctx<'p> {
         hashes.extend(post_hashes);
         let sizes = file_sizes(&dir, &hashes)?;
         stage("write", &mut stages);
+        if let (Some(p), Some(t)) = (profiler, image_start_us) {
+            p.cpu_span(&format!("image {}", item.id()), t, p.now_us() - t);
+        }
         let rel = |f: &str| format!("images/{}/{f}", item.id());
         Ok(ManifestEntry {
             index: item.index,

@@ -299,6 +299,7 @@ impl<'a> Graph<'a> {
                     track: "gpu",
                     start_us: submit_us + start_ms * 1e3,
                     dur_us: gpu_ms * 1e3,
+                    thread: String::new(),
                 });
             }
             timings.push(PassTiming { name, gpu_ms });

@@ -59,6 +59,7 @@ pub fn run_small_smoke(
         shard,
         fail_after: None,
         progress: None,
+        ..Default::default()
     };
     dataset::run(&prep, out, renderer, &mut textures, opts).unwrap()
 }

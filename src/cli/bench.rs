@@ -1,0 +1,273 @@
+//! `synosis bench-gpu`: the per-image benchmark of a dataset job on whatever Vulkan device
+//! is present (lavapipe included): images per hour, the stage split, the GPU's busy share
+//! of the run, peak memory, and the ray throughput of the backend. `tools/bench-gpu`
+//! wraps it; docs/benchmarks.md keeps the tables with their dates and devices.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context as _, Result};
+use clap::Args;
+use synosis::dataset::{self, RunOptions, Shard, gpu::GpuRenderer, texture_bridge::ModuleTextures};
+use synosis::vk::Profiler;
+
+#[derive(Args)]
+pub struct BenchGpuArgs {
+    /// The dataset job to time (docs/dataset.md).
+    #[arg(long, default_value = "scenes/paper-dataset.toml")]
+    job: PathBuf,
+    /// Work folder (the images are written there; it must be empty or absent).
+    #[arg(long)]
+    out: PathBuf,
+    /// Object instances to render (each with all of the job's views): the shard 0 of
+    /// `instances in the job / this` is rendered.
+    #[arg(long, default_value_t = 1)]
+    instances: usize,
+    /// Override the job's `[render] width` (pixels; the camera keeps its sensor size).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Override the job's `[render] height`.
+    #[arg(long)]
+    height: Option<u32>,
+    /// Override the job's `[render] spp`.
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Rays per set of the throughput test (primary and random rays on a 100 k-triangle
+    /// mesh): this squared; 0 skips it.
+    #[arg(long, default_value_t = 1024)]
+    rays_side: u32,
+    /// Also write the numbers as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Also write the run's Chrome trace here.
+    #[arg(long)]
+    profile: Option<PathBuf>,
+}
+
+/// The job text with `[render]` overrides.
+fn job_text(a: &BenchGpuArgs) -> Result<String> {
+    let text = std::fs::read_to_string(&a.job)
+        .with_context(|| format!("reading the job {}", a.job.display()))?;
+    let mut v: toml::Table =
+        toml::from_str(&text).with_context(|| format!("parsing the job {}", a.job.display()))?;
+    let render = v
+        .entry("render")
+        .or_insert_with(|| toml::Value::Table(Default::default()));
+    let r = render
+        .as_table_mut()
+        .context("the job's `render` is not a table")?;
+    for (key, val) in [("width", a.width), ("height", a.height), ("spp", a.spp)] {
+        if let Some(x) = val {
+            r.insert(key.into(), toml::Value::Integer(x as i64));
+        }
+    }
+    Ok(toml::to_string(&v)?)
+}
+
+fn peak_rss_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+pub fn run(a: BenchGpuArgs) -> Result<()> {
+    if a.instances == 0 {
+        anyhow::bail!("--instances 0: allowed 1 or more");
+    }
+    if a.out.exists() && std::fs::read_dir(&a.out)?.next().is_some() {
+        anyhow::bail!("--out {}: must be empty or absent", a.out.display());
+    }
+    let text = job_text(&a)?;
+    let base = a.job.parent().unwrap_or(Path::new("."));
+    let prep = dataset::prepare_text(&text, &a.job.display().to_string(), base)
+        .with_context(|| format!("job {}", a.job.display()))?;
+    let n_inst = prep.plan.instances.len().max(1);
+    let count = (n_inst / a.instances).max(1);
+    let shard = Shard { index: 0, count };
+
+    let profiler = Profiler::new();
+    let t0 = Instant::now();
+    let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
+    let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
+    let startup_s = t0.elapsed().as_secs_f64();
+    let describe = synosis::dataset::ImageRenderer::describe(&renderer);
+    let bar = indicatif::ProgressBar::new(0);
+    let mut progress = |done: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let loop_start_us = profiler.now_us();
+    let t1 = Instant::now();
+    dataset::run(
+        &prep,
+        &a.out,
+        &mut renderer,
+        &mut ModuleTextures::default(),
+        RunOptions {
+            shard,
+            progress: Some(&mut progress),
+            profiler: Some(&profiler),
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("dataset run into {}", a.out.display()))?;
+    bar.finish_and_clear();
+    let loop_s = t1.elapsed().as_secs_f64();
+    let loop_end_us = profiler.now_us();
+    if let Some(p) = &a.profile {
+        profiler
+            .write_chrome_trace(p)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    let manifest = a.out.join("manifests").join(shard.file_name());
+    let entries = dataset::read_manifest(&manifest, false)?;
+    let n = entries.len().max(1) as f64;
+    let mut stages: BTreeMap<String, f64> = BTreeMap::new();
+    for e in &entries {
+        for (k, v) in &e.stage_seconds {
+            *stages.entry(k.clone()).or_default() += v / n;
+        }
+    }
+    let gpu_ms = profiler.busy_ms("gpu");
+    let busy = gpu_ms / ((loop_end_us - loop_start_us) / 1e3).max(1e-9);
+    let per_image = loop_s / n;
+    let (w, h, spp) = (
+        prep.job.render.width,
+        prep.job.render.height,
+        prep.job.render.spp,
+    );
+
+    // Ray throughput of the renderer's backend on a 100 k-triangle mesh.
+    let rays = if a.rays_side > 0 {
+        Some(ray_throughput(accel, a.rays_side)?)
+    } else {
+        None
+    };
+
+    let info = synosis::vk::Context::new(&synosis::vk::ContextOptions {
+        validation: false,
+        ray_query: true,
+    })
+    .map(|c| format!("{} ({})", c.info.name, c.info.driver_info))
+    .unwrap_or_else(|e| format!("? ({e})"));
+    println!("| quantity | value |");
+    println!("|---|---|");
+    println!("| device | {info} |");
+    println!("| renderer | {describe} |");
+    println!(
+        "| job | {} : {} images ({} instance(s) of {}), {w} x {h}, {spp} spp |",
+        a.job.display(),
+        entries.len(),
+        prep.plan.instances.len().div_ceil(count),
+        n_inst
+    );
+    println!("| start-up (Vulkan, pipelines, energy tables) | {startup_s:.2} s |");
+    println!(
+        "| per image | {per_image:.2} s ({:.0} images per hour) |",
+        3600.0 / per_image
+    );
+    for (k, v) in &stages {
+        println!("| stage {k} | {v:.3} s |");
+    }
+    println!(
+        "| GPU busy | {:.1} % of the image loop ({gpu_ms:.0} ms of {:.0} ms) |",
+        100.0 * busy,
+        loop_s * 1e3
+    );
+    if let Some(m) = peak_rss_mib() {
+        println!("| peak memory (RSS) | {m:.0} MiB |");
+    }
+    if let Some((name, tris, nrays, p, r)) = &rays {
+        println!(
+            "| rays ({name}, {tris} triangles, {nrays} per set) | primary {p:.1} Mrays/s, random {r:.1} Mrays/s (GPU pass time) |"
+        );
+    }
+    if let Some(j) = &a.json {
+        let v = serde_json::json!({
+            "device": info,
+            "renderer": describe,
+            "images": entries.len(),
+            "width": w, "height": h, "spp": spp,
+            "startup_s": startup_s,
+            "per_image_s": per_image,
+            "images_per_hour": 3600.0 / per_image,
+            "stages_s": stages,
+            "gpu_busy_fraction": busy,
+            "peak_rss_mib": peak_rss_mib(),
+            "rays": rays.as_ref().map(|(name, tris, nrays, p, r)| serde_json::json!({
+                "backend": name, "triangles": tris, "rays_per_set": nrays,
+                "primary_mrays_s": p, "random_mrays_s": r,
+            })),
+        });
+        synosis::util::write_atomic(j, serde_json::to_string_pretty(&v)?.as_bytes())
+            .with_context(|| format!("writing {}", j.display()))?;
+    }
+    Ok(())
+}
+
+/// (backend, triangles, rays per set, primary Mrays/s, random Mrays/s), best of three.
+fn ray_throughput(
+    accel: synosis::trace::AccelChoice,
+    side: u32,
+) -> Result<(String, usize, usize, f64, f64)> {
+    use glam::Vec3;
+    use synosis::render::raycast::{RayIn, trace_rays};
+    use synosis::scene::Camera;
+    use synosis::scene::procedural::bumpy_sphere;
+    use synosis::trace::TraceScene;
+    let ctx = synosis::vk::Context::new(&synosis::vk::ContextOptions {
+        validation: false,
+        ray_query: true,
+    })?;
+    let backend = synosis::trace::resolve(accel, &ctx.info)?;
+    let mesh = bumpy_sphere(316, 159, 10.0, 0.05);
+    let cam = Camera::framing(&mesh, side, side);
+    let primary: Vec<RayIn> = (0..side * side)
+        .map(|i| RayIn {
+            origin: cam.eye.into(),
+            tmin: 0.0,
+            dir: cam.pixel_dir(i % side, i / side).into(),
+            tmax: 1e30,
+        })
+        .collect();
+    // Random rays around the mesh's box, from a splitmix64 hash of the ray index.
+    let (lo, hi) = mesh.bounds();
+    let hash = |i: u64, k: u64| {
+        let x = synosis::dataset::seed::splitmix64(i.wrapping_mul(4).wrapping_add(k));
+        (x >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let random: Vec<RayIn> = (0..(side * side) as u64)
+        .map(|i| {
+            let o = lo + (hi - lo) * Vec3::new(hash(i, 0), hash(i, 1), hash(i, 2)) * 1.5
+                - (hi - lo) * 0.25;
+            let u = 2.0 * hash(i, 3) - 1.0;
+            let phi = std::f32::consts::TAU * hash(i + (1 << 40), 0);
+            let s = (1.0 - u * u).sqrt();
+            RayIn {
+                origin: o.into(),
+                tmin: 0.0,
+                dir: [s * phi.cos(), s * phi.sin(), u],
+                tmax: 1e30,
+            }
+        })
+        .collect();
+    let scene = TraceScene::build(&ctx, &mesh, backend, None)?;
+    let mut rates = Vec::new();
+    for rays in [&primary, &random] {
+        trace_rays(&ctx, &scene, &rays[..rays.len().min(4096)], None)?;
+        let mut best = f64::INFINITY;
+        for _ in 0..3 {
+            best = best.min(trace_rays(&ctx, &scene, rays, None)?.1.gpu_ms);
+        }
+        rates.push(rays.len() as f64 / best.max(1e-9) / 1e3);
+    }
+    Ok((
+        backend.name().to_string(),
+        mesh.triangles.len(),
+        primary.len(),
+        rates[0],
+        rates[1],
+    ))
+}
