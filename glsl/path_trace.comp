@@ -243,7 +243,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                     }
                 }
             } else {
-                uint li = choose_light(e, ue, origin, ng);
+                float area_pdf;
+                uint li = choose_light_pdf(e, ue, origin, ng, emitter_pdf(ei), area_pdf);
                 Tri lt = fetch_tri(li);
                 float su = sqrt(ul.x);
                 float u2 = ul.y;
@@ -262,7 +263,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                         bool visible = s.prim == NO_HIT
                             || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
                         if (visible) {
-                            float pdf_light = dist2 / cos_l * light_area_pdf(li, origin, ng);
+                            float pdf_light = dist2 / cos_l * area_pdf;
                             L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
                         }
                     }

@@ -106,6 +106,42 @@ uint choose_light(LightBlock e, float u, vec3 x, vec3 n) {
     return base + k;
 }
 
+// Largest ring segment (triangles) whose weights choose_light_pdf keeps in a table.
+const uint FACING_TABLE = 64u;
+
+// choose_light and, for the triangle it returns, light_area_pdf times the probability of
+// choosing emitter ei (`sel`): the same choice for the same u and the same numbers, but a
+// facing ring segment's weights are evaluated once, kept in a table (segments of up to
+// FACING_TABLE triangles; larger ones take choose_light and light_area_pdf).
+uint choose_light_pdf(LightBlock e, float u, vec3 x, vec3 n, float sel, out float area_pdf) {
+    uint segments = e.shape.w;
+    uint segment_tris = segments == 0u ? 0u : e.shape.y / segments;
+    if (e.shape.z != LIGHT_FACING || segment_tris > FACING_TABLE) {
+        uint tri = choose_light(e, u, x, n);
+        area_pdf = light_area_pdf(tri, x, n);
+        return tri;
+    }
+    float fs = u * float(segments);
+    uint seg = min(uint(fs), segments - 1u);
+    uint base = prm.light_first + e.shape.x + seg * segment_tris;
+    float w[FACING_TABLE];
+    float wsum = 0.0;
+    for (uint k = 0u; k < segment_tris; k++) {
+        w[k] = light_weight(base + k, x, n);
+        wsum += w[k];
+    }
+    float target = clamp(fs - float(seg), 0.0, 1.0) * wsum;
+    float acc = 0.0;
+    uint k = 0u;
+    for (; k + 1u < segment_tris; k++) {
+        acc += w[k];
+        if (acc > target) break;
+    }
+    float area = 0.5 * length(tri_normal(fetch_tri(base + k)));
+    area_pdf = wsum > 0.0 ? w[k] / (wsum * float(segments) * area) * sel : 0.0;
+    return base + k;
+}
+
 // Intensity of spot e towards direction w (unit, from the light), times 1e6 mm^2/m^2:
 // full inside the inner cone, zero beyond the edge, smoothstep between.
 float spot_intensity(LightBlock e, vec3 w) {
