@@ -52,6 +52,8 @@ pub struct GpuScene {
     pub(crate) materials: Buffer,
     /// The material table (`SurfaceBlock` per `[[material.region]]` entry).
     pub(crate) surfaces: Buffer,
+    /// What `surfaces` was made from.
+    surface_list: Vec<SurfaceMaterial>,
     pub(crate) labels: Buffer,
     maps: MapBuffers,
     face_frames: Vec<FaceFrame>,
@@ -123,6 +125,7 @@ impl GpuScene {
                 &surface_blocks(&stage.surfaces),
                 storage,
             )?,
+            surface_list: stage.surfaces.clone(),
             labels: Buffer::from_slice(ctx, "triangle labels", &labels, storage)?,
             maps,
             face_frames: stage.face_frames.clone(),
@@ -146,6 +149,41 @@ impl GpuScene {
             let placed = place_maps(maps, &self.face_frames, &self.regions, placement)?;
             self.maps = upload_maps(tracer, &placed, self.regions.len() + 1, key)?;
         }
+        Ok(())
+    }
+
+    /// Replaces the material table's values (`[[material.region]]` entry i stays entry
+    /// i: which triangle takes which entry is the stage's); uploads only when they
+    /// differ. A dataset job's entries take each instance's alpha. The number of entries
+    /// must be the stage's (or zero when the stage had none).
+    pub fn set_surfaces(
+        &mut self,
+        tracer: &PathTracer,
+        surfaces: &[SurfaceMaterial],
+    ) -> Result<(), RenderError> {
+        if surfaces == self.surface_list.as_slice() {
+            return Ok(());
+        }
+        if surfaces.len() != self.surface_list.len() {
+            return Err(RenderError::Assemble(
+                crate::scene::config::ConfigError::Invalid {
+                    field: "material.region",
+                    message: format!(
+                        "{} entries for a scene built with {}",
+                        surfaces.len(),
+                        self.surface_list.len()
+                    ),
+                }
+                .into(),
+            ));
+        }
+        self.surfaces = Buffer::from_slice(
+            &tracer.ctx,
+            "material table",
+            &surface_blocks(surfaces),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+        )?;
+        self.surface_list = surfaces.to_vec();
         Ok(())
     }
 
