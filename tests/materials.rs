@@ -387,7 +387,11 @@ fn job_objects_take_region_materials() {
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
         let (plain, faces) = render(&base);
         let (same_img, _) = render(&same);
-        assert_eq!(bits(&plain), bits(&same_img), "{accel:?}: an entry equal to the object's conductor");
+        assert_eq!(
+            bits(&plain),
+            bits(&same_img),
+            "{accel:?}: an entry equal to the object's conductor"
+        );
         let (diff_img, diff_faces) = render(&diffuse);
         assert_eq!(faces, diff_faces);
         // faces.png labels a pixel by its centre, the radiance integrates the pixel:
@@ -409,12 +413,22 @@ fn job_objects_take_region_materials() {
                 a_diff += diff_img[p] as f64;
                 n_a += 1;
             } else if !near_a(p) {
-                assert_eq!(plain[p].to_bits(), diff_img[p].to_bits(), "{accel:?}: pixel {p} is not on A");
+                assert_eq!(
+                    plain[p].to_bits(),
+                    diff_img[p].to_bits(),
+                    "{accel:?}: pixel {p} is not on A"
+                );
                 n_off += 1;
             }
         }
-        assert!(n_a >= 50 && n_off >= 50, "{accel:?}: {n_a} pixels on A, {n_off} off it");
+        assert!(
+            n_a >= 50 && n_off >= 50,
+            "{accel:?}: {n_a} pixels on A, {n_off} off it"
+        );
         let rel = (a_diff - a_plain).abs() / a_plain.max(1e-12);
-        assert!(rel > 0.2, "{accel:?}: the diffuse face A renders as the conductor ({a_diff} vs {a_plain})");
+        assert!(
+            rel > 0.2,
+            "{accel:?}: the diffuse face A renders as the conductor ({a_diff} vs {a_plain})"
+        );
     }
 }

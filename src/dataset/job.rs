@@ -597,8 +597,10 @@ impl Object {
             ..Default::default()
         };
         crate::scene::materials::resolve(&m.region, &base, wavelength_nm).map_err(|e| {
-            e.to_string()
-                .replace("material.region", &format!("object[{index}].material.region"))
+            e.to_string().replace(
+                "material.region",
+                &format!("object[{index}].material.region"),
+            )
         })
     }
 }

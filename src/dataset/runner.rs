@@ -161,14 +161,15 @@ fn check_region_materials(
     let found = planar_regions(mesh, &RegionTolerance::default());
     let normals: Vec<glam::Vec3> = found.iter().map(|r| r.normal).collect();
     let region_of = region_per_triangle(mesh, &found);
-    crate::scene::materials::assign(&entries, &mesh.labels, &normals, &region_of, gltf)
-        .map_err(|e| DatasetError::Parse {
+    crate::scene::materials::assign(&entries, &mesh.labels, &normals, &region_of, gltf).map_err(
+        |e| DatasetError::Parse {
             file: job.origin.clone(),
             message: e.to_string().replace(
                 "material.region",
                 &format!("object[{object}].material.region"),
             ),
-        })?;
+        },
+    )?;
     Ok(())
 }
 
@@ -773,7 +774,11 @@ impl<'p> Ctx<'p> {
         self.mesh = None;
         let inst = &self.prep.plan.instances[inst_index];
         let base = &self.prep.meshes[inst.object];
-        let gltf = self.prep.gltf_materials.get(inst.object).and_then(|g| g.as_ref());
+        let gltf = self
+            .prep
+            .gltf_materials
+            .get(inst.object)
+            .and_then(|g| g.as_ref());
         let defect_err = |source| DatasetError::Defect {
             object: self.prep.job.objects[inst.object].name.clone(),
             source,

@@ -15,8 +15,8 @@
 //! the axis `a`, a reference radial direction `e0` (the area-weighted mean radial
 //! direction of its facets; for a full revolution that of its first facet), the mean
 //! radius, and the generatrix direction t = sin(beta) r + cos(beta) a in the (radial,
-//! axial) plane, oriented so that t x (a x r)... is the outward normal:
-//! the outward normal is cos(beta) r - sin(beta) a. A point p maps to
+//! axial) plane (r the radial unit vector), oriented so that the outward normal is
+//! (a x r) x t = cos(beta) r - sin(beta) a. A point p maps to
 //! u = radius * theta (theta about `a` from `e0`) and v = rho sin(beta) + h cos(beta)
 //! (rho its distance from the axis, h its height along `a` from `centre`): a function of
 //! the position alone, so two facets sharing an edge give the same (u, v) there.
@@ -73,8 +73,7 @@ pub struct CurvedPatch {
     /// The generatrix direction in the (radial, axial) plane: (sin beta, cos beta).
     pub sin_beta: f32,
     pub cos_beta: f32,
-    /// The facets span the whole revolution (no edge of the patch runs along the axis
-    /// direction... i.e. theta covers 360 degrees).
+    /// The facets go all the way round the axis (a bore, a hole, an outer wall).
     pub full_turn: bool,
 }
 
@@ -220,7 +219,11 @@ fn fit(facets: &[Facet], tol: &CurvedTolerance) -> Option<CurvedPatch> {
         (rhs.x * lhs[1][1] - rhs.y * lhs[0][1]) / det,
         (lhs[0][0] * rhs.y - lhs[1][0] * rhs.x) / det,
     );
-    let h_mean = facets.iter().map(|f| f.centroid.dot(a) * f.area).sum::<f64>() / w;
+    let h_mean = facets
+        .iter()
+        .map(|f| f.centroid.dot(a) * f.area)
+        .sum::<f64>()
+        / w;
     let centre = b1 * c2.x + b2 * c2.y + a * h_mean;
     // Radius, orientation of the generatrix, fit of the axis line.
     let mut radius = 0.0;
@@ -374,4 +377,84 @@ pub fn curved_patches(
             fit(&facets, tol)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::regions::{RegionTolerance, planar_regions, region_per_triangle};
+    use crate::scene::{FlangeParams, Variant, flange, testbody};
+
+    fn patches(mesh: &Mesh) -> (Vec<PlanarRegion>, Vec<CurvedPatch>) {
+        let found = planar_regions(mesh, &RegionTolerance::default());
+        let region_of = region_per_triangle(mesh, &found);
+        let p = curved_patches(mesh, &found, &region_of, &CurvedTolerance::default());
+        (found, p)
+    }
+
+    #[test]
+    fn the_flange_has_seven_surfaces_of_revolution_and_the_test_body_none() {
+        for v in [Variant::B, Variant::M] {
+            assert!(patches(&testbody(v)).1.is_empty(), "{v:?}");
+        }
+        let fp = FlangeParams::default();
+        let (regions, p) = patches(&flange(&fp));
+        // Outer wall, chamfer, bore and 4 holes; every facet in one patch.
+        assert_eq!(p.len(), 3 + fp.hole_count as usize);
+        let facets: usize = p.iter().map(|c| c.regions.len()).sum();
+        assert_eq!(facets, fp.facet_count());
+        assert_eq!(regions.len(), fp.facet_count() + 2);
+        let mut sizes: Vec<usize> = p.iter().map(|c| c.regions.len()).collect();
+        sizes.sort_unstable();
+        let h = fp.hole_segments as usize;
+        let o = fp.outer_segments as usize;
+        assert_eq!(
+            sizes,
+            [h, h, h, h, fp.bore_segments as usize, o, o],
+            "{sizes:?}"
+        );
+        for c in &p {
+            assert!(c.full_turn);
+            assert!((c.axis.z.abs() - 1.0).abs() < 1e-6, "axis {}", c.axis);
+            // The generatrix: vertical walls (beta 0), the chamfer at 45 degrees.
+            let slanted = (c.sin_beta.abs() - 0.5f32.sqrt()).abs() < 1e-3;
+            assert!(c.sin_beta.abs() < 1e-4 || slanted, "{c:?}");
+            // The outward normal (cos beta r - sin beta a) matches each facet's.
+            for &r in &c.regions {
+                let reg = &regions[r as usize];
+                let (tu, tv) = c.tangents(reg.centre);
+                assert!(tu.cross(tv).dot(reg.normal) > 0.99, "{c:?}");
+            }
+        }
+        let bore = p
+            .iter()
+            .find(|c| c.regions.len() == fp.bore_segments as usize)
+            .unwrap();
+        let centre = glam::Vec2::new(bore.centre.x, bore.centre.y);
+        assert!(centre.length() < 1e-4, "bore axis at {centre}");
+        // The facet centroids lie at R cos(pi / n) from the axis.
+        let want = fp.bore_radius * (std::f64::consts::PI / fp.bore_segments as f64).cos();
+        assert!((bore.radius as f64 - want).abs() < 1e-4, "{}", bore.radius);
+    }
+
+    #[test]
+    fn uv_is_a_function_of_position_and_follows_the_surface() {
+        let fp = FlangeParams::default();
+        let (_, p) = patches(&flange(&fp));
+        let bore = p
+            .iter()
+            .find(|c| c.regions.len() == fp.bore_segments as usize)
+            .unwrap();
+        // Around the axis u grows by radius x angle, along it v by the height (up or
+        // down, with the generatrix's orientation).
+        let at = |deg: f32, z: f32| {
+            let e1 = bore.axis.cross(bore.e0);
+            let (s, c) = deg.to_radians().sin_cos();
+            bore.centre + (bore.e0 * c + e1 * s) * bore.radius + bore.axis * z
+        };
+        let [u0, v0] = bore.uv(at(10.0, 0.0));
+        let [u1, v1] = bore.uv(at(30.0, 1.0));
+        assert!((u1 - u0 - bore.radius * 20f32.to_radians()).abs() < 1e-4);
+        assert!(((v1 - v0).abs() - 1.0).abs() < 1e-5);
+    }
 }
