@@ -128,15 +128,15 @@ fn smallest_eigenvector(m: DMat3) -> DVec3 {
             let t = if theta == 0.0 { 1.0 } else { t };
             let c = 1.0 / (t * t + 1.0).sqrt();
             let s = t * c;
-            for k in 0..3 {
-                let (akp, akq) = (a[k][p], a[k][q]);
-                a[k][p] = c * akp - s * akq;
-                a[k][q] = s * akp + c * akq;
+            for row in &mut a {
+                let (akp, akq) = (row[p], row[q]);
+                row[p] = c * akp - s * akq;
+                row[q] = s * akp + c * akq;
             }
+            let (rp, rq) = (a[p], a[q]);
             for k in 0..3 {
-                let (apk, aqk) = (a[p][k], a[q][k]);
-                a[p][k] = c * apk - s * aqk;
-                a[q][k] = s * apk + c * aqk;
+                a[p][k] = c * rp[k] - s * rq[k];
+                a[q][k] = s * rp[k] + c * rq[k];
             }
             for row in &mut v {
                 let (vp, vq) = (row[p], row[q]);
@@ -212,7 +212,7 @@ fn fit(facets: &[Facet], tol: &CurvedTolerance) -> Option<CurvedPatch> {
     }
     let det = lhs[0][0] * lhs[1][1] - lhs[0][1] * lhs[1][0];
     let scale = lhs[0][0] + lhs[1][1];
-    if !(det.abs() > 1e-6 * scale * scale) {
+    if det.abs() <= 1e-6 * scale * scale || !det.is_finite() {
         return None; // the normal lines are (nearly) parallel: no axis to find
     }
     let c2 = DVec2::new(
