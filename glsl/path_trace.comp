@@ -41,6 +41,41 @@ layout(std430, set = 0, binding = PT_SLOPES0) readonly buffer Slopes0 { uint slo
 layout(std430, set = 0, binding = PT_SLOPES1) readonly buffer Slopes1 { uint slopes1[]; };
 layout(std430, set = 0, binding = PT_SLOPES2) readonly buffer Slopes2 { uint slopes2[]; };
 
+// Curved patches' projections (MAP_REVOLVED slots), one per slot; see
+// src/scene/curved.rs and CurvedMapBlock in src/gpu_interface.in.
+layout(std430, set = 0, binding = PT_CURVED_MAPS) readonly buffer CurvedMaps { CurvedMapBlock curved_maps[]; };
+
+// Map-plane coordinates of p (mm along the map's x and up axes from its centre): the
+// planar projection, or on a curved patch u = arc radius * theta about the axis and v
+// along the generatrix, both functions of p alone (continuous across facets).
+vec2 map_plane(uint slot, MapHeader m, vec3 p) {
+    vec3 d = p - m.origin.xyz;
+    if ((m.dims.w & MAP_REVOLVED) == 0u) return vec2(dot(d, m.axis_x.xyz), dot(d, m.axis_up.xyz));
+    CurvedMapBlock c = curved_maps[slot];
+    vec3 a = m.axis_up.xyz;
+    float h = dot(d, a);
+    vec3 r = d - h * a;
+    float theta = atan(dot(r, cross(a, m.axis_x.xyz)), dot(r, m.axis_x.xyz));
+    return vec2(c.profile.z * theta - c.place.x,
+                length(r) * c.profile.x + h * c.profile.y - c.place.y);
+}
+
+// The map's x and up axes at p: the header's, or on a curved patch the unit tangents
+// about the axis and along the generatrix (their cross product is the outward normal).
+void map_axes(uint slot, MapHeader m, vec3 p, out vec3 ax, out vec3 up) {
+    ax = m.axis_x.xyz;
+    up = m.axis_up.xyz;
+    if ((m.dims.w & MAP_REVOLVED) != 0u) {
+        CurvedMapBlock c = curved_maps[slot];
+        vec3 d = p - m.origin.xyz;
+        vec3 r = d - dot(d, up) * up;
+        float rl = length(r);
+        r = rl > 0.0 ? r / rl : vec3(0.0);
+        ax = cross(up, r);
+        up = r * c.profile.x + up * c.profile.y;
+    }
+}
+
 vec2 slope_texel(uint buf, uint i) {
     uint w;
     if (buf == 1u) w = slopes0[i];
@@ -93,10 +128,10 @@ vec2 map_slopes(uint slot, vec3 p) {
     MapHeader m = map_headers[slot];
     uint buf = m.dims.w & MAP_BUFFER_MASK;
     if (buf == 0u) return vec2(0.0);
-    vec3 d = p - m.origin.xyz;
+    vec2 q = map_plane(slot, m, p);
     vec2 wh = vec2(m.dims.xy);
-    float x = dot(d, m.axis_x.xyz) * m.origin.w + 0.5 * wh.x;
-    float y = -dot(d, m.axis_up.xyz) * m.origin.w + 0.5 * wh.y;
+    float x = q.x * m.origin.w + 0.5 * wh.x;
+    float y = -q.y * m.origin.w + 0.5 * wh.y;
     uint x0, y0, x1, y1;
     float tx, ty;
     if ((m.dims.w & MAP_WRAP) != 0u) {
@@ -135,14 +170,16 @@ vec2 map_slopes(uint slot, vec3 p) {
 vec3 shading_normal(uint slot, vec3 p, vec3 ng) {
     MapHeader m = map_headers[slot];
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
+    vec3 mx, mu;
+    map_axes(slot, m, p, mx, mu);
     // Seen from inside (not the region's outward side): no perturbation.
-    if (dot(cross(m.axis_x.xyz, m.axis_up.xyz), ng) <= 0.0) return ng;
+    if (dot(cross(mx, mu), ng) <= 0.0) return ng;
     vec2 s = map_slopes(slot, p);
     if (s.x == 0.0 && s.y == 0.0) return ng;
     float len = length(s);
     if (len > MAX_SLOPE) s *= MAX_SLOPE / len;
-    vec3 ax = m.axis_x.xyz - dot(m.axis_x.xyz, ng) * ng;
-    vec3 up = m.axis_up.xyz - dot(m.axis_up.xyz, ng) * ng;
+    vec3 ax = mx - dot(mx, ng) * ng;
+    vec3 up = mu - dot(mu, ng) * ng;
     // n = normalize(-dh/dx, -dh/dup, 1) in (x, up, n) with dh/dup = -dh/dy.
     return normalize(ng - s.x * ax + s.y * up);
 }

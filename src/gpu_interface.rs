@@ -93,7 +93,8 @@ mod tests {
         assert_eq!(std::mem::size_of::<PathPush>(), 32);
         // Push constants: 128 bytes is all Vulkan guarantees.
         assert_eq!(std::mem::size_of::<ImagePush>(), 128);
-        assert_eq!(PathTraceBinding::COUNT, 13);
+        assert_eq!(PathTraceBinding::COUNT, 14);
+        assert_eq!(PathTraceBinding::CurvedMaps.at(2), 15);
         assert_eq!(PathTraceBinding::LightGeometry.at(2), 12);
         assert_eq!(PathTraceBinding::LightList.at(2), 13);
         assert_eq!(std::mem::size_of::<LightBlock>(), 64);

@@ -300,3 +300,135 @@ fn flange_materials_scene_selects_face_and_chamfer() {
     }
     assert_eq!(chamfer_regions.len(), 96, "the chamfer's facets");
 }
+
+/// A dataset job's `[[object.material.region]]` entries (docs/dataset.md): an entry equal
+/// to the object's own conductor (no values: aluminium, the instance's drawn alpha, the
+/// finish) renders bit for bit as no entry; a diffuse face A changes face A's pixels and
+/// no other (one bounce: nothing else sees A's BSDF); bad entries are refused by
+/// `prepare_text`, before any rendering, naming `object[0].material.region`. Both
+/// backends, validation on.
+#[test]
+fn job_objects_take_region_materials() {
+    use synosis::dataset::gpu::GpuRenderer;
+    use synosis::trace::AccelChoice;
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let base = std::fs::read_to_string(scenes.join("flange-dataset.toml"))
+        .unwrap()
+        .replace(
+            "plan = { ring = { face = \"A\", tilt_deg = 20, count = 3 } }",
+            "",
+        )
+        .replace("width = 64", "width = 40")
+        .replace("height = 48", "height = 30")
+        .replace("spp = 4", "spp = 2")
+        .replace("bounces = 2", "bounces = 1")
+        .replace("defect_free = 2", "defect_free = 1");
+    let with = |entry: &str| base.replace("defect_free = 1", &format!("defect_free = 1\n{entry}"));
+    let prep = |text: &str| synosis::dataset::prepare_text(text, "job.toml", scenes);
+
+    // The instance's alpha reaches entries that give none; their own is kept.
+    let p = prep(&with(
+        "[[object.material.region]]\nselect = [\"A\"]\npreset = \"steel\"\n[[object.material.region]]\nselect = [{ normal = [0, 0, -1] }]\nalpha = 0.3\n",
+    ))
+    .unwrap();
+    let r = p.job.objects[0].region_materials(0, 0.04, 550.0).unwrap();
+    assert_eq!((r[0].material.alpha, r[1].material.alpha), (0.04, 0.3));
+    assert_eq!(
+        (r[0].material.ior_n, r[0].material.ior_k),
+        Preset::Steel.ior()
+    );
+
+    for (entry, want) in [
+        (
+            "select = [\"A\"]\nalpha = 0.0",
+            "job.toml: object[0].material.region: entry 0: alpha = 0 is out of range: allowed (0, 1]",
+        ),
+        (
+            "select = [\"A\"]\nkind = \"glass\"",
+            "object[0].material.region: entry 0: kind = \"glass\": allowed",
+        ),
+        (
+            "select = [\"region:9999\"]",
+            "object[0].material.region: entry 0: select region:9999: the mesh has",
+        ),
+        (
+            "select = [{ normal = [1, 1, 1], tolerance_deg = 0 }]",
+            "object[0].material.region: entry 0: select normal",
+        ),
+        (
+            "select = [{ gltf_material = \"Steel\" }]",
+            "object[0].material.region: entry 0: select gltf_material \"Steel\": the object is not a glTF file",
+        ),
+        ("select = [\"A\"]\nshine = 1", "shine"),
+    ] {
+        let e = prep(&with(&format!("[[object.material.region]]\n{entry}\n")))
+            .err()
+            .unwrap_or_else(|| panic!("{entry}: accepted"))
+            .to_string();
+        assert!(e.contains(want), "{entry}: {e}");
+    }
+
+    let same = with("[[object.material.region]]\nselect = [\"A\"]\n");
+    let diffuse =
+        with("[[object.material.region]]\nselect = [\"A\"]\nkind = \"diffuse\"\nalbedo = 0.9\n");
+    for accel in [AccelChoice::RayQuery, AccelChoice::Software] {
+        let mut r = GpuRenderer::new(accel, true).unwrap();
+        let mut render = |text: &str| {
+            let prep = prep(text).unwrap();
+            let tmp = tempfile::tempdir().unwrap();
+            let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+            synosis::dataset::render_one(&prep, 0, tmp.path(), &mut r, &mut textures).unwrap();
+            let dir = tmp.path().join("images/000000");
+            let (_, _, radiance) =
+                synosis::image_io::read_exr_f32(&dir.join("radiance.exr")).unwrap();
+            let faces = image::open(dir.join("faces.png")).unwrap().into_luma8();
+            (radiance, faces.into_raw())
+        };
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+        let (plain, faces) = render(&base);
+        let (same_img, _) = render(&same);
+        assert_eq!(
+            bits(&plain),
+            bits(&same_img),
+            "{accel:?}: an entry equal to the object's conductor"
+        );
+        let (diff_img, diff_faces) = render(&diffuse);
+        assert_eq!(faces, diff_faces);
+        // faces.png labels a pixel by its centre, the radiance integrates the pixel:
+        // pixels next to an A pixel may hold some of A.
+        let (w, h) = (40i64, 30i64);
+        let near_a = |p: usize| {
+            let (x, y) = (p as i64 % w, p as i64 / w);
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| {
+                    let (u, v) = (x + dx, y + dy);
+                    (0..w).contains(&u) && (0..h).contains(&v) && faces[(v * w + u) as usize] == 1
+                })
+            })
+        };
+        let (mut a_plain, mut a_diff, mut n_a, mut n_off) = (0.0f64, 0.0f64, 0, 0);
+        for p in 0..plain.len() {
+            if faces[p] == 1 {
+                a_plain += plain[p] as f64;
+                a_diff += diff_img[p] as f64;
+                n_a += 1;
+            } else if !near_a(p) {
+                assert_eq!(
+                    plain[p].to_bits(),
+                    diff_img[p].to_bits(),
+                    "{accel:?}: pixel {p} is not on A"
+                );
+                n_off += 1;
+            }
+        }
+        assert!(
+            n_a >= 50 && n_off >= 50,
+            "{accel:?}: {n_a} pixels on A, {n_off} off it"
+        );
+        let rel = (a_diff - a_plain).abs() / a_plain.max(1e-12);
+        assert!(
+            rel > 0.2,
+            "{accel:?}: the diffuse face A renders as the conductor ({a_diff} vs {a_plain})"
+        );
+    }
+}

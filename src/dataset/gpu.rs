@@ -13,6 +13,7 @@ use crate::render::slope::FaceMap;
 use crate::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
 use crate::scene::assemble::{DefectSurface, Stage, ViewSetup};
 use crate::scene::config::SceneConfig;
+use crate::scene::materials::RegionSelector;
 use crate::scene::mesh::FACE_OTHER;
 use crate::trace::{AccelChoice, resolve};
 use crate::vk::{Context, ContextOptions, Profiler};
@@ -26,8 +27,8 @@ const FACE_OBJECT_OTHER: u8 = 4;
 pub struct GpuRenderer {
     ctx: Arc<Context>,
     tracer: PathTracer,
-    /// The GPU scene of the last mesh key.
-    cached: Option<(u64, GpuScene)>,
+    /// The GPU scene of the last mesh key and region-material selectors.
+    cached: Option<(SceneKey, GpuScene)>,
     base: SceneConfig,
     stages: Vec<(String, f64)>,
     /// The timeline of the last image (CPU phases, GPU passes).
@@ -57,15 +58,25 @@ impl GpuRenderer {
     }
 }
 
-/// The GPU scene for `req`'s mesh: the cached one when the mesh key is the same.
+/// What a GPU scene is built from besides the table: the mesh (by key) and which
+/// triangles take which region material (the selectors; the materials' values are set
+/// per request).
+type SceneKey = (u64, Vec<Vec<RegionSelector>>);
+
+/// The GPU scene for `req`'s mesh: the cached one when the mesh key and the material
+/// selectors are the same.
 fn scene_for<'c>(
-    cached: &'c mut Option<(u64, GpuScene)>,
+    cached: &'c mut Option<(SceneKey, GpuScene)>,
     tracer: &PathTracer,
     base: &SceneConfig,
     req: &ImageRequest,
     profiler: &Profiler,
 ) -> Result<&'c mut GpuScene, String> {
-    if cached.as_ref().map(|c| c.0) != Some(req.mesh_key) {
+    let key: SceneKey = (
+        req.mesh_key,
+        req.materials.iter().map(|m| m.selectors.clone()).collect(),
+    );
+    if cached.as_ref().map(|c| &c.0) != Some(&key) {
         *cached = None; // free the old scene before building the next
         let mut object = req.mesh.clone();
         for l in &mut object.labels {
@@ -76,11 +87,18 @@ fn scene_for<'c>(
         let mut stage = profiler.cpu("stage (planar regions)", || {
             Stage::new(object, base.object.position_mm, &base.table)
         });
+        if !req.materials.is_empty() {
+            // Which triangle takes which entry depends on the mesh only (one object per
+            // mesh key); the entries' values (an instance's alpha) are set per request.
+            stage
+                .set_region_materials(req.materials, req.gltf_materials)
+                .map_err(|e| e.to_string())?;
+        }
         if req.placement.defects == DefectSurface::Burnished {
             stage.burnish_defects();
         }
         let scene = GpuScene::new(tracer, &stage, Some(profiler)).map_err(|e| e.to_string())?;
-        *cached = Some((req.mesh_key, scene));
+        *cached = Some((key, scene));
     }
     Ok(&mut cached.as_mut().expect("just filled").1)
 }
@@ -139,6 +157,10 @@ impl ImageRenderer for GpuRenderer {
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
         scene
             .set_face_maps(tracer, &face_maps(req), &req.placement)
+            .map_err(|e| e.to_string())?;
+        let surfaces: Vec<_> = req.materials.iter().map(|m| m.material.clone()).collect();
+        scene
+            .set_surfaces(tracer, &surfaces)
             .map_err(|e| e.to_string())?;
         let (frames, first_light) = (scene.face_frames(), scene.triangle_count);
         let setup = ViewSetup::for_pose(frames, first_light, &pose, &cfg.camera, &cfg.light)

@@ -566,10 +566,54 @@ pub struct Object {
     /// Finishes this object is made in; default all, in job order.
     #[serde(default)]
     pub finishes: Option<Vec<String>>,
+    /// Materials per region of this object (`[[object.material.region]]`, the entries of
+    /// a scene file's `[[material.region]]`); none: the whole object is the job's
+    /// `[material]` conductor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<ObjectMaterial>,
     /// Instances per finish carrying defect set 0, 1, ... (cycled if fewer sets).
     pub defective: i64,
     /// Instances per finish without defects.
     pub defect_free: i64,
+}
+
+/// An object's `material` table: only its region entries (the object's own conductor
+/// is the job's `[material]` roughness draw).
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectMaterial {
+    /// As a scene file's `[[material.region]]` (docs/scene-format.md): selectors, kind,
+    /// preset / IOR, alpha / roughness, albedo, finish.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub region: Vec<crate::scene::materials::RegionMaterialConfig>,
+}
+
+impl Object {
+    /// The object's region materials, checked, for an instance whose conductor has GGX
+    /// alpha `alpha`: entries without `alpha` / `roughness` take it (as a scene file's
+    /// entries take `[material]`'s), entries without a preset or IOR take aluminium.
+    /// `wavelength_nm`: the camera's (presets are tabulated at 550 nm). Errors name
+    /// `object[<index>].material.region` and the entry.
+    pub fn region_materials(
+        &self,
+        index: usize,
+        alpha: f32,
+        wavelength_nm: f64,
+    ) -> std::result::Result<Vec<crate::scene::materials::RegionMaterial>, String> {
+        let Some(m) = &self.material else {
+            return Ok(Vec::new());
+        };
+        let base = crate::scene::config::MaterialConfig {
+            alpha,
+            ..Default::default()
+        };
+        crate::scene::materials::resolve(&m.region, &base, wavelength_nm).map_err(|e| {
+            e.to_string().replace(
+                "material.region",
+                &format!("object[{index}].material.region"),
+            )
+        })
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -1019,6 +1063,14 @@ impl Job {
                     }
                 }
             }
+            // Region materials: the scene file's checks (an entry that gives no alpha
+            // takes the instance's, drawn from the checked range: any value does here).
+            let placeholder = crate::scene::config::MaterialConfig::default().alpha;
+            o.region_materials(i, placeholder, self.scene_base().wavelength_nm())
+                .map_err(|message| DatasetError::Parse {
+                    file: self.origin.clone(),
+                    message,
+                })?;
             if let Some(list) = &o.inspect {
                 crate::scene::inspect::parse(list).map_err(|e| {
                     self.field(

@@ -86,6 +86,12 @@ pub struct ImageRequest<'a> {
     pub camera: &'a crate::scene::config::CameraConfig,
     /// The job's `[[light]]` entries (checked); empty: the default ring on the camera.
     pub lights: &'a [crate::scene::lights::LightEntry],
+    /// The object's materials per region (`[[object.material.region]]`, checked, with
+    /// this instance's alpha where an entry gives none); empty: the whole object is the
+    /// conductor of `alpha`.
+    pub materials: &'a [crate::scene::materials::RegionMaterial],
+    /// The glTF material of each triangle of `mesh` (for `gltf_material` selectors).
+    pub gltf_materials: Option<&'a crate::scene::materials::GltfMaterials>,
     /// GGX alpha of the aluminium (appleseed / Disney roughness r = sqrt(alpha)).
     pub alpha: f32,
     pub face_textures: Vec<FaceTexture>,

@@ -22,9 +22,10 @@ use super::post::{self, DefectVisibility, Frame};
 use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
 use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, texture_error};
-use crate::defect::{DefectSet, DefectSpec, imprint, sample_defects};
+use crate::defect::{DefectSet, DefectSpec, imprint, imprint_traced, sample_defects};
 use crate::render::pixels::{quantise_units_deep, quantise_units8};
 use crate::scene::assemble::Placement;
+use crate::scene::materials::GltfMaterials;
 use crate::scene::{Degenerates, Mesh, face_frames, testbody};
 use crate::vk::Profiler;
 
@@ -35,6 +36,9 @@ pub struct Prepared {
     pub job_text: String,
     pub plan: Plan,
     pub meshes: Vec<Mesh>,
+    /// The glTF material of each triangle of `meshes[i]` when object i is a glTF file
+    /// with materials (for `{ gltf_material = ... }` region selectors).
+    pub gltf_materials: Vec<Option<GltfMaterials>>,
     pub defect_sets: Vec<DefectSet>,
 }
 
@@ -49,11 +53,12 @@ pub fn prepare(job_path: &Path) -> Result<Prepared> {
 pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepared> {
     let job = Job::parse(text, origin, base_dir)?;
     let mut meshes = Vec::new();
+    let mut gltf_materials = Vec::new();
     for (i, o) in job.objects.iter().enumerate() {
-        let mesh = match builtin_variant(&o.mesh) {
-            Some(v) => testbody(v),
+        let (mesh, gltf) = match builtin_variant(&o.mesh) {
+            Some(v) => (testbody(v), None),
             None => {
-                crate::scene::load_mesh(
+                let imported = crate::scene::load_mesh(
                     &job.resolve(&o.mesh),
                     o.unit,
                     crate::scene::GltfUnitDefault::Millimetres,
@@ -63,8 +68,8 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
                     object: o.name.clone(),
                     source,
                 })?
-                .imported
-                .mesh
+                .imported;
+                (imported.mesh, imported.materials)
             }
         };
         let mut mesh = mesh;
@@ -79,7 +84,9 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
             crate::scene::inspect::apply(&mut mesh, &sel, &Default::default()).map_err(field)?;
         }
         check_texture_cover(&job, i, &mesh)?;
+        check_region_materials(&job, i, &mesh, gltf.as_ref())?;
         meshes.push(mesh);
+        gltf_materials.push(gltf);
     }
     let spec = if job.defects.spec == "paper" {
         DefectSpec::paper()
@@ -122,8 +129,49 @@ pub fn prepare_text(text: &str, origin: &str, base_dir: &Path) -> Result<Prepare
         job_text: text.to_string(),
         plan,
         meshes,
+        gltf_materials,
         defect_sets,
     })
+}
+
+/// An object's region materials select triangles of its mesh (a region id past the
+/// last, a selector that chooses nothing, an unknown glTF material name are refused
+/// now, as a scene file's are when its stage is built). Imprinted defects keep every
+/// triangle's face label, region and glTF material, so what selects here selects on
+/// each instance.
+fn check_region_materials(
+    job: &Job,
+    object: usize,
+    mesh: &Mesh,
+    gltf: Option<&GltfMaterials>,
+) -> Result<()> {
+    use crate::scene::regions::{RegionTolerance, planar_regions, region_per_triangle};
+    let entries = job.objects[object]
+        .region_materials(
+            object,
+            crate::scene::config::MaterialConfig::default().alpha,
+            job.scene_base().wavelength_nm(),
+        )
+        .map_err(|message| DatasetError::Parse {
+            file: job.origin.clone(),
+            message,
+        })?;
+    if entries.is_empty() {
+        return Ok(());
+    }
+    let found = planar_regions(mesh, &RegionTolerance::default());
+    let normals: Vec<glam::Vec3> = found.iter().map(|r| r.normal).collect();
+    let region_of = region_per_triangle(mesh, &found);
+    crate::scene::materials::assign(&entries, &mesh.labels, &normals, &region_of, gltf).map_err(
+        |e| DatasetError::Parse {
+            file: job.origin.clone(),
+            message: e.to_string().replace(
+                "material.region",
+                &format!("object[{object}].material.region"),
+            ),
+        },
+    )?;
+    Ok(())
 }
 
 /// The renderer's own checks of each image's settings, run for every view and every
@@ -707,7 +755,9 @@ fn claim_dir(out: &Path, job_text: &str) -> Result<()> {
 struct Ctx<'p> {
     prep: &'p Prepared,
     cache: TextureCache,
-    mesh: Option<(usize, Arc<Mesh>)>,
+    /// The current instance's mesh, with its triangles' glTF materials when the object
+    /// has them.
+    mesh: Option<(usize, Arc<Mesh>, Option<Arc<GltfMaterials>>)>,
     camera: CameraRecord,
     profiler: Option<&'p Profiler>,
 }
@@ -724,29 +774,51 @@ impl<'p> Ctx<'p> {
         })
     }
 
-    /// The mesh of an instance: the object, with its defect set imprinted if defective.
+    /// The mesh of an instance: the object, with its defect set imprinted if defective,
+    /// and its triangles' glTF materials (followed through the imprint's refinement).
     /// Only the current one is kept.
-    fn mesh(&mut self, inst_index: usize) -> Result<Arc<Mesh>> {
-        if let Some((k, m)) = &self.mesh
+    fn mesh(&mut self, inst_index: usize) -> Result<(Arc<Mesh>, Option<Arc<GltfMaterials>>)> {
+        if let Some((k, m, g)) = &self.mesh
             && *k == inst_index
         {
-            return Ok(m.clone());
+            return Ok((m.clone(), g.clone()));
         }
         self.mesh = None;
         let inst = &self.prep.plan.instances[inst_index];
         let base = &self.prep.meshes[inst.object];
-        let mesh = match inst.defect_set {
-            Some(k) => {
-                imprint(base, &self.prep.defect_sets[k]).map_err(|source| DatasetError::Defect {
-                    object: self.prep.job.objects[inst.object].name.clone(),
-                    source,
-                })?
+        let gltf = self
+            .prep
+            .gltf_materials
+            .get(inst.object)
+            .and_then(|g| g.as_ref());
+        let defect_err = |source| DatasetError::Defect {
+            object: self.prep.job.objects[inst.object].name.clone(),
+            source,
+        };
+        let (mesh, gltf) = match (inst.defect_set, gltf) {
+            (Some(k), Some(g)) => {
+                let (mesh, origin) =
+                    imprint_traced(base, &self.prep.defect_sets[k]).map_err(defect_err)?;
+                let of_triangle = origin
+                    .iter()
+                    .map(|&t| g.of_triangle.get(t as usize).copied().unwrap_or(u32::MAX))
+                    .collect();
+                let traced = GltfMaterials {
+                    names: g.names.clone(),
+                    of_triangle,
+                };
+                (mesh, Some(traced))
             }
-            None => base.clone(),
+            (Some(k), None) => (
+                imprint(base, &self.prep.defect_sets[k]).map_err(defect_err)?,
+                None,
+            ),
+            (None, g) => (base.clone(), g.cloned()),
         };
         let m = Arc::new(mesh);
-        self.mesh = Some((inst_index, m.clone()));
-        Ok(m)
+        let g = gltf.map(Arc::new);
+        self.mesh = Some((inst_index, m.clone(), g.clone()));
+        Ok((m, g))
     }
 
     fn render_item(
@@ -773,8 +845,19 @@ impl<'p> Ctx<'p> {
             }
             lap = Instant::now();
         };
-        let mesh = self.mesh(item.instance)?;
+        let (mesh, gltf) = self.mesh(item.instance)?;
         stage("defects", &mut stages);
+        let materials = job.objects[inst.object]
+            .region_materials(
+                inst.object,
+                params.alpha as f32,
+                job.scene_base().wavelength_nm(),
+            )
+            .map_err(|message| DatasetError::Render {
+                index: item.index,
+                id: item.id(),
+                message,
+            })?;
         let present: BTreeSet<u8> = mesh.labels.iter().map(|l| l.face).collect();
         let mut face_textures = Vec::new();
         for fc in params.faces.iter().filter(|f| present.contains(&f.face)) {
@@ -810,6 +893,8 @@ impl<'p> Ctx<'p> {
             pose,
             camera: &job.camera_config,
             lights: &job.lights,
+            materials: &materials,
+            gltf_materials: gltf.as_deref(),
             mesh: &mesh,
             mesh_key: match inst.defect_set {
                 Some(_) => (1u64 << 32) | item.instance as u64,

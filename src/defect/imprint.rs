@@ -98,6 +98,19 @@ pub fn imprint_with_stats(
     mesh: &Mesh,
     set: &DefectSet,
 ) -> Result<(Mesh, ImprintStats), DefectError> {
+    imprint_inner(mesh, set).map(|(m, s, _)| (m, s))
+}
+
+/// As [`imprint`], with the input triangle each output triangle is a piece of (so
+/// per-triangle data of the input, e.g. glTF materials, can follow the refinement).
+pub fn imprint_traced(mesh: &Mesh, set: &DefectSet) -> Result<(Mesh, Vec<u32>), DefectError> {
+    imprint_inner(mesh, set).map(|(m, _, o)| (m, o))
+}
+
+fn imprint_inner(
+    mesh: &Mesh,
+    set: &DefectSet,
+) -> Result<(Mesh, ImprintStats, Vec<u32>), DefectError> {
     if !(set.resolution.is_finite() && (2.0..=64.0).contains(&set.resolution)) {
         return Err(DefectError::BadSet(format!(
             "resolution = {}: allowed 2 ... 64",
@@ -258,5 +271,5 @@ pub fn imprint_with_stats(
         triangles: r.tris,
         labels: r.labels,
     };
-    Ok((out, stats))
+    Ok((out, stats, r.origin))
 }

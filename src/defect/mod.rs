@@ -15,7 +15,7 @@ mod spec;
 mod tool;
 
 pub use check::check_closed_manifold;
-pub use imprint::{ImprintStats, imprint, imprint_with_stats};
+pub use imprint::{ImprintStats, imprint, imprint_traced, imprint_with_stats};
 pub use sample::{Defect, DefectSet, Dent, Scratch, Shape, sample_defects};
 pub use spec::{DefectSpec, DentSpec, Range, ScratchSpec};
 pub use tool::DefectTool;

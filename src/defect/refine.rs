@@ -24,6 +24,8 @@ pub(crate) struct Refiner {
     pub positions: Vec<DVec3>,
     pub tris: Vec<[u32; 3]>,
     pub labels: Vec<TriLabel>,
+    /// The input triangle each triangle is a piece of.
+    pub origin: Vec<u32>,
     /// `adj[t][k]`: the triangle across edge k = (tri[k], tri[k+1]) of t, or NONE.
     /// Kept per triangle rather than in an edge hash map: bisection only ever touches
     /// the two triangles of an edge and their four neighbours.
@@ -61,10 +63,12 @@ impl Refiner {
                 adj[t1 as usize][k1 as usize] = t0;
             }
         }
+        let origin = (0..tris.len() as u32).collect();
         Ok(Refiner {
             positions,
             tris,
             labels,
+            origin,
             adj,
             touched: Vec::new(),
             limit,
@@ -155,6 +159,7 @@ impl Refiner {
         self.tris.push([m, b, c]);
         self.adj.push([n_child_with(b), x, t]);
         self.labels.push(self.labels[t as usize]);
+        self.origin.push(self.origin[t as usize]);
         self.relink(x, b, c, t, t2);
         self.touched.extend([t, t2]);
         if n != NONE {
@@ -165,6 +170,7 @@ impl Refiner {
             self.tris.push([m, q, d]);
             self.adj.push([t_child_with(q), xn, n]);
             self.labels.push(self.labels[n as usize]);
+            self.origin.push(self.origin[n as usize]);
             self.relink(xn, q, d, n, n2);
             self.touched.extend([n, n2]);
         }

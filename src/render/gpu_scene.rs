@@ -14,7 +14,8 @@ use crate::gpu_interface::{
     LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAT_LABELLED, MAT_MAP_SHIFT, MAT_REGION_FIRST,
     MAT_SLOT_MASK, SURFACE_CONDUCTOR, SURFACE_DIFFUSE, SurfaceBlock,
 };
-use crate::scene::assemble::{RegionFrame, Stage, place_maps};
+use crate::scene::assemble::{PlacedCurved, RegionFrame, Stage, place_curved_maps, place_maps};
+use crate::scene::curved::CurvedPatch;
 use crate::scene::materials::{Finish, SurfaceKind, SurfaceMaterial};
 use crate::scene::mesh::{FACE_A, FACE_C};
 use crate::scene::{FaceFrame, TriLabel};
@@ -36,6 +37,8 @@ struct MapBuffers {
     key: MapKey,
     headers: Buffer,
     texels: [Buffer; slope::MAP_BUFFERS],
+    /// The curved patches' projections, one per slot.
+    curved: Buffer,
 }
 
 /// What a set of uploaded maps was made from: each face map's identity and placement,
@@ -52,10 +55,14 @@ pub struct GpuScene {
     pub(crate) materials: Buffer,
     /// The material table (`SurfaceBlock` per `[[material.region]]` entry).
     pub(crate) surfaces: Buffer,
+    /// What `surfaces` was made from.
+    surface_list: Vec<SurfaceMaterial>,
     pub(crate) labels: Buffer,
     maps: MapBuffers,
     face_frames: Vec<FaceFrame>,
     regions: Vec<RegionFrame>,
+    /// The object's curved patches (slots after the regions').
+    curved: Vec<CurvedPatch>,
     pub table_albedo: f32,
     /// Triangles of the stage (the view's light is numbered after them).
     pub triangle_count: u32,
@@ -80,10 +87,14 @@ impl GpuScene {
         // Material in the low byte, the slope-map slot above it (region + 1; 0 for the
         // table), the top bit for triangles labelled A, B or C: the shader finds the
         // region's map without another buffer.
-        if stage.regions.len() as u64 >= MAT_SLOT_MASK as u64 {
+        let slots = stage.regions.len() + stage.curved.len() + 1;
+        if slots as u64 > MAT_SLOT_MASK as u64 {
             return Err(RenderError::Slope(slope::SlopeError::Invalid {
                 region: stage.regions.len() as u32,
-                message: format!("more than {} planar regions", MAT_SLOT_MASK - 1),
+                message: format!(
+                    "more than {} planar regions and curved patches",
+                    MAT_SLOT_MASK - 1
+                ),
             }));
         }
         let mat_words: Vec<u32> = stage
@@ -98,11 +109,7 @@ impl GpuScene {
                         .surfaces
                         .get((m - MAT_REGION_FIRST) as usize)
                         .is_none_or(|s| s.finish == Finish::None);
-                let slot = if bare {
-                    0
-                } else {
-                    stage.region_of.get(t).map_or(0, |&r| r.wrapping_add(1))
-                };
+                let slot = if bare { 0 } else { stage.map_slot(t) };
                 let labelled = (FACE_A..=FACE_C).contains(&l.face) as u32 * MAT_LABELLED;
                 m | (slot & MAT_SLOT_MASK) << MAT_MAP_SHIFT | labelled
             })
@@ -112,7 +119,7 @@ impl GpuScene {
             maps: Vec::new(),
             placement: None,
         };
-        let maps = upload_maps(tracer, &[], stage.regions.len() + 1, empty)?;
+        let maps = upload_maps(tracer, &[], &[], slots, empty)?;
         BUILT.fetch_add(1, Ordering::Relaxed);
         Ok(GpuScene {
             geometry,
@@ -123,10 +130,12 @@ impl GpuScene {
                 &surface_blocks(&stage.surfaces),
                 storage,
             )?,
+            surface_list: stage.surfaces.clone(),
             labels: Buffer::from_slice(ctx, "triangle labels", &labels, storage)?,
             maps,
             face_frames: stage.face_frames.clone(),
             regions: stage.regions.clone(),
+            curved: stage.curved.clone(),
             table_albedo: stage.table_albedo,
             triangle_count: stage.mesh.triangles.len() as u32,
         })
@@ -144,8 +153,46 @@ impl GpuScene {
         let key = map_key(maps, placement);
         if key != self.maps.key {
             let placed = place_maps(maps, &self.face_frames, &self.regions, placement)?;
-            self.maps = upload_maps(tracer, &placed, self.regions.len() + 1, key)?;
+            let first = self.regions.len() as u32;
+            let curved = place_curved_maps(maps, &self.curved, first, placement);
+            let slots = self.regions.len() + self.curved.len() + 1;
+            self.maps = upload_maps(tracer, &placed, &curved, slots, key)?;
         }
+        Ok(())
+    }
+
+    /// Replaces the material table's values (`[[material.region]]` entry i stays entry
+    /// i: which triangle takes which entry is the stage's); uploads only when they
+    /// differ. A dataset job's entries take each instance's alpha. The number of entries
+    /// must be the stage's (or zero when the stage had none).
+    pub fn set_surfaces(
+        &mut self,
+        tracer: &PathTracer,
+        surfaces: &[SurfaceMaterial],
+    ) -> Result<(), RenderError> {
+        if surfaces == self.surface_list.as_slice() {
+            return Ok(());
+        }
+        if surfaces.len() != self.surface_list.len() {
+            return Err(RenderError::Assemble(
+                crate::scene::config::ConfigError::Invalid {
+                    field: "material.region",
+                    message: format!(
+                        "{} entries for a scene built with {}",
+                        surfaces.len(),
+                        self.surface_list.len()
+                    ),
+                }
+                .into(),
+            ));
+        }
+        self.surfaces = Buffer::from_slice(
+            &tracer.ctx,
+            "material table",
+            &surface_blocks(surfaces),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+        )?;
+        self.surface_list = surfaces.to_vec();
         Ok(())
     }
 
@@ -161,6 +208,11 @@ impl GpuScene {
 
     pub(crate) fn map_buffers(&self) -> (&Buffer, &[Buffer; slope::MAP_BUFFERS]) {
         (&self.maps.headers, &self.maps.texels)
+    }
+
+    /// The curved patches' projection blocks (`CurvedMapBlock` per slot).
+    pub(crate) fn curved_buffer(&self) -> &Buffer {
+        &self.maps.curved
     }
 
     /// GPU scenes built by this process so far.
@@ -217,12 +269,16 @@ fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {
 fn upload_maps(
     tracer: &PathTracer,
     placed: &[slope::PlacedMap],
+    curved: &[PlacedCurved],
     slots: usize,
     key: MapKey,
 ) -> Result<MapBuffers, RenderError> {
     let ctx = &tracer.ctx;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let (headers, texels) = slope::pack(placed, slots, ctx.info.max_storage_buffer_range as u64)?;
+    let mut all = placed.to_vec();
+    all.extend(curved.iter().map(|c| c.map.clone()));
+    let (mut headers, texels) = slope::pack(&all, slots, ctx.info.max_storage_buffer_range as u64)?;
+    let blocks = slope::curved_blocks(curved, &mut headers)?;
     let buf = |texels: &[u32], name: &str| {
         // A binding may not be empty; a slot without a map never reads it.
         let data: &[u32] = if texels.is_empty() { &[0] } else { texels };
@@ -236,5 +292,6 @@ fn upload_maps(
             buf(&texels[1], "slopes 1")?,
             buf(&texels[2], "slopes 2")?,
         ],
+        curved: Buffer::from_slice(ctx, "curved maps", &blocks, storage)?,
     })
 }

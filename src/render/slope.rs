@@ -15,7 +15,10 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use crate::gpu_interface::{MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_WRAP};
+use crate::gpu_interface::{MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_REVOLVED, MAP_WRAP};
+
+/// A curved patch's projection as the shader reads it (src/gpu_interface.in).
+pub use crate::gpu_interface::CurvedMapBlock;
 
 /// Per-texel slopes from the texture module (`[dh/dx, dh/dy]`, row 0 at the top, y down,
 /// `spacing_um`); the renderer takes it as is.
@@ -184,10 +187,88 @@ pub fn lookup(h: &MapHeader, texels: &[u32], p: Vec3) -> [f32; 2] {
         return [0.0; 2];
     }
     let d = p - Vec3::from_slice(&h.origin[..3]);
+    let q = [
+        d.dot(Vec3::from_slice(&h.axis_x[..3])),
+        d.dot(Vec3::from_slice(&h.axis_up[..3])),
+    ];
+    lookup_plane(h, texels, q)
+}
+
+/// The headers' projection blocks (`CurvedMapBlock`, one per slot, zeros for planar
+/// slots) for the curved patches' maps, which must be in `headers` already (`pack` of
+/// their `map`s with the planar ones): marks their headers `MAP_REVOLVED`.
+pub fn curved_blocks(
+    curved: &[crate::scene::assemble::PlacedCurved],
+    headers: &mut [MapHeader],
+) -> Result<Vec<CurvedMapBlock>, SlopeError> {
+    let mut blocks = vec![CurvedMapBlock::default(); headers.len().max(1)];
+    for c in curved {
+        let slot = c.map.region as usize + 1;
+        let bad = |message: String| SlopeError::Invalid {
+            region: c.map.region,
+            message,
+        };
+        if slot >= headers.len() || headers[slot].dims[3] & MAP_BUFFER_MASK == 0 {
+            return Err(bad("a curved patch without its packed map".into()));
+        }
+        let v = [
+            c.sin_beta,
+            c.cos_beta,
+            c.arc_radius,
+            c.offset_mm[0],
+            c.offset_mm[1],
+        ];
+        if !(v.iter().all(|x| x.is_finite()) && c.arc_radius > 0.0) {
+            return Err(bad("curved placement must be finite, radius > 0".into()));
+        }
+        headers[slot].dims[3] |= MAP_REVOLVED;
+        blocks[slot] = CurvedMapBlock {
+            profile: [c.sin_beta, c.cos_beta, c.arc_radius, 0.0],
+            place: [c.offset_mm[0], c.offset_mm[1], 0.0, 0.0],
+        };
+    }
+    Ok(blocks)
+}
+
+/// Map-plane coordinates (mm along the map's x and up axes from its centre) of `p` on a
+/// curved patch's slot (`MAP_REVOLVED`): u = arc radius x theta, v along the generatrix
+/// (src/scene/curved.rs), minus the map centre's (u, v). The shader's `map_plane`.
+pub fn curved_plane(h: &MapHeader, c: &CurvedMapBlock, p: Vec3) -> [f32; 2] {
+    let d = p - Vec3::from_slice(&h.origin[..3]);
+    let a = Vec3::from_slice(&h.axis_up[..3]);
+    let e0 = Vec3::from_slice(&h.axis_x[..3]);
+    let hgt = d.dot(a);
+    let r = d - hgt * a;
+    let theta = r.dot(a.cross(e0)).atan2(r.dot(e0));
+    [
+        c.profile[2] * theta - c.place[0],
+        r.length() * c.profile[0] + hgt * c.profile[1] - c.place[1],
+    ]
+}
+
+/// Unit map axes (x, up) in the surface at `p` of a curved patch's slot: about the axis
+/// and along the generatrix. The shader's `map_axes`.
+pub fn curved_axes(h: &MapHeader, c: &CurvedMapBlock, p: Vec3) -> (Vec3, Vec3) {
+    let d = p - Vec3::from_slice(&h.origin[..3]);
+    let a = Vec3::from_slice(&h.axis_up[..3]);
+    let r = (d - d.dot(a) * a).normalize_or_zero();
+    (a.cross(r), r * c.profile[0] + a * c.profile[1])
+}
+
+/// Bilinear slopes at `p` on a curved patch's slot, as the shader computes them.
+pub fn lookup_curved(h: &MapHeader, c: &CurvedMapBlock, texels: &[u32], p: Vec3) -> [f32; 2] {
+    if h.dims[3] & MAP_BUFFER_MASK == 0 {
+        return [0.0; 2];
+    }
+    lookup_plane(h, texels, curved_plane(h, c, p))
+}
+
+/// Bilinear slopes at map-plane coordinates `q` (mm along map x and up from its centre).
+fn lookup_plane(h: &MapHeader, texels: &[u32], q: [f32; 2]) -> [f32; 2] {
     let k = h.origin[3];
     let (w, ht) = (h.dims[0] as f32, h.dims[1] as f32);
-    let x = d.dot(Vec3::from_slice(&h.axis_x[..3])) * k + 0.5 * w;
-    let y = -d.dot(Vec3::from_slice(&h.axis_up[..3])) * k + 0.5 * ht;
+    let x = q[0] * k + 0.5 * w;
+    let y = -q[1] * k + 0.5 * ht;
     let (x0, y0, x1, y1, tx, ty);
     if h.dims[3] & MAP_WRAP != 0 {
         let fx = (x - 0.5) - w * ((x - 0.5) / w).floor();
@@ -527,5 +608,114 @@ mod tests {
             (max / 60f32.to_radians().tan() - 1.0).abs() < 0.003,
             "{max}"
         );
+    }
+
+    /// On the flange's bore (a curved patch), two neighbouring facets share one map
+    /// frame: a point on their common edge gets the same slope from either side, and
+    /// points just across the edge get nearly the same; with a planar frame per facet
+    /// (before) the two sides disagree there.
+    #[test]
+    fn curved_patches_give_the_same_slope_on_both_sides_of_a_facet_edge() {
+        use crate::scene::assemble::place_curved_maps;
+        use crate::scene::{FlangeParams, flange};
+        let fp = FlangeParams::default();
+        let stage = Stage::new(
+            flange(&fp),
+            [0.0; 3],
+            &crate::scene::config::TableConfig::default(),
+        );
+        // A 64 x 64 map of 0.1 mm texels with pseudo-random slopes.
+        let mut map = SlopeMap::flat(64, 64, 100.0);
+        for (i, v) in map.data.iter_mut().enumerate() {
+            let h = (i as u32).wrapping_mul(2_654_435_761);
+            *v = [
+                (h >> 8 & 0xff) as f32 / 255.0 - 0.5,
+                (h >> 16 & 0xff) as f32 / 255.0 - 0.5,
+            ];
+        }
+        let maps = [FaceMap {
+            face: FACE_A,
+            slopes: Arc::new(map),
+            rotation_deg: 0.0,
+            offset_mm: [0.0; 2],
+        }];
+        let part = Placement {
+            cover: Cover::Part,
+            seed: 7,
+            ..FACES
+        };
+        let first = stage.regions.len() as u32;
+        let curved = place_curved_maps(&maps, &stage.curved, first, &part);
+        assert_eq!(curved.len(), stage.curved.len());
+        let slots = stage.regions.len() + stage.curved.len() + 1;
+        let all: Vec<PlacedMap> = curved.iter().map(|c| c.map.clone()).collect();
+        let (mut h, t) = pack(&all, slots, 1 << 27).expect("pack");
+        let blocks = curved_blocks(&curved, &mut h).expect("blocks");
+        // Two bore facets sharing an edge (the bore's triangles lie at radius 10).
+        let mesh = &stage.mesh;
+        let n = stage.region_of.len();
+        let on_bore = |t: usize| {
+            mesh.corners(t)
+                .iter()
+                .all(|c| (glam::Vec2::new(c.x, c.y).length() - 10.0).abs() < 1e-3)
+        };
+        let bore: Vec<usize> = (0..n).filter(|&t| on_bore(t)).collect();
+        assert_eq!(bore.len(), 2 * fp.bore_segments as usize);
+        let (t1, t2, a, b) = bore
+            .iter()
+            .flat_map(|&t1| bore.iter().map(move |&t2| (t1, t2)))
+            .filter(|&(t1, t2)| stage.region_of[t1] != stage.region_of[t2])
+            .find_map(|(t1, t2)| {
+                let (c1, c2) = (mesh.corners(t1), mesh.corners(t2));
+                let shared: Vec<Vec3> = c1.iter().filter(|p| c2.contains(p)).copied().collect();
+                (shared.len() == 2).then(|| (t1, t2, shared[0], shared[1]))
+            })
+            .expect("two neighbouring bore facets");
+        let slot = stage.map_slot(t1);
+        assert_eq!(slot, stage.map_slot(t2), "one patch, one slot");
+        assert!(h[slot as usize].dims[3] & MAP_REVOLVED != 0);
+        let (hs, bs) = (&h[slot as usize], &blocks[slot as usize]);
+        let tex = &t[(hs.dims[3] & MAP_BUFFER_MASK) as usize - 1];
+        let centroid = |t: usize| mesh.corners(t).iter().copied().sum::<Vec3>() / 3.0;
+        // The old way: each facet's own planar frame (place_maps with its region).
+        let regions: Vec<RegionFrame> = [t1, t2]
+            .iter()
+            .map(|&t| stage.regions[stage.region_of[t] as usize])
+            .collect();
+        let planar = place_maps(&maps, &[frame_a()], &regions, &part).expect("planar");
+        let (hp, tp) = pack(&planar, stage.regions.len() + 1, 1 << 27).expect("pack");
+        let planar_at = |k: usize, p: Vec3| {
+            let hh = &hp[regions[k].id as usize + 1];
+            lookup(hh, &tp[(hh.dims[3] & MAP_BUFFER_MASK) as usize - 1], p)
+        };
+        let (mut worst_curved, mut worst_planar) = (0.0f32, 0.0f32);
+        for k in 1..10 {
+            let p = a + (b - a) * (k as f32 / 10.0);
+            // Just inside each facet, 1 um from the edge.
+            let step = |t: usize| (centroid(t) - p).normalize() * 1e-3;
+            let (p1, p2) = (p + step(t1), p + step(t2));
+            let s = lookup_curved(hs, bs, tex, p);
+            assert!(s != [0.0, 0.0], "the map reaches the bore");
+            let (s1, s2) = (
+                lookup_curved(hs, bs, tex, p1),
+                lookup_curved(hs, bs, tex, p2),
+            );
+            worst_curved = worst_curved.max((s1[0] - s2[0]).abs().max((s1[1] - s2[1]).abs()));
+            let (q1, q2) = (planar_at(0, p1), planar_at(1, p2));
+            worst_planar = worst_planar.max((q1[0] - q2[0]).abs().max((q1[1] - q2[1]).abs()));
+        }
+        // 2 um apart on a 100 um grid of slopes within +-0.5: at most 0.02 apart.
+        assert!(worst_curved < 0.02, "curved: {worst_curved}");
+        assert!(
+            worst_planar > 0.1,
+            "per-facet frames agree by chance: {worst_planar}"
+        );
+        // The map's axes at the edge: about the axis and along it (the bore is vertical).
+        let (ax, up) = curved_axes(hs, bs, a);
+        assert!(
+            ax.z.abs() < 1e-6 && (up.z.abs() - 1.0).abs() < 1e-6,
+            "{ax} {up}"
+        );
+        assert!((ax.length() - 1.0).abs() < 1e-5);
     }
 }

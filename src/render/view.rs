@@ -163,6 +163,7 @@ impl<'s> View<'s> {
         let ltris = g.import(self.trace.second_shade_tris());
         let mats = g.import(&self.scene.materials);
         let surf = g.import(&self.scene.surfaces);
+        let curved = g.import(self.scene.curved_buffer());
         let lts = g.import(&self.lights);
         let ems = g.import(&self.emitters);
         let en = g.import(&tracer.energy);
@@ -214,6 +215,7 @@ impl<'s> View<'s> {
                 .read(B::LightGeometry.at(off), &ltris)
                 .read(B::LightList.at(off), &ems)
                 .read(B::Surfaces.at(off), &surf)
+                .read(B::CurvedMaps.at(off), &curved)
                 .push(&push)
                 .submit();
         }

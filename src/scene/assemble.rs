@@ -12,6 +12,7 @@ use super::config::{
     CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, Pose, SceneConfig,
     TableConfig, TextureConfig, View,
 };
+use super::curved::{CurvedPatch, CurvedTolerance, curved_patches};
 use super::lights::{LightShape, LightSpec};
 use super::materials::{GltfMaterials, RegionMaterial, SurfaceMaterial};
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
@@ -184,6 +185,77 @@ pub fn place_maps(
     Ok(out)
 }
 
+/// A slope map on a curved patch (`scene::curved`): the map's centre at (u, v) =
+/// `offset_mm` of the patch's frame, its x axis along u (about the axis), its up axis along
+/// v (the generatrix); repeated beyond its edges.
+#[derive(Clone, Debug)]
+pub struct PlacedCurved {
+    /// Slot `regions + 1 + patch`, as `PlacedMap::region + 1` (`map` holds the centre on
+    /// the axis, `axis_x` = the patch's `e0`, `axis_up` = its axis).
+    pub map: PlacedMap,
+    /// u = `arc_radius` x theta: the patch radius, for a full turn rounded so that the
+    /// circumference holds a whole number of map widths (no seam where theta wraps).
+    pub arc_radius: f32,
+    pub offset_mm: [f32; 2],
+    pub sin_beta: f32,
+    pub cos_beta: f32,
+}
+
+/// With `Cover::Part`, each curved patch gets one of the face maps (chosen, with an
+/// offset uniform over the map's extent, from `placement.seed` and the patch's first
+/// region id, as `place_maps` does for planar regions), unrotated: map x runs about the
+/// axis, map up along the generatrix. `first_region`: the number of planar regions (the
+/// patches' slots follow theirs). None with `Cover::Faces` or without maps.
+pub fn place_curved_maps(
+    maps: &[FaceMap],
+    patches: &[CurvedPatch],
+    first_region: u32,
+    placement: &Placement,
+) -> Vec<PlacedCurved> {
+    use rand::{Rng, SeedableRng};
+    if placement.cover != Cover::Part || maps.is_empty() {
+        return Vec::new();
+    }
+    patches
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let id = p.regions.first().copied().unwrap_or(0) as u64;
+            let mix = (id + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0x4355_5256_4544;
+            let mut rng = rand_pcg::Pcg64::seed_from_u64(placement.seed ^ mix);
+            let m = &maps[rng.random_range(0..maps.len())];
+            let s = &m.slopes;
+            let extent = |n: usize| (n as f64 * s.spacing_um * 1e-3) as f32;
+            let (wx, wy) = (extent(s.width), extent(s.height));
+            let off = [
+                rng.random_range(-0.5f32..=0.5) * wx,
+                rng.random_range(-0.5f32..=0.5) * wy,
+            ];
+            let arc_radius = if p.full_turn {
+                let turns = (std::f32::consts::TAU * p.radius / wx).round().max(1.0);
+                turns * wx / std::f32::consts::TAU
+            } else {
+                p.radius
+            };
+            PlacedCurved {
+                map: PlacedMap {
+                    region: first_region + i as u32,
+                    slopes: s.clone(),
+                    centre: p.centre,
+                    axis_x: p.e0,
+                    axis_up: p.axis,
+                    wrap: true,
+                    labelled_only: false,
+                },
+                arc_radius,
+                offset_mm: off,
+                sin_beta: p.sin_beta,
+                cos_beta: p.cos_beta,
+            }
+        })
+        .collect()
+}
+
 /// The configured object (built-in test body or mesh file), its inspected faces chosen
 /// by `inspect`, translated to its position.
 pub fn load_object(scene: &SceneConfig) -> Result<Mesh, AssembleError> {
@@ -256,6 +328,11 @@ pub struct Stage {
     /// The `[[material.region]]` entries: triangle material `MAT_REGION_FIRST + i` is
     /// entry i (`scene::materials`); empty: every object triangle is `[material]`'s.
     pub surfaces: Vec<SurfaceMaterial>,
+    /// The object's curved patches (`scene::curved`, default tolerances): groups of
+    /// facet regions with one map frame each.
+    pub curved: Vec<CurvedPatch>,
+    /// The curved patch of each planar region (`u32::MAX`: none).
+    pub curved_of: Vec<u32>,
 }
 
 impl Stage {
@@ -265,6 +342,13 @@ impl Stage {
         let face_frames = face_frames(&object);
         let found = planar_regions(&object, &RegionTolerance::default());
         let region_of = region_per_triangle(&object, &found);
+        let curved = curved_patches(&object, &found, &region_of, &CurvedTolerance::default());
+        let mut curved_of = vec![u32::MAX; found.len()];
+        for (i, p) in curved.iter().enumerate() {
+            for &r in &p.regions {
+                curved_of[r as usize] = i as u32;
+            }
+        }
         let regions = found
             .iter()
             .map(|r| RegionFrame {
@@ -301,6 +385,20 @@ impl Stage {
             regions,
             region_of,
             surfaces: Vec::new(),
+            curved,
+            curved_of,
+        }
+    }
+
+    /// The slope-map slot of object triangle `t`: 0 for none (burnished defects, the
+    /// table), `r + 1` for planar region r, `regions.len() + 1 + i` for curved patch i.
+    pub fn map_slot(&self, t: usize) -> u32 {
+        match self.region_of.get(t) {
+            None | Some(&u32::MAX) => 0,
+            Some(&r) => match self.curved_of.get(r as usize) {
+                Some(&p) if p != u32::MAX => self.regions.len() as u32 + 1 + p,
+                _ => r + 1,
+            },
         }
     }
 

@@ -22,5 +22,6 @@ pub use gltf_io::{Degenerates, Imported, MeshError, export_mesh, import_mesh};
 pub use mesh::{Mesh, TriLabel};
 pub use mesh_io::{GltfUnitDefault, LoadedMesh, MeshFormat, MeshUnit, load_mesh, write_mesh};
 pub use testbody::{FaceFrame, Variant, face_frames, testbody};
+pub mod curved;
 pub mod regions;
 pub use regions::{PlanarRegion, RegionTolerance, planar_regions};
