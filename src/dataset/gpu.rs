@@ -130,7 +130,12 @@ impl ImageRenderer for GpuRenderer {
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
         scene
-            .set_face_maps(tracer, &face_maps(req), &req.placement)
+            .set_face_maps_filtered(
+                tracer,
+                &face_maps(req),
+                &req.placement,
+                cfg.render.texture_filter,
+            )
             .map_err(|e| e.to_string())?;
         let (frames, first_light) = (scene.face_frames(), scene.triangle_count);
         let setup = ViewSetup::for_pose(frames, first_light, &pose, &cfg.camera, &cfg.light)

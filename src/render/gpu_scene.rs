@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use ash::vk;
 
 use super::RenderError;
+use super::settings::TextureFilter;
 use super::slope::{self, FaceMap, Placement};
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
@@ -36,6 +37,11 @@ struct MapBuffers {
     key: MapKey,
     headers: Buffer,
     texels: [Buffer; slope::MAP_BUFFERS],
+    /// Each map's moment pyramid (`slope::moments_pyramid`) when uploaded for
+    /// `TextureFilter::Lean`; one unused word each otherwise.
+    moments: [Buffer; slope::MAP_BUFFERS],
+    /// Whether any slot has a map.
+    any: bool,
 }
 
 /// What a set of uploaded maps was made from: each face map's identity and placement,
@@ -44,6 +50,7 @@ struct MapBuffers {
 struct MapKey {
     maps: Vec<(usize, u32, [u32; 2], u8)>,
     placement: Option<(crate::scene::assemble::Cover, u64, u32)>,
+    filter: TextureFilter,
 }
 
 /// The GPU side of a [`Stage`].
@@ -111,6 +118,7 @@ impl GpuScene {
         let empty = MapKey {
             maps: Vec::new(),
             placement: None,
+            filter: TextureFilter::None,
         };
         let maps = upload_maps(tracer, &[], stage.regions.len() + 1, empty)?;
         BUILT.fetch_add(1, Ordering::Relaxed);
@@ -141,12 +149,31 @@ impl GpuScene {
         maps: &[FaceMap],
         placement: &Placement,
     ) -> Result<(), RenderError> {
-        let key = map_key(maps, placement);
+        self.set_face_maps_filtered(tracer, maps, placement, TextureFilter::None)
+    }
+
+    /// [`set_face_maps`](Self::set_face_maps) for views rendered with `filter`: with
+    /// `TextureFilter::Lean` each map's moment pyramid is built (on the CPU) and uploaded
+    /// too (4 bytes per texel more, docs/rendering.md, "Filtered slope maps").
+    pub fn set_face_maps_filtered(
+        &mut self,
+        tracer: &PathTracer,
+        maps: &[FaceMap],
+        placement: &Placement,
+        filter: TextureFilter,
+    ) -> Result<(), RenderError> {
+        let key = map_key(maps, placement, filter);
         if key != self.maps.key {
             let placed = place_maps(maps, &self.face_frames, &self.regions, placement)?;
             self.maps = upload_maps(tracer, &placed, self.regions.len() + 1, key)?;
         }
         Ok(())
+    }
+
+    /// Whether views with `filter` can read these maps: "lean" needs the moment pyramids
+    /// of every map (none needed when no slot has a map).
+    pub fn maps_support(&self, filter: TextureFilter) -> bool {
+        filter == TextureFilter::None || !self.maps.any || self.maps.key.filter == filter
     }
 
     /// The object's planar regions (where slope maps are projected).
@@ -161,6 +188,11 @@ impl GpuScene {
 
     pub(crate) fn map_buffers(&self) -> (&Buffer, &[Buffer; slope::MAP_BUFFERS]) {
         (&self.maps.headers, &self.maps.texels)
+    }
+
+    /// The maps' moment pyramids (unused words without "lean").
+    pub(crate) fn moment_buffers(&self) -> &[Buffer; slope::MAP_BUFFERS] {
+        &self.maps.moments
     }
 
     /// GPU scenes built by this process so far.
@@ -197,7 +229,7 @@ pub fn surface_blocks(surfaces: &[SurfaceMaterial]) -> Vec<SurfaceBlock> {
         .collect()
 }
 
-fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {
+fn map_key(maps: &[FaceMap], p: &Placement, filter: TextureFilter) -> MapKey {
     MapKey {
         maps: maps
             .iter()
@@ -211,6 +243,7 @@ fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {
             })
             .collect(),
         placement: Some((p.cover, p.seed, p.rotation_range_deg.to_bits())),
+        filter,
     }
 }
 
@@ -222,19 +255,31 @@ fn upload_maps(
 ) -> Result<MapBuffers, RenderError> {
     let ctx = &tracer.ctx;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let (headers, texels) = slope::pack(placed, slots, ctx.info.max_storage_buffer_range as u64)?;
+    let max_bytes = ctx.info.max_storage_buffer_range as u64;
+    let (headers, texels) = slope::pack(placed, slots, max_bytes)?;
+    let moments = if key.filter == TextureFilter::Lean {
+        slope::pack_moments(&headers, &texels, max_bytes)?
+    } else {
+        Default::default()
+    };
     let buf = |texels: &[u32], name: &str| {
         // A binding may not be empty; a slot without a map never reads it.
         let data: &[u32] = if texels.is_empty() { &[0] } else { texels };
         Buffer::from_slice(ctx, name, data, storage)
     };
     Ok(MapBuffers {
+        any: !placed.is_empty(),
         key,
         headers: Buffer::from_slice(ctx, "slope map headers", &headers, storage)?,
         texels: [
             buf(&texels[0], "slopes 0")?,
             buf(&texels[1], "slopes 1")?,
             buf(&texels[2], "slopes 2")?,
+        ],
+        moments: [
+            buf(&moments[0], "slope moments 0")?,
+            buf(&moments[1], "slope moments 1")?,
+            buf(&moments[2], "slope moments 2")?,
         ],
     })
 }
