@@ -389,7 +389,7 @@ pub fn lookup_lean(
     lambda: f32,
 ) -> ([f32; 2], f32) {
     let m0 = lookup(h, texels, p);
-    if !(lambda > 0.0) || h.dims[3] & MAP_BUFFER_MASK == 0 {
+    if lambda.is_nan() || lambda <= 0.0 || h.dims[3] & MAP_BUFFER_MASK == 0 {
         return (m0, 0.0);
     }
     let top = (moment_levels(h.dims[0], h.dims[1]) - 1) as f32;

@@ -1409,6 +1409,27 @@ mod tests {
     use super::*;
 
     #[test]
+    fn texture_filter_parses_and_checks_its_scale() {
+        let c = SceneConfig::parse("").expect("defaults");
+        assert_eq!(c.render.texture_filter, TextureFilter::None);
+        let c =
+            SceneConfig::parse("[render]\ntexture_filter = \"lean\"\ntexture_filter_scale = 0.5\n")
+                .expect("lean");
+        assert_eq!(
+            (c.render.texture_filter, c.render.texture_filter_scale),
+            (TextureFilter::Lean, 0.5)
+        );
+        let e = SceneConfig::parse("[render]\ntexture_filter_scale = 8.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("render.texture_filter_scale") && e.contains("[0.25, 4]"),
+            "{e}"
+        );
+        assert!(SceneConfig::parse("[render]\ntexture_filter = \"mip\"\n").is_err());
+    }
+
+    #[test]
     fn defaults_are_valid() {
         let c = SceneConfig::parse("").expect("defaults");
         assert_eq!(c.camera.width, 1224);
