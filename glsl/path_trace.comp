@@ -184,6 +184,131 @@ vec3 shading_normal(uint slot, vec3 p, vec3 ng) {
     return normalize(ng - s.x * ax + s.y * up);
 }
 
+// LEAN filtering (`[render] texture_filter = "lean"`; docs/rendering.md, "Filtered slope
+// maps"; CPU mirror: lookup_lean in src/render/slope.rs). Per map a pyramid of slope
+// moments, levels 1 up to 1 x 1 (level k: ceil(w / 2^k) x ceil(h / 2^k) texels), three
+// uints a texel: f16 [mean dh/dx, mean dh/dy], [var dh/dx, var dh/dy], [cov, 0].
+layout(std430, set = 0, binding = PT_MOMENTS0) readonly buffer Moments0 { uint moments0[]; };
+layout(std430, set = 0, binding = PT_MOMENTS1) readonly buffer Moments1 { uint moments1[]; };
+layout(std430, set = 0, binding = PT_MOMENTS2) readonly buffer Moments2 { uint moments2[]; };
+
+uint moment_word(uint buf, uint i) {
+    if (buf == 1u) return moments0[i];
+    if (buf == 2u) return moments1[i];
+    return moments2[i];
+}
+
+// Smallest |cos| between the primary ray and the surface in the footprint.
+const float LEAN_MIN_COS = 0.05;
+
+// Highest level of a map's pyramid: ceil(log2(max(w, h))).
+uint lean_top(MapHeader m) {
+    return uint(findMSB(max(max(m.dims.x, m.dims.y), 1u) - 1u) + 1);
+}
+
+// Bilinear mean slope and slope variance (var x + var y) at level k >= 1: the mixture of
+// the four texels' distributions. False outside a clipped map.
+bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
+    mean = vec2(0.0);
+    var = 0.0;
+    MapHeader m = map_headers[slot];
+    uint buf = m.dims.w & MAP_BUFFER_MASK;
+    uint w = (m.dims.x + (1u << k) - 1u) >> k;
+    uint ht = (m.dims.y + (1u << k) - 1u) >> k;
+    vec3 d = p - m.origin.xyz;
+    float s = 1.0 / float(1u << k);
+    float x = (dot(d, m.axis_x.xyz) * m.origin.w + 0.5 * float(m.dims.x)) * s;
+    float y = (-dot(d, m.axis_up.xyz) * m.origin.w + 0.5 * float(m.dims.y)) * s;
+    vec2 wh = vec2(w, ht);
+    uint x0, y0, x1, y1;
+    float tx, ty;
+    if ((m.dims.w & MAP_WRAP) != 0u) {
+        float fx = x - 0.5, fy = y - 0.5;
+        fx -= wh.x * floor(fx / wh.x);
+        fy -= wh.y * floor(fy / wh.y);
+        if (!(fx >= 0.0 && fy >= 0.0)) return false;
+        x0 = min(uint(fx), w - 1u);
+        y0 = min(uint(fy), ht - 1u);
+        x1 = x0 + 1u == w ? 0u : x0 + 1u;
+        y1 = y0 + 1u == ht ? 0u : y0 + 1u;
+        tx = fx - float(x0);
+        ty = fy - float(y0);
+    } else {
+        if (!(x >= 0.0 && y >= 0.0 && x <= float(m.dims.x) * s && y <= float(m.dims.y) * s)) return false;
+        float fx = clamp(x - 0.5, 0.0, wh.x - 1.0);
+        float fy = clamp(y - 0.5, 0.0, wh.y - 1.0);
+        x0 = uint(fx);
+        y0 = uint(fy);
+        x1 = min(x0 + 1u, w - 1u);
+        y1 = min(y0 + 1u, ht - 1u);
+        tx = fx - float(x0);
+        ty = fy - float(y0);
+    }
+    uint base = 0u;
+    for (uint j = 1u; j < k; j++) {
+        base += ((m.dims.x + (1u << j) - 1u) >> j) * ((m.dims.y + (1u << j) - 1u) >> j) * 3u;
+    }
+    uint idx[4] = uint[4](y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1);
+    float wt[4] = float[4]((1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty);
+    vec2 mi[4];
+    float vi[4];
+    for (int i = 0; i < 4; i++) {
+        uint a = base + idx[i] * 3u;
+        mi[i] = unpackHalf2x16(moment_word(buf, a));
+        vec2 v = unpackHalf2x16(moment_word(buf, a + 1u));
+        vi[i] = v.x + v.y;
+        mean += wt[i] * mi[i];
+    }
+    for (int i = 0; i < 4; i++) {
+        vec2 e = mi[i] - mean;
+        var += wt[i] * (vi[i] + dot(e, e));
+    }
+    return true;
+}
+
+// Mean slope and slope variance at mip level `lambda` (trilinear between floor and
+// floor + 1, clamped to the top level; level 0 is the point lookup with no spread).
+vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
+    var = 0.0;
+    vec2 m0 = map_slopes(slot, p);
+    MapHeader m = map_headers[slot];
+    uint top = lean_top(m);
+    if (!(lambda > 0.0) || top == 0u) return m0;
+    float l = min(lambda, float(top));
+    uint k = uint(floor(l));
+    float f = l - float(k);
+    vec2 ma = m0;
+    float va = 0.0;
+    if (k > 0u && !lean_level(slot, p, k, ma, va)) return m0;
+    if (f == 0.0) {
+        var = va;
+        return ma;
+    }
+    vec2 mb;
+    float vb;
+    if (!lean_level(slot, p, min(k + 1u, top), mb, vb)) return m0;
+    vec2 mm = mix(ma, mb, f);
+    vec2 ea = ma - mm, eb = mb - mm;
+    var = (1.0 - f) * (va + dot(ea, ea)) + f * (vb + dot(eb, eb));
+    return mm;
+}
+
+// shading_normal with the filtered mean slope at level `lambda` (> 0); `var`: the slope
+// variance under the footprint (0 where the map does not apply).
+vec3 shading_normal_lean(uint slot, vec3 p, vec3 ng, float lambda, out float var) {
+    var = 0.0;
+    MapHeader m = map_headers[slot];
+    if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
+    if (dot(cross(m.axis_x.xyz, m.axis_up.xyz), ng) <= 0.0) return ng;
+    vec2 s = lean_slopes(slot, p, lambda, var);
+    if (s.x == 0.0 && s.y == 0.0) return ng;
+    float len = length(s);
+    if (len > MAX_SLOPE) s *= MAX_SLOPE / len;
+    vec3 ax = m.axis_x.xyz - dot(m.axis_x.xyz, ng) * ng;
+    vec3 up = m.axis_up.xyz - dot(m.axis_up.xyz, ng) * ng;
+    return normalize(ng - s.x * ax + s.y * up);
+}
+
 // A perturbed normal can face away from the viewer (slope + view angle > 90 degrees),
 // which would make the BSDF zero there: black fringes. The normal is rotated towards wo,
 // in the plane of (ns, wo), until cos(ns, wo) = min(SHADE_MIN_COS, cos(ng, wo)); the
@@ -251,7 +376,28 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
         vec3 ns = ng;
         if (mat != MAT_TABLE && slot != 0u && ((word & MAT_LABELLED) != 0u
                 || (map_headers[slot].dims.w & MAP_LABELLED_ONLY) == 0u)) {
-            ns = bend_towards_viewer(shading_normal(slot, p, ng), ng, -d);
+            // LEAN at the primary hit: footprint = the pixel cone's width at the hit
+            // (its angle shrinks off axis as cos^1.5), over |cos| on the surface, in
+            // texels; secondary hits read level 0, and so do curved (revolved) patches
+            // (LEAN there is not done: lean_level uses the planar projection).
+            float lambda = 0.0;
+            if (prm.texture_filter == FILTER_LEAN && depth == 0u
+                    && (map_headers[slot].dims.w & MAP_REVOLVED) == 0u) {
+                float c = max(dot(d, prm.cam.forward.xyz), 0.1);
+                float width = prm.pixel_angle * c * sqrt(c) * h.t
+                    / max(abs(dot(ng, d)), LEAN_MIN_COS);
+                lambda = log2(width * map_headers[slot].origin.w * prm.filter_scale);
+            }
+            if (lambda > 0.0) {
+                float var;
+                ns = bend_towards_viewer(shading_normal_lean(slot, p, ng, lambda, var), ng, -d);
+                // The slope variance widens the lobe (isotropic LEAN: alpha^2 + var).
+                if (var > 0.0 && !surf.diffuse) {
+                    surf.c.alpha = min(sqrt(surf.c.alpha * surf.c.alpha + var), 1.0);
+                }
+            } else {
+                ns = bend_towards_viewer(shading_normal(slot, p, ng), ng, -d);
+            }
         }
         vec3 tb, bt;
         onb(ns, tb, bt);

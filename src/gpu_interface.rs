@@ -87,14 +87,16 @@ mod tests {
 
     #[test]
     fn layouts_match_what_the_shaders_were_written_for() {
-        assert_eq!(std::mem::size_of::<PathParams>(), 176);
+        assert_eq!(std::mem::size_of::<PathParams>(), 192);
+        assert_eq!(std::mem::offset_of!(PathParams, texture_filter), 176);
         assert_eq!(std::mem::offset_of!(PathParams, width), 96);
         assert_eq!(std::mem::offset_of!(PathParams, light_first), 160);
         assert_eq!(std::mem::size_of::<PathPush>(), 32);
         // Push constants: 128 bytes is all Vulkan guarantees.
         assert_eq!(std::mem::size_of::<ImagePush>(), 128);
-        assert_eq!(PathTraceBinding::COUNT, 14);
+        assert_eq!(PathTraceBinding::COUNT, 17);
         assert_eq!(PathTraceBinding::CurvedMaps.at(2), 15);
+        assert_eq!(PathTraceBinding::Moments0.at(2), 16);
         assert_eq!(PathTraceBinding::LightGeometry.at(2), 12);
         assert_eq!(PathTraceBinding::LightList.at(2), 13);
         assert_eq!(std::mem::size_of::<LightBlock>(), 64);
@@ -111,6 +113,8 @@ mod tests {
             "#define PT_LIGHT_GEOMETRY",
             "struct LightBlock",
             "#define PT_LIGHT_LIST",
+            "#define PT_MOMENTS2",
+            "#define FILTER_LEAN 1u",
         ] {
             assert!(glsl.contains(name), "{name} missing from interface.glsl");
         }

@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use ash::vk;
 
 use super::RenderError;
+use super::settings::TextureFilter;
 use super::slope::{self, FaceMap, Placement};
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
@@ -39,6 +40,11 @@ struct MapBuffers {
     texels: [Buffer; slope::MAP_BUFFERS],
     /// The curved patches' projections, one per slot.
     curved: Buffer,
+    /// Each map's moment pyramid (`slope::moments_pyramid`) when uploaded for
+    /// `TextureFilter::Lean`; one unused word each otherwise.
+    moments: [Buffer; slope::MAP_BUFFERS],
+    /// Whether any slot has a map.
+    any: bool,
 }
 
 /// What a set of uploaded maps was made from: each face map's identity and placement,
@@ -47,6 +53,7 @@ struct MapBuffers {
 struct MapKey {
     maps: Vec<(usize, u32, [u32; 2], u8)>,
     placement: Option<(crate::scene::assemble::Cover, u64, u32)>,
+    filter: TextureFilter,
 }
 
 /// The GPU side of a [`Stage`].
@@ -118,6 +125,7 @@ impl GpuScene {
         let empty = MapKey {
             maps: Vec::new(),
             placement: None,
+            filter: TextureFilter::None,
         };
         let maps = upload_maps(tracer, &[], &[], slots, empty)?;
         BUILT.fetch_add(1, Ordering::Relaxed);
@@ -150,7 +158,20 @@ impl GpuScene {
         maps: &[FaceMap],
         placement: &Placement,
     ) -> Result<(), RenderError> {
-        let key = map_key(maps, placement);
+        self.set_face_maps_filtered(tracer, maps, placement, TextureFilter::None)
+    }
+
+    /// [`set_face_maps`](Self::set_face_maps) for views rendered with `filter`: with
+    /// `TextureFilter::Lean` each map's moment pyramid is built (on the CPU) and uploaded
+    /// too (4 bytes per texel more, docs/rendering.md, "Filtered slope maps").
+    pub fn set_face_maps_filtered(
+        &mut self,
+        tracer: &PathTracer,
+        maps: &[FaceMap],
+        placement: &Placement,
+        filter: TextureFilter,
+    ) -> Result<(), RenderError> {
+        let key = map_key(maps, placement, filter);
         if key != self.maps.key {
             let placed = place_maps(maps, &self.face_frames, &self.regions, placement)?;
             let first = self.regions.len() as u32;
@@ -196,6 +217,12 @@ impl GpuScene {
         Ok(())
     }
 
+    /// Whether views with `filter` can read these maps: "lean" needs the moment pyramids
+    /// of every map (none needed when no slot has a map).
+    pub fn maps_support(&self, filter: TextureFilter) -> bool {
+        filter == TextureFilter::None || !self.maps.any || self.maps.key.filter == filter
+    }
+
     /// The object's planar regions (where slope maps are projected).
     pub fn regions(&self) -> &[RegionFrame] {
         &self.regions
@@ -213,6 +240,11 @@ impl GpuScene {
     /// The curved patches' projection blocks (`CurvedMapBlock` per slot).
     pub(crate) fn curved_buffer(&self) -> &Buffer {
         &self.maps.curved
+    }
+
+    /// The maps' moment pyramids (unused words without "lean").
+    pub(crate) fn moment_buffers(&self) -> &[Buffer; slope::MAP_BUFFERS] {
+        &self.maps.moments
     }
 
     /// GPU scenes built by this process so far.
@@ -249,7 +281,7 @@ pub fn surface_blocks(surfaces: &[SurfaceMaterial]) -> Vec<SurfaceBlock> {
         .collect()
 }
 
-fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {
+fn map_key(maps: &[FaceMap], p: &Placement, filter: TextureFilter) -> MapKey {
     MapKey {
         maps: maps
             .iter()
@@ -263,6 +295,7 @@ fn map_key(maps: &[FaceMap], p: &Placement) -> MapKey {
             })
             .collect(),
         placement: Some((p.cover, p.seed, p.rotation_range_deg.to_bits())),
+        filter,
     }
 }
 
@@ -275,16 +308,23 @@ fn upload_maps(
 ) -> Result<MapBuffers, RenderError> {
     let ctx = &tracer.ctx;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let max_bytes = ctx.info.max_storage_buffer_range as u64;
     let mut all = placed.to_vec();
     all.extend(curved.iter().map(|c| c.map.clone()));
-    let (mut headers, texels) = slope::pack(&all, slots, ctx.info.max_storage_buffer_range as u64)?;
+    let (mut headers, texels) = slope::pack(&all, slots, max_bytes)?;
     let blocks = slope::curved_blocks(curved, &mut headers)?;
+    let moments = if key.filter == TextureFilter::Lean {
+        slope::pack_moments(&headers, &texels, max_bytes)?
+    } else {
+        Default::default()
+    };
     let buf = |texels: &[u32], name: &str| {
         // A binding may not be empty; a slot without a map never reads it.
         let data: &[u32] = if texels.is_empty() { &[0] } else { texels };
         Buffer::from_slice(ctx, name, data, storage)
     };
     Ok(MapBuffers {
+        any: !placed.is_empty() || !curved.is_empty(),
         key,
         headers: Buffer::from_slice(ctx, "slope map headers", &headers, storage)?,
         texels: [
@@ -293,5 +333,10 @@ fn upload_maps(
             buf(&texels[2], "slopes 2")?,
         ],
         curved: Buffer::from_slice(ctx, "curved maps", &blocks, storage)?,
+        moments: [
+            buf(&moments[0], "slope moments 0")?,
+            buf(&moments[1], "slope moments 1")?,
+            buf(&moments[2], "slope moments 2")?,
+        ],
     })
 }

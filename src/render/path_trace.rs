@@ -111,9 +111,15 @@ pub fn render_scene(
     progress: impl FnMut(u32),
 ) -> Result<Frame, RenderError> {
     let tracer = PathTracer::new(ctx, backend, tables)?;
+    let settings: RenderSettings = settings.into();
     let mut gpu = GpuScene::new(&tracer, &scene.stage, opts.profiler)?;
-    gpu.set_face_maps(&tracer, &scene.face_maps, &scene.placement)?;
-    render_frame(&tracer, &gpu, &scene.view, &settings.into(), opts, progress)
+    gpu.set_face_maps_filtered(
+        &tracer,
+        &scene.face_maps,
+        &scene.placement,
+        settings.texture_filter,
+    )?;
+    render_frame(&tracer, &gpu, &scene.view, &settings, opts, progress)
 }
 
 /// The radiance of [`render_scene`] without annotation.

@@ -1,7 +1,7 @@
 //! Plain render settings: what the path tracer needs besides the scene, independent of
 //! the scene file (`scene::config` converts into these).
 
-pub use crate::scene::config::{LightSampling, SamplerKind};
+pub use crate::scene::config::{LightSampling, SamplerKind, TextureFilter};
 use crate::scene::config::{MaterialConfig, RenderConfig, SceneConfig};
 
 /// The object's rough conductor (GGX, Kulla-Conty energy compensation optional).
@@ -36,6 +36,11 @@ pub struct RenderSettings {
     pub seed: u32,
     pub sampler: SamplerKind,
     pub material: Material,
+    /// Slope-map filtering (`[render] texture_filter`); "lean" needs the scene's maps
+    /// uploaded with their moment pyramids (`GpuScene::set_face_maps_filtered`).
+    pub texture_filter: TextureFilter,
+    /// Footprint multiplier of "lean" (`[render] texture_filter_scale`).
+    pub texture_filter_scale: f32,
 }
 
 impl RenderSettings {
@@ -47,6 +52,8 @@ impl RenderSettings {
             seed: r.seed,
             sampler: r.sampler,
             material: material.into(),
+            texture_filter: r.texture_filter,
+            texture_filter_scale: r.texture_filter_scale,
         }
     }
 }

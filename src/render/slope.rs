@@ -305,6 +305,278 @@ fn lookup_plane(h: &MapHeader, texels: &[u32], q: [f32; 2]) -> [f32; 2] {
     out
 }
 
+/// u32 words per texel of a moments level (levels 1 and up; [`moments_pyramid`]).
+pub const MOMENT_WORDS: usize = 3;
+
+/// Levels of a `width` x `height` map's moment pyramid, level 0 (the map) included: level
+/// k has `ceil(width / 2^k)` x `ceil(height / 2^k)` texels, down to 1 x 1.
+pub fn moment_levels(width: u32, height: u32) -> u32 {
+    let n = width.max(height).max(1);
+    // 1 + ceil(log2(n)); the shader: findMSB(n - 1) + 2.
+    1 + (32 - (n - 1).leading_zeros())
+}
+
+/// Texels per side of level `k`.
+pub fn level_dims(width: u32, height: u32, k: u32) -> (u32, u32) {
+    (width.div_ceil(1 << k), height.div_ceil(1 << k))
+}
+
+/// First word of level `k` (>= 1) in the moments buffer.
+pub fn level_offset(width: u32, height: u32, k: u32) -> usize {
+    (1..k)
+        .map(|j| {
+            let (w, h) = level_dims(width, height, j);
+            w as usize * h as usize * MOMENT_WORDS
+        })
+        .sum()
+}
+
+/// The slope moments of a packed level-0 map (`pack`'s texels: two f16 slopes a u32) for
+/// LEAN filtering (`[render] texture_filter = "lean"`): levels 1 up to 1 x 1, each texel
+/// the mean slope and the slope covariance of the level-0 texels under it (a box of
+/// 2^k x 2^k texels, clipped at the map's right and bottom edges), in f16:
+/// word 0 `[mean dh/dx, mean dh/dy]`, word 1 `[var dh/dx, var dh/dy]`, word 2
+/// `[cov, 0]`. Level 0 itself is the map (covariance zero: a bilinear surface has one
+/// slope at a point). Central moments rather than raw ones keep the variance exact in
+/// f16 when the mean slope is far larger than its spread; the shader's bilinear lookup
+/// adds the spread of the interpolated means (a mixture's covariance), which is what
+/// interpolating raw moments gives. Memory: `MOMENT_WORDS` x 4 bytes x (1/4 + 1/16 + ...)
+/// = 4 bytes per level-0 texel, as much as the map. Built in f64 from the f16 slopes the
+/// shader reads.
+pub fn moments_pyramid(level0: &[u32], width: u32, height: u32) -> Vec<u32> {
+    use rayon::prelude::*;
+    let levels = moment_levels(width, height);
+    let mut out = vec![0u32; level_offset(width, height, levels)];
+    // One level as (mean x, mean y, cxx, cyy, cxy, texel count).
+    type M = [f64; 6];
+    let mut prev: Vec<M> = level0
+        .iter()
+        .map(|&w| {
+            let (x, y) = (
+                f16_to_f32(w as u16) as f64,
+                f16_to_f32((w >> 16) as u16) as f64,
+            );
+            [x, y, 0.0, 0.0, 0.0, 1.0]
+        })
+        .collect();
+    let (mut pw, mut ph) = (width as usize, height as usize);
+    for k in 1..levels {
+        let (w, h) = level_dims(width, height, k);
+        let (w, h) = (w as usize, h as usize);
+        let cur: Vec<M> = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let kids: Vec<&M> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                    .iter()
+                    .filter(|&&(dx, dy)| 2 * x + dx < pw && 2 * y + dy < ph)
+                    .map(|&(dx, dy)| &prev[(2 * y + dy) * pw + 2 * x + dx])
+                    .collect();
+                let n: f64 = kids.iter().map(|c| c[5]).sum();
+                let mx = kids.iter().map(|c| c[5] * c[0]).sum::<f64>() / n;
+                let my = kids.iter().map(|c| c[5] * c[1]).sum::<f64>() / n;
+                let mut m = [mx, my, 0.0, 0.0, 0.0, n];
+                for c in &kids {
+                    let (ex, ey) = (c[0] - mx, c[1] - my);
+                    m[2] += c[5] * (c[2] + ex * ex);
+                    m[3] += c[5] * (c[3] + ey * ey);
+                    m[4] += c[5] * (c[4] + ex * ey);
+                }
+                for v in &mut m[2..5] {
+                    *v /= n;
+                }
+                m
+            })
+            .collect();
+        let base = level_offset(width, height, k);
+        out[base..base + w * h * MOMENT_WORDS]
+            .par_chunks_mut(MOMENT_WORDS)
+            .zip(cur.par_iter())
+            .for_each(|(o, m)| {
+                let half2 =
+                    |a: f64, b: f64| f16_bits(a as f32) as u32 | (f16_bits(b as f32) as u32) << 16;
+                o[0] = half2(m[0], m[1]);
+                o[1] = half2(m[2], m[3]);
+                o[2] = half2(m[4], 0.0);
+            });
+        (prev, pw, ph) = (cur, w, h);
+    }
+    out
+}
+
+/// The moment pyramid of each texel buffer of [`pack`]'s output (empty where a buffer is
+/// unused), sized from the header that uses it; a pyramid may not exceed `max_bytes`.
+pub fn pack_moments(
+    headers: &[MapHeader],
+    texels: &[Vec<u32>; MAP_BUFFERS],
+    max_bytes: u64,
+) -> Result<[Vec<u32>; MAP_BUFFERS], SlopeError> {
+    let mut out: [Vec<u32>; MAP_BUFFERS] = Default::default();
+    for (b, o) in out.iter_mut().enumerate() {
+        let Some((slot, h)) = headers
+            .iter()
+            .enumerate()
+            .find(|(_, h)| (h.dims[3] & MAP_BUFFER_MASK) as usize == b + 1)
+        else {
+            continue;
+        };
+        let (w, ht) = (h.dims[0], h.dims[1]);
+        let bytes = level_offset(w, ht, moment_levels(w, ht)) as u64 * 4;
+        if bytes > max_bytes {
+            return Err(SlopeError::Invalid {
+                region: slot.saturating_sub(1) as u32,
+                message: format!(
+                    "{w} x {ht} texels: the moment pyramid of texture_filter = \"lean\" needs {} MiB, more than one storage buffer allows ({} MiB)",
+                    bytes >> 20,
+                    max_bytes >> 20
+                ),
+            });
+        }
+        *o = moments_pyramid(&texels[b], w, ht);
+    }
+    Ok(out)
+}
+
+/// The footprint's mip level as the shader computes it for a primary hit: the pixel
+/// cone's width at the hit, `pixel_angle` (rad: `PathParams::pixel_angle` x cos^1.5 of
+/// the ray's angle to the camera axis) x the
+/// distance `t` (mm), widened by 1 / |cos| of the angle between the ray and the surface
+/// (clamped at `LEAN_MIN_COS`), in texels (`texels_per_mm`, `MapHeader::origin.w`), times
+/// `scale`; log2 of it. Below 0 (the footprint is under a texel) nothing is filtered.
+pub fn lean_lambda(
+    pixel_angle: f32,
+    t: f32,
+    cos_surface: f32,
+    texels_per_mm: f32,
+    scale: f32,
+) -> f32 {
+    let width_mm = pixel_angle * t / cos_surface.abs().max(LEAN_MIN_COS);
+    (width_mm * texels_per_mm * scale).log2()
+}
+
+/// Smallest |cos| between the primary ray and the surface in the footprint (about 87
+/// degrees off the normal): keeps the footprint finite at grazing angles.
+pub const LEAN_MIN_COS: f32 = 0.05;
+
+/// Mean slope and slope variance (trace of the covariance: var dh/dx + var dh/dy) at `p`
+/// at mip level `lambda` (fractional: trilinear between floor and floor + 1, clamped to
+/// the top level), as the shader computes them; `lambda <= 0`: the level-0 lookup
+/// ([`lookup`]) and variance 0, exactly.
+pub fn lookup_lean(
+    h: &MapHeader,
+    texels: &[u32],
+    moments: &[u32],
+    p: Vec3,
+    lambda: f32,
+) -> ([f32; 2], f32) {
+    let m0 = lookup(h, texels, p);
+    if lambda.is_nan() || lambda <= 0.0 || h.dims[3] & MAP_BUFFER_MASK == 0 {
+        return (m0, 0.0);
+    }
+    let top = (moment_levels(h.dims[0], h.dims[1]) - 1) as f32;
+    if top < 1.0 {
+        return (m0, 0.0);
+    }
+    let l = lambda.min(top);
+    let k = l.floor() as u32;
+    let f = l - k as f32;
+    // The lower level (level 0: the point lookup, no spread).
+    let (ma, va) = if k == 0 {
+        (m0, 0.0)
+    } else {
+        match level_moments(h, moments, p, k) {
+            Some(r) => r,
+            None => return (m0, 0.0),
+        }
+    };
+    if f == 0.0 {
+        return (ma, va);
+    }
+    let Some((mb, vb)) = level_moments(h, moments, p, (k + 1).min(top as u32)) else {
+        return (m0, 0.0);
+    };
+    mix_moments(ma, va, mb, vb, f)
+}
+
+/// Mixture of two slope distributions with weights 1 - f and f: its mean and variance.
+fn mix_moments(ma: [f32; 2], va: f32, mb: [f32; 2], vb: f32, f: f32) -> ([f32; 2], f32) {
+    // GLSL's mix: a (1 - f) + b f.
+    let m = [ma[0] * (1.0 - f) + mb[0] * f, ma[1] * (1.0 - f) + mb[1] * f];
+    let d2 = |a: [f32; 2]| (a[0] - m[0]) * (a[0] - m[0]) + (a[1] - m[1]) * (a[1] - m[1]);
+    (m, (1.0 - f) * (va + d2(ma)) + f * (vb + d2(mb)))
+}
+
+/// Bilinear moments at level `k` >= 1 (None outside a clipped map).
+fn level_moments(h: &MapHeader, moments: &[u32], p: Vec3, k: u32) -> Option<([f32; 2], f32)> {
+    let (w, ht) = level_dims(h.dims[0], h.dims[1], k);
+    let d = p - Vec3::from_slice(&h.origin[..3]);
+    let s = 1.0 / (1u32 << k) as f32;
+    let x = (d.dot(Vec3::from_slice(&h.axis_x[..3])) * h.origin[3] + 0.5 * h.dims[0] as f32) * s;
+    let y = (-d.dot(Vec3::from_slice(&h.axis_up[..3])) * h.origin[3] + 0.5 * h.dims[1] as f32) * s;
+    let (wf, hf) = (w as f32, ht as f32);
+    let (x0, y0, x1, y1, tx, ty);
+    if h.dims[3] & MAP_WRAP != 0 {
+        let fx = (x - 0.5) - wf * ((x - 0.5) / wf).floor();
+        let fy = (y - 0.5) - hf * ((y - 0.5) / hf).floor();
+        if !(fx >= 0.0 && fy >= 0.0) {
+            return None;
+        }
+        x0 = (fx as u32).min(w - 1);
+        y0 = (fy as u32).min(ht - 1);
+        x1 = if x0 + 1 == w { 0 } else { x0 + 1 };
+        y1 = if y0 + 1 == ht { 0 } else { y0 + 1 };
+        tx = fx - x0 as f32;
+        ty = fy - y0 as f32;
+    } else {
+        let (wl, hl) = (h.dims[0] as f32 * s, h.dims[1] as f32 * s);
+        if !(x >= 0.0 && y >= 0.0 && x <= wl && y <= hl) {
+            return None;
+        }
+        let fx = (x - 0.5).clamp(0.0, wf - 1.0);
+        let fy = (y - 0.5).clamp(0.0, hf - 1.0);
+        (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
+        (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(ht - 1));
+        (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
+    }
+    let base = level_offset(h.dims[0], h.dims[1], k);
+    let at = |x: u32, y: u32| {
+        let i = base + (y * w + x) as usize * MOMENT_WORDS;
+        let (a, b) = (moments[i], moments[i + 1]);
+        let m = [f16_to_f32(a as u16), f16_to_f32((a >> 16) as u16)];
+        (m, f16_to_f32(b as u16) + f16_to_f32((b >> 16) as u16))
+    };
+    // Bilinear weights; the mixture of the four texels' distributions.
+    let taps = [
+        (at(x0, y0), (1.0 - tx) * (1.0 - ty)),
+        (at(x1, y0), tx * (1.0 - ty)),
+        (at(x0, y1), (1.0 - tx) * ty),
+        (at(x1, y1), tx * ty),
+    ];
+    let mut m = [0.0f32; 2];
+    for ((mi, _), wt) in &taps {
+        m[0] += wt * mi[0];
+        m[1] += wt * mi[1];
+    }
+    let mut v = 0.0f32;
+    for ((mi, vi), wt) in &taps {
+        let (ex, ey) = (mi[0] - m[0], mi[1] - m[1]);
+        v += wt * (vi + ex * ex + ey * ey);
+    }
+    Some((m, v))
+}
+
+/// GGX alpha widened by the slope variance under the footprint (isotropic LEAN:
+/// alpha^2 + var dh/dx + var dh/dy, i.e. each axis's Beckmann-matched alpha^2 / 2 gains
+/// that axis's variance, averaged over the two axes), at most 1; unchanged (bit for bit)
+/// when the variance is not positive.
+pub fn lean_alpha(alpha: f32, var: f32) -> f32 {
+    if var > 0.0 {
+        (alpha * alpha + var).sqrt().min(1.0)
+    } else {
+        alpha
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -597,6 +869,143 @@ mod tests {
         let mut bad = maps.clone();
         bad[0].face = 9;
         assert!(place_maps(&bad, &stage.face_frames, &stage.regions, &part).is_err());
+    }
+
+    /// The moment pyramid of sinusoidal grooves (dh/dx = S cos(k x), dh/dy = 0) holds at
+    /// each level the box-filtered mean and variance of the slope: for N texel centres
+    /// spaced h around a block centre c, mean = S cos(k c) D(k), E[s^2] = S^2 / 2 (1 +
+    /// cos(2 k c) D(2 k)) with D(k) = sin(N k h / 2) / (N sin(k h / 2)); the top level
+    /// (the whole map, four periods) has mean 0 and variance S^2 / 2.
+    #[test]
+    fn moments_pyramid_matches_box_filtered_grooves() {
+        let (spacing, period) = (10.0f64, 0.64f32);
+        let map = SlopeMap::test_grooves(2.56, spacing, period, 20.0);
+        let n = map.width as u32;
+        assert_eq!((n, map.height as u32), (256, 256));
+        let level0: Vec<u32> = map
+            .data
+            .iter()
+            .map(|v| f16_bits(v[0]) as u32 | (f16_bits(v[1]) as u32) << 16)
+            .collect();
+        let pyr = moments_pyramid(&level0, n, n);
+        let levels = moment_levels(n, n);
+        assert_eq!(levels, 9);
+        assert_eq!(pyr.len(), level_offset(n, n, levels));
+        // 4 bytes per level-0 texel at most (1/4 + 1/16 + ... < 1/3, 3 words).
+        assert!(pyr.len() <= level0.len());
+        let s = 20f64.to_radians().tan();
+        let k = std::f64::consts::TAU / (period as f64 * 1000.0);
+        let d = |k: f64, m: f64| (m * k * spacing / 2.0).sin() / (m * (k * spacing / 2.0).sin());
+        let mut checked = 0;
+        for l in 1..levels {
+            let (w, h) = level_dims(n, n, l);
+            let base = level_offset(n, n, l);
+            let m = (1u32 << l) as f64;
+            for i in (0..w).step_by(((w / 8).max(1)) as usize) {
+                // Block centre (µm from the map centre) of column i.
+                let c = ((i as f64 + 0.5) * m - 0.5 * n as f64) * spacing;
+                let mean = s * (k * c).cos() * d(k, m);
+                let var = s * s / 2.0 * (1.0 + (2.0 * k * c).cos() * d(2.0 * k, m)) - mean * mean;
+                for j in [0, h - 1] {
+                    let o = base + ((j * w + i) as usize) * MOMENT_WORDS;
+                    let g = |w: u32, hi: bool| {
+                        f16_to_f32(if hi { (w >> 16) as u16 } else { w as u16 }) as f64
+                    };
+                    let (mx, my) = (g(pyr[o], false), g(pyr[o], true));
+                    let (vx, vy, cxy) = (
+                        g(pyr[o + 1], false),
+                        g(pyr[o + 1], true),
+                        g(pyr[o + 2], false),
+                    );
+                    assert!(
+                        (mx - mean).abs() < 1e-3 * s,
+                        "level {l} texel {i}: mean {mx} vs {mean}"
+                    );
+                    assert!(
+                        (vx - var).abs() < 0.02 * var + 2e-6,
+                        "level {l} texel {i}: variance {vx} vs {var}"
+                    );
+                    assert_eq!((my, vy, cxy), (0.0, 0.0, 0.0), "level {l} texel {i}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 40, "{checked}");
+        // The top level: the whole map.
+        let o = level_offset(n, n, levels - 1);
+        let top = f16_to_f32(pyr[o + 1] as u16) as f64;
+        assert!((top / (s * s / 2.0) - 1.0).abs() < 2e-3, "{top}");
+    }
+
+    /// The shader's lookup (CPU mirror): below a texel (lambda <= 0) it is the level-0
+    /// lookup, bit for bit, with no variance; at an integer level on a texel centre it
+    /// is that texel's moments; between levels it is continuous; the alpha widening
+    /// leaves alpha untouched at zero variance.
+    #[test]
+    fn lean_lookup_levels() {
+        let map = Arc::new(SlopeMap::test_grooves(2.56, 10.0, 0.64, 20.0));
+        let frame = frame_a();
+        let fm = FaceMap {
+            face: frame.face,
+            slopes: map,
+            rotation_deg: 0.0,
+            offset_mm: [0.0, 0.0],
+        };
+        let placed = place_maps(&[fm], &[frame], &[region_a(&frame)], &FACES).expect("place");
+        let (h, t) = pack(&placed, 2, 1 << 27).expect("pack");
+        let mom = pack_moments(&h, &t, 1 << 27).expect("moments");
+        let (h, t, mom) = (h[1], &t[0], &mom[0]);
+        assert!(mom.len() > 1000 && pack_moments(&[h], &[t.clone(), vec![], vec![]], 64).is_err());
+        let c = Vec3::from_slice(&h.origin[..3]);
+        for i in 0..50 {
+            let p = c + Vec3::new(i as f32 * 0.0137 - 0.3, i as f32 * 0.0071 - 0.2, 0.0);
+            for lambda in [-3.0, -0.01, 0.0, f32::NAN] {
+                assert_eq!(lookup_lean(&h, t, mom, p, lambda), (lookup(&h, t, p), 0.0));
+            }
+            // Continuity at integer levels (from below and above).
+            for l in [1.0f32, 2.0, 3.0] {
+                let (a, va) = lookup_lean(&h, t, mom, p, l - 1e-4);
+                let (b, vb) = lookup_lean(&h, t, mom, p, l);
+                let (c2, vc) = lookup_lean(&h, t, mom, p, l + 1e-4);
+                for (x, y) in [(a, b), (b, c2)] {
+                    assert!(
+                        (x[0] - y[0]).abs() < 1e-3 && (x[1] - y[1]).abs() < 1e-3,
+                        "{l}: {x:?} {y:?}"
+                    );
+                }
+                assert!(
+                    (va - vb).abs() < 1e-4 && (vb - vc).abs() < 1e-4,
+                    "{l}: {va} {vb} {vc}"
+                );
+            }
+            // Far above the top level: the whole map's variance.
+            let (m, v) = lookup_lean(&h, t, mom, p, 40.0);
+            let s2 = 20f32.to_radians().tan().powi(2) / 2.0;
+            assert!(
+                m[0].abs() < 1e-3 && (v / s2 - 1.0).abs() < 3e-3,
+                "{m:?} {v}"
+            );
+        }
+        // At level 2 on a texel centre: that texel's moments. Texel (5, 7) of level 2
+        // (64 x 64) has its centre 4 (5.5, 7.5) texels from the map's top-left corner.
+        let mm_per_texel = 1.0 / h.origin[3];
+        let p = c + Vec3::new(
+            (4.0 * 5.5 - 128.0) * mm_per_texel,
+            -(4.0 * 7.5 - 128.0) * mm_per_texel,
+            0.0,
+        );
+        let o = level_offset(256, 256, 2) + (7 * 64 + 5) * MOMENT_WORDS;
+        let (m, v) = lookup_lean(&h, t, mom, p, 2.0);
+        assert!((m[0] - f16_to_f32(mom[o] as u16)).abs() < 1e-6, "{m:?}");
+        let want = f16_to_f32(mom[o + 1] as u16) + f16_to_f32((mom[o + 1] >> 16) as u16);
+        assert!((v - want).abs() < 1e-6 && want > 0.0, "{v} {want}");
+        assert_eq!(lean_alpha(0.1, 0.0), 0.1);
+        assert!((lean_alpha(0.3, 0.16) - 0.5).abs() < 1e-6);
+        assert_eq!(lean_alpha(0.5, 4.0), 1.0);
+        // 2^lambda texels: 1 mrad at 500 mm on a face 60 degrees off the ray, 0.5 mm / px
+        // texels per mm 100 -> 100 texels.
+        let l = lean_lambda(1e-3, 500.0, 0.5, 100.0, 1.0);
+        assert!((l - 100f32.log2()).abs() < 1e-4, "{l}");
     }
 
     #[test]

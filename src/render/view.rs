@@ -123,6 +123,12 @@ impl<'s> View<'s> {
         if blocks.is_empty() {
             blocks.push(LightBlock::default()); // a binding may not be empty; never read
         }
+        if !scene.maps_support(settings.texture_filter) {
+            return Err(RenderError::Slope(super::slope::SlopeError::Invalid {
+                region: 0,
+                message: "texture_filter = \"lean\" needs the maps' moment pyramids: upload them with GpuScene::set_face_maps_filtered".into(),
+            }));
+        }
         let mut params = path_params(scene, cam, light, settings);
         if !emitting {
             params.emitter_count = 0;
@@ -171,6 +177,8 @@ impl<'s> View<'s> {
         let mut acc = g.import(&self.accum);
         let mh = g.import(headers);
         let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(&texels[k]));
+        let moments = self.scene.moment_buffers();
+        let [m0, m1, m2] = [0, 1, 2].map(|k| g.import(&moments[k]));
         if start == 0 {
             g.fill("clear radiance", &mut acc, 0);
             if let Some((targets, grid)) = &self.annotation {
@@ -216,6 +224,9 @@ impl<'s> View<'s> {
                 .read(B::LightList.at(off), &ems)
                 .read(B::Surfaces.at(off), &surf)
                 .read(B::CurvedMaps.at(off), &curved)
+                .read(B::Moments0.at(off), &m0)
+                .read(B::Moments1.at(off), &m1)
+                .read(B::Moments2.at(off), &m2)
                 .push(&push)
                 .submit();
         }
@@ -261,8 +272,17 @@ fn path_params(
         emitter_count: light.emitters.len() as u32,
         table_albedo: scene.table_albedo,
         light_first: scene.triangle_count,
+        texture_filter: s.texture_filter as u32,
+        pixel_angle: pixel_angle(cam),
+        filter_scale: s.texture_filter_scale,
         ..Default::default()
     }
+}
+
+/// The pixel cone's angle (rad): the square root of the centre pixel's solid angle,
+/// sqrt((2 tan(fov_w / 2) / width) (2 tan(fov_h / 2) / height)).
+pub fn pixel_angle(cam: &Camera) -> f32 {
+    (4.0 * cam.tan_half_w * cam.tan_half_h / (cam.width as f32 * cam.height as f32)).sqrt()
 }
 
 /// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,

@@ -828,6 +828,26 @@ pub struct RenderConfig {
     pub accel: AccelChoice,
     /// Random numbers: "sobol" (Owen-scrambled, low discrepancy) or "independent".
     pub sampler: SamplerKind,
+    /// Slope-map filtering: "none" (point samples of the map) or "lean" (the slope
+    /// distribution under the pixel's footprint folded into the GGX roughness;
+    /// docs/rendering.md, "Filtered slope maps").
+    pub texture_filter: TextureFilter,
+    /// Footprint multiplier of "lean" (the mip level is log2 of the footprint in texels
+    /// times this), [0.25, 4].
+    pub texture_filter_scale: f32,
+}
+
+/// How the path tracer reads slope maps (`[render] texture_filter`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TextureFilter {
+    /// Point samples of the level-0 map (bilinear), the renderer before this option.
+    #[default]
+    None = 0,
+    /// LEAN mapping (Olano and Baker 2010): a pyramid of slope moments looked up at the
+    /// primary hit's pixel footprint; mean slope -> shading normal, slope variance ->
+    /// widened GGX alpha (isotropic).
+    Lean = 1,
 }
 
 /// Which sample generator the path tracer uses (ids match glsl/common/sampler.glsl).
@@ -850,6 +870,8 @@ impl Default for RenderConfig {
             batch_spp: 16,
             accel: AccelChoice::Auto,
             sampler: SamplerKind::Sobol,
+            texture_filter: TextureFilter::None,
+            texture_filter_scale: 1.0,
         }
     }
 }
@@ -1275,6 +1297,14 @@ impl SceneConfig {
         range_u("render.spp", r.spp, 1, 1 << 20, "[1, 1048576]")?;
         range_u("render.max_bounces", r.max_bounces, 1, 64, "[1, 64]")?;
         range_u("render.batch_spp", r.batch_spp, 1, 1024, "[1, 1024]")?;
+        range_f(
+            "render.texture_filter_scale",
+            r.texture_filter_scale,
+            0.25,
+            4.0,
+            false,
+            "[0.25, 4]",
+        )?;
         let t = &self.texture;
         if !["flat", "test-grooves", "file"].contains(&t.kind.as_str()) {
             return Err(ConfigError::Invalid {
@@ -1377,6 +1407,27 @@ impl SceneConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn texture_filter_parses_and_checks_its_scale() {
+        let c = SceneConfig::parse("").expect("defaults");
+        assert_eq!(c.render.texture_filter, TextureFilter::None);
+        let c =
+            SceneConfig::parse("[render]\ntexture_filter = \"lean\"\ntexture_filter_scale = 0.5\n")
+                .expect("lean");
+        assert_eq!(
+            (c.render.texture_filter, c.render.texture_filter_scale),
+            (TextureFilter::Lean, 0.5)
+        );
+        let e = SceneConfig::parse("[render]\ntexture_filter_scale = 8.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("render.texture_filter_scale") && e.contains("[0.25, 4]"),
+            "{e}"
+        );
+        assert!(SceneConfig::parse("[render]\ntexture_filter = \"mip\"\n").is_err());
+    }
 
     #[test]
     fn defaults_are_valid() {
