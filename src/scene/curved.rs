@@ -294,17 +294,7 @@ pub fn curved_patches(
     let n = regions.len();
     let candidate = |r: u32| (r as usize) < n && regions[r as usize].face == FACE_OTHER;
     // Region adjacency over shared edges (vertices welded by position, 0.25 um grid).
-    let cell = 2.5e-4;
-    let mut weld: HashMap<[i64; 3], u32> = HashMap::new();
-    let welded: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|p| {
-            let key = p.as_dvec3().to_array().map(|c| (c / cell).round() as i64);
-            let next = weld.len() as u32;
-            *weld.entry(key).or_insert(next)
-        })
-        .collect();
+    let welded = super::regions::weld_positions(mesh, 2.5e-4);
     let mut edges: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
     for (t, tri) in mesh.triangles.iter().enumerate() {
         let r = region_of.get(t).copied().unwrap_or(u32::MAX);

@@ -73,17 +73,7 @@ pub fn planar_regions(mesh: &Mesh, tol: &RegionTolerance) -> Vec<PlanarRegion> {
     let defect = |t: usize| mesh.labels.get(t).is_some_and(|l| l.class != 0);
 
     // Weld vertices by position, then map each undirected edge to its triangles.
-    let cell = (tol.distance_mm / 4.0).max(1e-9);
-    let mut weld: HashMap<[i64; 3], u32> = HashMap::new();
-    let welded: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|p| {
-            let key = p.as_dvec3().to_array().map(|c| (c / cell).round() as i64);
-            let next = weld.len() as u32;
-            *weld.entry(key).or_insert(next)
-        })
-        .collect();
+    let welded = weld_positions(mesh, (tol.distance_mm / 4.0).max(1e-9));
     let mut edges: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
     for (t, tri) in mesh.triangles.iter().enumerate() {
         for k in 0..3 {
@@ -277,6 +267,23 @@ pub fn planar_regions(mesh: &Mesh, tol: &RegionTolerance) -> Vec<PlanarRegion> {
 }
 
 /// Region id per triangle (`u32::MAX` for none, which `planar_regions` never leaves).
+/// One id per vertex, equal for vertices whose positions round to the same cell of a
+/// `cell_mm` grid (welds the duplicated vertices of a mesh with split normals or UVs).
+pub(crate) fn weld_positions(mesh: &Mesh, cell_mm: f64) -> Vec<u32> {
+    let mut weld: HashMap<[i64; 3], u32> = HashMap::new();
+    mesh.positions
+        .iter()
+        .map(|p| {
+            let key = p
+                .as_dvec3()
+                .to_array()
+                .map(|c| (c / cell_mm).round() as i64);
+            let next = weld.len() as u32;
+            *weld.entry(key).or_insert(next)
+        })
+        .collect()
+}
+
 pub fn region_per_triangle(mesh: &Mesh, regions: &[PlanarRegion]) -> Vec<u32> {
     let mut out = vec![u32::MAX; mesh.triangles.len()];
     for r in regions {
