@@ -249,7 +249,6 @@ fn run_all(
         RunOptions {
             shard,
             fail_after,
-            progress: None,
             ..Default::default()
         },
     )

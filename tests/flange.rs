@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 
 use synosis::dataset::gpu::GpuRenderer;
-use synosis::dataset::{self, RunOptions, Shard};
+use synosis::dataset::{self, RunOptions};
 use synosis::scene::config::SceneConfig;
 use synosis::scene::{Degenerates, FlangeParams, GltfUnitDefault, flange, load_mesh};
 use synosis::trace::AccelChoice;
@@ -58,12 +58,7 @@ fn flange_job_renders_plans_and_poses_and_resumes() {
         let mut r = GpuRenderer::new(accel, true).unwrap();
         let mut run = || {
             let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
-            let opts = RunOptions {
-                shard: Shard { index: 0, count: 1 },
-                fail_after: None,
-                progress: None,
-                ..Default::default()
-            };
+            let opts = RunOptions::default();
             dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap()
         };
         assert_eq!(run().rendered, 4);

@@ -10,30 +10,7 @@ use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object, path_trace};
 use synosis::scene::assemble::{EmitterSampling, LightGeometry};
 use synosis::scene::config::SceneConfig;
-use synosis::scene::mesh::{FACE_A, Mesh, TriLabel};
 use synosis::trace::Backend;
-
-/// A 200 mm square plate at z = 10 mm, labelled face A.
-fn plate() -> Mesh {
-    let mut plate = Mesh::default();
-    for (x, y) in [
-        (-100.0, -100.0),
-        (100.0, -100.0),
-        (100.0, 100.0),
-        (-100.0, 100.0),
-    ] {
-        plate.positions.push(Vec3::new(x, y, 10.0));
-    }
-    plate.triangles = vec![[0, 1, 2], [0, 2, 3]];
-    plate.labels = vec![
-        TriLabel {
-            face: FACE_A,
-            ..Default::default()
-        };
-        2
-    ];
-    plate
-}
 
 /// The paper camera's field of view at `w` x `h`, straight above face A (30 x 25 mm of
 /// the plate from 90 mm), with `lights` (`[[light]]` tables) and direct light only.
@@ -49,7 +26,7 @@ fn plate_cfg(lights: &str, w: u32, h: u32, spp: u32) -> SceneConfig {
 /// Renders the plate (albedo 1, Lambertian) under `cfg`.
 fn render_plate(cfg: &SceneConfig, backend: Backend) -> (RenderScene, Radiance) {
     let ctx = common::gpu();
-    let mut s = RenderScene::assemble(&plate(), cfg).expect("scene");
+    let mut s = RenderScene::assemble(&common::face_a_plate(), cfg).expect("scene");
     for m in s.stage.materials.iter_mut().take(2) {
         *m = MAT_TABLE;
     }
@@ -310,7 +287,7 @@ fn bad_lights_are_refused_by_name() {
 #[test]
 fn job_lights_replace_the_default_ring() {
     use synosis::dataset::gpu::GpuRenderer;
-    use synosis::dataset::{self, RunOptions, Shard};
+    use synosis::dataset::{self, RunOptions};
     let base = "seed = 5\nviews = [\"A0\"]\n[render]\nwidth = 32\nheight = 24\nspp = 2\nbounces = 2\n\
         [material]\nalpha = [0.2, 0.3]\n[texture]\nsize_px = 80\nspacing_um = 400.0\ncache = 1\n\
         [[object]]\nname = \"testbody-b\"\nmesh = \"testbody-b\"\ndefective = 0\ndefect_free = 1\n\
@@ -323,12 +300,7 @@ fn job_lights_replace_the_default_ring() {
         let tmp = tempfile::tempdir().unwrap();
         let out = tmp.path().join("ds");
         let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
-        let opts = RunOptions {
-            shard: Shard { index: 0, count: 1 },
-            fail_after: None,
-            progress: None,
-            ..Default::default()
-        };
+        let opts = RunOptions::default();
         assert_eq!(
             dataset::run(&prep, &out, &mut r, &mut textures, opts)
                 .unwrap()

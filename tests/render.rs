@@ -8,12 +8,10 @@ use std::sync::Arc;
 use synosis::render::bsdf::{Conductor, Fresnel, ggx_d, ggx_g1, sample_vndf};
 use synosis::render::energy::EnergyTables;
 
-use synosis::render::path_trace::{
-    FrameOptions, MAT_TABLE, Radiance, RenderScene, load_object, path_trace, render_scene,
-};
+use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object, path_trace};
 use synosis::render::slope::{FaceMap, SlopeMap};
 use synosis::scene::config::SceneConfig;
-use synosis::scene::mesh::{FACE_A, Mesh, TriLabel};
+use synosis::scene::mesh::FACE_A;
 use synosis::trace::Backend;
 
 /// Directional albedo of the conductor at cos(theta_o) = mu by sampling it (f cos / pdf).
@@ -360,23 +358,7 @@ impl TapView for SceneConfig {
 /// ring light's triangles integrated numerically on the CPU.
 #[test]
 fn diffuse_plate_matches_irradiance_integral() {
-    let mut plate = Mesh::default();
-    for (x, y) in [
-        (-100.0, -100.0),
-        (100.0, -100.0),
-        (100.0, 100.0),
-        (-100.0, 100.0),
-    ] {
-        plate.positions.push(Vec3::new(x, y, 10.0));
-    }
-    plate.triangles = vec![[0, 1, 2], [0, 2, 3]];
-    plate.labels = vec![
-        TriLabel {
-            face: FACE_A,
-            ..Default::default()
-        };
-        2
-    ];
+    let plate = common::face_a_plate();
     let mut cfg = small_cfg("[table]\nalbedo = 1.0\n");
     cfg.render.max_bounces = 1;
     cfg.camera.view = "A0".into();
@@ -485,36 +467,6 @@ fn flat_map_equals_no_map() {
     }
 }
 
-/// Radiance and per-pixel face ids (centre ray) of one render.
-fn render_faces(cfg: &SceneConfig, backend: Backend) -> (Radiance, Vec<u8>) {
-    let ctx = common::gpu();
-    let object = load_object(cfg).expect("object");
-    let scene = RenderScene::assemble(&object, cfg).expect("scene");
-    let tables = EnergyTables::compute();
-    let opts = FrameOptions {
-        annotate_grid: Some(1),
-        profiler: None,
-    };
-    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
-    common::assert_clean(&ctx);
-    let ann = f.annotation.expect("annotation");
-    (f.radiance, ann.face)
-}
-
-/// Pixels of face A whose 8 neighbours are face A too (no silhouette pixels).
-fn interior(face: &[u8], w: usize, h: usize) -> Vec<usize> {
-    let mut out = Vec::new();
-    for y in 1..h - 1 {
-        for x in 1..w - 1 {
-            let all = (0..9).all(|k| face[(y + k / 3 - 1) * w + x + k % 3 - 1] == FACE_A);
-            if all {
-                out.push(y * w + x);
-            }
-        }
-    }
-    out
-}
-
 /// 60-degree grooves seen 45 degrees off the normal put the shading normal of the
 /// far-side flanks 15 degrees past the viewer's horizon. With the shading-normal
 /// bending (docs/rendering.md) no face pixel may go black: every interior face pixel
@@ -527,11 +479,11 @@ fn steep_slope_map_has_no_black_fringes() {
         flat_cfg.render.spp = 64;
         let mut groove_cfg = small_cfg(extra).tap_view("A45");
         groove_cfg.render.spp = 64;
-        let (flat, faces) = render_faces(&flat_cfg, backend);
-        let (grooved, faces_g) = render_faces(&groove_cfg, backend);
+        let (flat, faces) = common::render_faces(&flat_cfg, backend);
+        let (grooved, faces_g) = common::render_faces(&groove_cfg, backend);
         assert_eq!(faces, faces_g, "the map must not change the geometry");
         assert_sane("grooves", &grooved);
-        let px = interior(&faces, flat.width as usize, flat.height as usize);
+        let px = common::interior(&faces, flat.width as usize, flat.height as usize);
         assert!(px.len() > 100, "only {} interior face pixels", px.len());
         let fmin = px.iter().map(|&i| flat.data[i]).fold(f32::MAX, f32::min);
         let gmin = px.iter().map(|&i| grooved.data[i]).fold(f32::MAX, f32::min);
@@ -548,7 +500,7 @@ fn steep_slope_map_has_no_black_fringes() {
         // non-negative everywhere (too few lit pixels for assert_sane's coverage check).
         let steep = "[texture]\nkind = \"test-grooves\"\nspacing_um = 50.0\ngroove_period_mm = 2.0\ngroove_max_slope_deg = 85.0\n";
         for view in ["A80", "B85"] {
-            let (img, _) = render_faces(&small_cfg(steep).tap_view(view), backend);
+            let (img, _) = common::render_faces(&small_cfg(steep).tap_view(view), backend);
             let bad = img
                 .data
                 .iter()
@@ -740,23 +692,7 @@ fn images_do_not_depend_on_batch_size() {
 #[test]
 fn conductor_plate_matches_rust_bsdf_integral() {
     use synosis::render::bsdf::{Conductor, Fresnel};
-    let mut plate = Mesh::default();
-    for (x, y) in [
-        (-100.0, -100.0),
-        (100.0, -100.0),
-        (100.0, 100.0),
-        (-100.0, 100.0),
-    ] {
-        plate.positions.push(Vec3::new(x, y, 10.0));
-    }
-    plate.triangles = vec![[0, 1, 2], [0, 2, 3]];
-    plate.labels = vec![
-        TriLabel {
-            face: FACE_A,
-            ..Default::default()
-        };
-        2
-    ];
+    let plate = common::face_a_plate();
     let tables = EnergyTables::compute();
     for (alpha, backend) in [(0.3f32, Backend::RayQuery), (0.6, Backend::Software)] {
         let mut cfg = small_cfg(&format!("[material]\nalpha = {alpha}\n"));
@@ -884,26 +820,6 @@ fn thin_lens_in_the_path_tracer() {
     }
 }
 
-/// Radiance and per-pixel face ids of one render, after `tweak` on the assembled scene.
-fn render_faces_with(
-    cfg: &SceneConfig,
-    backend: Backend,
-    tweak: impl FnOnce(&mut RenderScene),
-) -> (Radiance, Vec<u8>) {
-    let ctx = common::gpu();
-    let object = load_object(cfg).expect("object");
-    let mut scene = RenderScene::assemble(&object, cfg).expect("scene");
-    tweak(&mut scene);
-    let tables = EnergyTables::compute();
-    let opts = FrameOptions {
-        annotate_grid: Some(1),
-        profiler: None,
-    };
-    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
-    common::assert_clean(&ctx);
-    (f.radiance, f.annotation.expect("annotation").face)
-}
-
 /// Issue 11: no textured/untextured border inside a planar face. Face A seen head-on
 /// with 2 mm grooves: the mean absolute difference between horizontal neighbours (local
 /// contrast) of the pixels of A's plane outside the labelled square is that of the
@@ -920,8 +836,8 @@ fn whole_part_finish_has_no_border_in_a_face() {
         let contrast = |cover: &str| {
             let mut cfg = small_cfg(&format!("{extra}cover = \"{cover}\"\n")).tap_view("A0");
             cfg.set_resolution(w as u32, h as u32).expect("size");
-            let (img, square) = render_faces_with(&cfg, backend, |_| {});
-            let (img2, plane) = render_faces_with(&cfg, backend, |s| {
+            let (img, square) = common::render_faces_with(&cfg, backend, |_| {});
+            let (img2, plane) = common::render_faces_with(&cfg, backend, |s| {
                 let a = s
                     .stage
                     .regions
@@ -938,8 +854,8 @@ fn whole_part_finish_has_no_border_in_a_face() {
             if cover == "part" {
                 assert_eq!(img.data, img2.data, "labels changed the image");
             }
-            let inside = interior(&square, w, h);
-            let outside: Vec<usize> = interior(&plane, w, h)
+            let inside = common::interior(&square, w, h);
+            let outside: Vec<usize> = common::interior(&plane, w, h)
                 .into_iter()
                 .filter(|&i| (0..9).all(|k| square[i + (k / 3) * w + k % 3 - w - 1] != FACE_A))
                 .collect();

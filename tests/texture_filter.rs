@@ -3,10 +3,7 @@
 
 mod common;
 
-use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{FrameOptions, RenderScene, load_object, render_scene};
 use synosis::scene::config::SceneConfig;
-use synosis::scene::mesh::FACE_A;
 use synosis::trace::Backend;
 
 /// Face A seen head-on (view A0) at 64 x 48 (pixels of about 0.47 mm on the face), test
@@ -25,28 +22,10 @@ fn cfg(spacing_um: f32, period_mm: f32, filter: &str, seed: u32, spp: u32) -> Sc
 
 /// Radiance and the pixels of face A (3 x 3 neighbourhood all A: no edge pixels).
 fn render(cfg: &SceneConfig, backend: Backend) -> (Vec<f32>, Vec<usize>) {
-    let ctx = common::gpu();
-    let object = load_object(cfg).expect("object");
-    let scene = RenderScene::assemble(&object, cfg).expect("scene");
-    let tables = EnergyTables::compute();
-    let opts = FrameOptions {
-        annotate_grid: Some(1),
-        profiler: None,
-    };
-    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
-    common::assert_clean(&ctx);
-    let face = f.annotation.expect("annotation").face;
-    let (w, h) = (64usize, 48usize);
-    let mut inner = Vec::new();
-    for y in 1..h - 1 {
-        for x in 1..w - 1 {
-            if (0..9).all(|k| face[(y + k / 3 - 1) * w + x + k % 3 - 1] == FACE_A) {
-                inner.push(y * w + x);
-            }
-        }
-    }
+    let (img, face) = common::render_faces(cfg, backend);
+    let inner = common::interior(&face, 64, 48);
     assert!(inner.len() > 400, "{} pixels of face A", inner.len());
-    (f.radiance.data, inner)
+    (img.data, inner)
 }
 
 fn mean(img: &[f32], px: &[usize]) -> f64 {

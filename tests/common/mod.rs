@@ -4,6 +4,11 @@
 
 use std::sync::Arc;
 
+use glam::Vec3;
+use synosis::render::energy::EnergyTables;
+use synosis::render::path_trace::{FrameOptions, Radiance, RenderScene, load_object, render_scene};
+use synosis::scene::config::SceneConfig;
+use synosis::scene::mesh::{FACE_A, Mesh, TriLabel};
 use synosis::trace::Backend;
 use synosis::vk::{Context, ContextOptions};
 
@@ -57,8 +62,6 @@ pub fn run_small_smoke(
     let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
     let opts = RunOptions {
         shard,
-        fail_after: None,
-        progress: None,
         ..Default::default()
     };
     dataset::run(&prep, out, renderer, &mut textures, opts).unwrap()
@@ -104,4 +107,65 @@ pub fn light_integral(
         e += light.radiance_of(t) as f64 * sum * area / (n * n) as f64;
     }
     e
+}
+
+/// A 200 mm square plate at z = 10 mm, labelled face A (two triangles).
+pub fn face_a_plate() -> Mesh {
+    let mut plate = Mesh::default();
+    for (x, y) in [
+        (-100.0, -100.0),
+        (100.0, -100.0),
+        (100.0, 100.0),
+        (-100.0, 100.0),
+    ] {
+        plate.positions.push(Vec3::new(x, y, 10.0));
+    }
+    plate.triangles = vec![[0, 1, 2], [0, 2, 3]];
+    plate.labels = vec![
+        TriLabel {
+            face: FACE_A,
+            ..Default::default()
+        };
+        2
+    ];
+    plate
+}
+
+/// Radiance and per-pixel face ids (centre ray: annotation grid 1) of one render.
+pub fn render_faces(cfg: &SceneConfig, backend: Backend) -> (Radiance, Vec<u8>) {
+    render_faces_with(cfg, backend, |_| {})
+}
+
+/// Radiance and per-pixel face ids of one render, after `tweak` on the assembled scene.
+pub fn render_faces_with(
+    cfg: &SceneConfig,
+    backend: Backend,
+    tweak: impl FnOnce(&mut RenderScene),
+) -> (Radiance, Vec<u8>) {
+    let ctx = gpu();
+    let object = load_object(cfg).expect("object");
+    let mut scene = RenderScene::assemble(&object, cfg).expect("scene");
+    tweak(&mut scene);
+    let tables = EnergyTables::compute();
+    let opts = FrameOptions {
+        annotate_grid: Some(1),
+        profiler: None,
+    };
+    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
+    assert_clean(&ctx);
+    (f.radiance, f.annotation.expect("annotation").face)
+}
+
+/// Pixels of face A whose 8 neighbours are face A too (no silhouette pixels).
+pub fn interior(face: &[u8], w: usize, h: usize) -> Vec<usize> {
+    let mut out = Vec::new();
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            let all = (0..9).all(|k| face[(y + k / 3 - 1) * w + x + k % 3 - 1] == FACE_A);
+            if all {
+                out.push(y * w + x);
+            }
+        }
+    }
+    out
 }
