@@ -4,10 +4,8 @@
 use std::time::Instant;
 
 use glam::Vec3;
-use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
-use synosis::render::raycast::{RayIn, trace_rays};
-use synosis::scene::Camera;
+use synosis::render::raycast::{benchmark_rays, trace_rays};
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::trace::software_bvh::{
     TraversalStats, build_bvh, cpu_closest_hit, cpu_closest_hit_counted, obvhs_triangles,
@@ -18,35 +16,7 @@ use synosis::vk::{Context, ContextOptions};
 fn main() -> anyhow::Result<()> {
     let mesh = bumpy_sphere(316, 159, 10.0, 0.05);
     let n_side = 1024u32;
-    let cam = Camera::framing(&mesh, n_side, n_side);
-    let primary: Vec<RayIn> = (0..n_side * n_side)
-        .map(|i| {
-            let d = cam.pixel_dir(i % n_side, i / n_side);
-            RayIn {
-                origin: cam.eye.into(),
-                tmin: 0.0,
-                dir: d.into(),
-                tmax: 1e30,
-            }
-        })
-        .collect();
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(1);
-    let (lo, hi) = mesh.bounds();
-    let random: Vec<RayIn> = (0..n_side * n_side)
-        .map(|_| {
-            let o = lo + (hi - lo) * Vec3::new(rng.random(), rng.random(), rng.random()) * 1.5
-                - (hi - lo) * 0.25;
-            let u: f32 = rng.random_range(-1.0..1.0);
-            let phi: f32 = rng.random_range(0.0..std::f32::consts::TAU);
-            let s = (1.0 - u * u).sqrt();
-            RayIn {
-                origin: o.into(),
-                tmin: 0.0,
-                dir: [s * phi.cos(), s * phi.sin(), u],
-                tmax: 1e30,
-            }
-        })
-        .collect();
+    let (primary, random) = benchmark_rays(&mesh, n_side);
     let ctx = Context::new(&ContextOptions {
         validation: false,
         ray_query: true,

@@ -212,9 +212,7 @@ fn ray_throughput(
     accel: synosis::trace::AccelChoice,
     side: u32,
 ) -> Result<(String, usize, usize, f64, f64)> {
-    use glam::Vec3;
-    use synosis::render::raycast::{RayIn, trace_rays};
-    use synosis::scene::Camera;
+    use synosis::render::raycast::{benchmark_rays, trace_rays};
     use synosis::scene::procedural::bumpy_sphere;
     use synosis::trace::TraceScene;
     let ctx = synosis::vk::Context::new(&synosis::vk::ContextOptions {
@@ -223,36 +221,7 @@ fn ray_throughput(
     })?;
     let backend = synosis::trace::resolve(accel, &ctx.info)?;
     let mesh = bumpy_sphere(316, 159, 10.0, 0.05);
-    let cam = Camera::framing(&mesh, side, side);
-    let primary: Vec<RayIn> = (0..side * side)
-        .map(|i| RayIn {
-            origin: cam.eye.into(),
-            tmin: 0.0,
-            dir: cam.pixel_dir(i % side, i / side).into(),
-            tmax: 1e30,
-        })
-        .collect();
-    // Random rays around the mesh's box, from a splitmix64 hash of the ray index.
-    let (lo, hi) = mesh.bounds();
-    let hash = |i: u64, k: u64| {
-        let x = synosis::dataset::seed::splitmix64(i.wrapping_mul(4).wrapping_add(k));
-        (x >> 11) as f32 / (1u64 << 53) as f32
-    };
-    let random: Vec<RayIn> = (0..(side * side) as u64)
-        .map(|i| {
-            let o = lo + (hi - lo) * Vec3::new(hash(i, 0), hash(i, 1), hash(i, 2)) * 1.5
-                - (hi - lo) * 0.25;
-            let u = 2.0 * hash(i, 3) - 1.0;
-            let phi = std::f32::consts::TAU * hash(i + (1 << 40), 0);
-            let s = (1.0 - u * u).sqrt();
-            RayIn {
-                origin: o.into(),
-                tmin: 0.0,
-                dir: [s * phi.cos(), s * phi.sin(), u],
-                tmax: 1e30,
-            }
-        })
-        .collect();
+    let (primary, random) = benchmark_rays(&mesh, side);
     let scene = TraceScene::build(&ctx, &mesh, backend, None)?;
     let mut rates = Vec::new();
     for rays in [&primary, &random] {

@@ -36,6 +36,41 @@ impl HitOut {
     }
 }
 
+/// The ray sets of the throughput benchmarks (examples/bench_trace, `synosis bench-gpu`):
+/// `side`^2 primary rays of a pinhole camera framing `mesh`, and `side`^2 random rays
+/// (origins spread over 1.5 x its bounding box, uniform directions; Pcg64 seed 1).
+pub fn benchmark_rays(mesh: &crate::scene::Mesh, side: u32) -> (Vec<RayIn>, Vec<RayIn>) {
+    use glam::Vec3;
+    use rand::{Rng, SeedableRng};
+    let cam = Camera::framing(mesh, side, side);
+    let primary = (0..side * side)
+        .map(|i| RayIn {
+            origin: cam.eye.into(),
+            tmin: 0.0,
+            dir: cam.pixel_dir(i % side, i / side).into(),
+            tmax: 1e30,
+        })
+        .collect();
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(1);
+    let (lo, hi) = mesh.bounds();
+    let random = (0..side * side)
+        .map(|_| {
+            let o = lo + (hi - lo) * Vec3::new(rng.random(), rng.random(), rng.random()) * 1.5
+                - (hi - lo) * 0.25;
+            let u: f32 = rng.random_range(-1.0..1.0);
+            let phi: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+            let s = (1.0 - u * u).sqrt();
+            RayIn {
+                origin: o.into(),
+                tmin: 0.0,
+                dir: [s * phi.cos(), s * phi.sin(), u],
+                tmax: 1e30,
+            }
+        })
+        .collect();
+    (primary, random)
+}
+
 /// Traces `rays` against `scene` on the GPU; returns the hits and the trace pass's time.
 pub fn trace_rays(
     ctx: &Arc<Context>,
