@@ -139,19 +139,18 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
         prep.job.render.spp,
     );
 
-    // Ray throughput of the renderer's backend on a 100 k-triangle mesh.
+    // The device's name, and the ray throughput of the renderer's backend on a
+    // 100 k-triangle mesh, on one more context (the renderer keeps its own private).
+    let ctx = synosis::vk::Context::new(&synosis::vk::ContextOptions {
+        validation: false,
+        ray_query: true,
+    })?;
+    let info = format!("{} ({})", ctx.info.name, ctx.info.driver_info);
     let rays = if a.rays_side > 0 {
-        Some(ray_throughput(accel, a.rays_side)?)
+        Some(ray_throughput(&ctx, accel, a.rays_side)?)
     } else {
         None
     };
-
-    let info = synosis::vk::Context::new(&synosis::vk::ContextOptions {
-        validation: false,
-        ray_query: true,
-    })
-    .map(|c| format!("{} ({})", c.info.name, c.info.driver_info))
-    .unwrap_or_else(|e| format!("? ({e})"));
     println!("| quantity | value |");
     println!("|---|---|");
     println!("| device | {info} |");
@@ -209,26 +208,23 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
 
 /// (backend, triangles, rays per set, primary Mrays/s, random Mrays/s), best of three.
 fn ray_throughput(
+    ctx: &std::sync::Arc<synosis::vk::Context>,
     accel: synosis::trace::AccelChoice,
     side: u32,
 ) -> Result<(String, usize, usize, f64, f64)> {
     use synosis::render::raycast::{benchmark_rays, trace_rays};
     use synosis::scene::procedural::bumpy_sphere;
     use synosis::trace::TraceScene;
-    let ctx = synosis::vk::Context::new(&synosis::vk::ContextOptions {
-        validation: false,
-        ray_query: true,
-    })?;
     let backend = synosis::trace::resolve(accel, &ctx.info)?;
     let mesh = bumpy_sphere(316, 159, 10.0, 0.05);
     let (primary, random) = benchmark_rays(&mesh, side);
-    let scene = TraceScene::build(&ctx, &mesh, backend, None)?;
+    let scene = TraceScene::build(ctx, &mesh, backend, None)?;
     let mut rates = Vec::new();
     for rays in [&primary, &random] {
-        trace_rays(&ctx, &scene, &rays[..rays.len().min(4096)], None)?;
+        trace_rays(ctx, &scene, &rays[..rays.len().min(4096)], None)?;
         let mut best = f64::INFINITY;
         for _ in 0..3 {
-            best = best.min(trace_rays(&ctx, &scene, rays, None)?.1.gpu_ms);
+            best = best.min(trace_rays(ctx, &scene, rays, None)?.1.gpu_ms);
         }
         rates.push(rays.len() as f64 / best.max(1e-9) / 1e3);
     }

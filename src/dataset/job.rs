@@ -385,12 +385,13 @@ pub enum SensorModel {
 }
 
 impl SensorModel {
-    /// The bit depth of image.png's codes: 8 for the linear model, the sensor's ADC depth
-    /// for EMVA 1288 (10, 12, 16: a 16-bit PNG with the codes unscaled).
-    pub fn image_bit_depth(&self) -> u32 {
+    /// The bit depth of image.png's codes when deeper than 8: an EMVA sensor of 10, 12
+    /// or 16 bit writes a 16-bit PNG with the codes unscaled (recorded in the manifest as
+    /// `bit_depth`); None for 8-bit images (the linear model, an 8-bit sensor).
+    pub fn deep_bit_depth(&self) -> Option<u32> {
         match self {
-            SensorModel::Linear { .. } => 8,
-            SensorModel::Emva(s) => s.bit_depth,
+            SensorModel::Emva(s) if s.bit_depth > 8 => Some(s.bit_depth),
+            _ => None,
         }
     }
 }

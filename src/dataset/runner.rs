@@ -975,7 +975,7 @@ impl<'p> Ctx<'p> {
             camera: Some(self.camera.clone()),
             exposure_ev: exposed.exposure_ev,
             exposure_ms: exposed.exposure_ms,
-            bit_depth: Some(job.sensor.model.image_bit_depth()).filter(|&b| b > 8),
+            bit_depth: job.sensor.model.deep_bit_depth(),
             defects,
             files: hashes,
             sizes,
@@ -1146,12 +1146,10 @@ fn write_post(
     let f = &r.frame;
     let (w, h) = (f.width, f.height);
     let mut m = BTreeMap::new();
-    let bits = job.sensor.model.image_bit_depth();
     let png = dir.join("image.png");
-    let hash = if bits > 8 {
-        files::write_gray16(&png, w, h, &quantise_units_deep(&f.image, bits))?
-    } else {
-        files::write_gray8(&png, w, h, &quantise_units8(&f.image))?
+    let hash = match job.sensor.model.deep_bit_depth() {
+        Some(bits) => files::write_gray16(&png, w, h, &quantise_units_deep(&f.image, bits))?,
+        None => files::write_gray8(&png, w, h, &quantise_units8(&f.image))?,
     };
     m.insert("image.png".into(), hash);
     m.insert(
@@ -1603,7 +1601,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
                 e.noise_sigma = noise;
                 e.exposure_ev = exposed.exposure_ev;
                 e.exposure_ms = exposed.exposure_ms;
-                e.bit_depth = Some(job.sensor.model.image_bit_depth()).filter(|&b| b > 8);
+                e.bit_depth = job.sensor.model.deep_bit_depth();
                 Ok(e)
             })
             .collect::<Result<_>>()?;
