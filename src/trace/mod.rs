@@ -102,6 +102,12 @@ pub struct ShadeTri {
 pub trait Triangles {
     fn positions(&self) -> &[Vec3];
     fn triangles(&self) -> &[[u32; 3]];
+    /// A value per triangle corner for the shader, stored in `ShadeTri`'s w components
+    /// (the scene's smooth normals of triplanar patches: `Tri` in src/gpu_interface.in);
+    /// None: zeros.
+    fn corner_w(&self) -> Option<&[[f32; 3]]> {
+        None
+    }
 }
 
 /// Plain indexed triangles.
@@ -154,15 +160,18 @@ impl TraceGeometry {
     ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let (positions, triangles) = (geo.positions(), geo.triangles());
+        let corner_w = geo.corner_w();
         let shade: Vec<ShadeTri> = timed(profiler, "upload geometry", || {
             triangles
                 .iter()
-                .map(|t| {
+                .enumerate()
+                .map(|(k, t)| {
                     let p = t.map(|i| positions[i as usize]);
+                    let w = corner_w.and_then(|c| c.get(k)).copied().unwrap_or([0.0; 3]);
                     ShadeTri {
-                        a: p[0].extend(0.0).into(),
-                        b: p[1].extend(0.0).into(),
-                        c: p[2].extend(0.0).into(),
+                        a: p[0].extend(w[0]).into(),
+                        b: p[1].extend(w[1]).into(),
+                        c: p[2].extend(w[2]).into(),
                     }
                 })
                 .collect()
