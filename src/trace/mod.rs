@@ -158,6 +158,26 @@ impl TraceGeometry {
         first_prim: u32,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
+        Self::build_with(
+            ctx,
+            geo,
+            backend,
+            first_prim,
+            software_bvh::DEFAULT_BVH_QUALITY,
+            profiler,
+        )
+    }
+
+    /// As [`TraceGeometry::build`], the software BVH built with obvhs's `quality` preset
+    /// (the ray-query backend ignores it).
+    pub fn build_with(
+        ctx: &Arc<Context>,
+        geo: &impl Triangles,
+        backend: Backend,
+        first_prim: u32,
+        quality: software_bvh::BvhQuality,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let (positions, triangles) = (geo.positions(), geo.triangles());
         let corner_w = geo.corner_w();
@@ -200,7 +220,7 @@ impl TraceGeometry {
                     software_bvh::empty()
                 } else {
                     timed(profiler, "BVH build (obvhs)", || {
-                        software_bvh::flatten(&software_bvh::build_bvh(&tris), &tris)
+                        software_bvh::flatten(&software_bvh::build_bvh_with(&tris, quality), &tris)
                     })
                 };
                 if first_prim != 0 {
@@ -267,6 +287,20 @@ impl TraceScene {
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
         let object = Arc::new(TraceGeometry::build(ctx, mesh, backend, 0, profiler)?);
+        Self::layered(ctx, object, &TriangleSoup::default(), profiler)
+    }
+
+    /// One mesh, its software BVH built with obvhs's `quality` preset (benchmarks).
+    pub fn build_with(
+        ctx: &Arc<Context>,
+        mesh: &impl Triangles,
+        backend: Backend,
+        quality: software_bvh::BvhQuality,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
+        let object = Arc::new(TraceGeometry::build_with(
+            ctx, mesh, backend, 0, quality, profiler,
+        )?);
         Self::layered(ctx, object, &TriangleSoup::default(), profiler)
     }
 
