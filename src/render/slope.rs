@@ -1112,32 +1112,65 @@ mod tests {
         }]
     }
 
+    /// A stage of `mesh` whose curved patches carry `noise_face_map` with
+    /// `cover = "part"` and `seed`: the packed headers, texels and projection blocks.
+    struct CurvedSetup {
+        stage: Stage,
+        maps: [FaceMap; 1],
+        part: Placement,
+        curved: Vec<crate::scene::assemble::PlacedCurved>,
+        h: Vec<MapHeader>,
+        t: [Vec<u32>; MAP_BUFFERS],
+        blocks: Vec<CurvedMapBlock>,
+    }
+
+    fn curved_setup(mesh: crate::scene::Mesh, seed: u64) -> CurvedSetup {
+        let stage = Stage::new(
+            mesh,
+            [0.0; 3],
+            &crate::scene::config::TableConfig::default(),
+        );
+        let maps = noise_face_map();
+        let part = Placement {
+            cover: Cover::Part,
+            seed,
+            ..FACES
+        };
+        let first = stage.regions.len() as u32;
+        let curved = crate::scene::assemble::place_curved_maps(&maps, &stage.curved, first, &part);
+        let slots = stage.regions.len() + stage.curved.len() + 1;
+        let all: Vec<PlacedMap> = curved.iter().map(|c| c.map.clone()).collect();
+        let (mut h, t) = pack(&all, slots, 1 << 27).expect("pack");
+        let blocks = curved_blocks(&curved, &mut h).expect("blocks");
+        CurvedSetup {
+            stage,
+            maps,
+            part,
+            curved,
+            h,
+            t,
+            blocks,
+        }
+    }
+
     /// On a dome (a triplanar patch), two neighbouring facets interpolate the same
     /// smooth normal on their common edge, so (for one base normal) the blended slopes
     /// agree just across the edge; each facet's own planar frame (before) disagrees. At
     /// the pole (smooth normal +Z) the blend is the map projected on the XY plane.
     #[test]
     fn triplanar_patches_are_continuous_across_facet_edges() {
-        use crate::scene::assemble::place_curved_maps;
         use crate::scene::curved::decode_normal;
-        let stage = Stage::new(
-            crate::scene::procedural::dome(20.0, 12, 64),
-            [0.0; 3],
-            &crate::scene::config::TableConfig::default(),
-        );
+        let CurvedSetup {
+            stage,
+            maps,
+            part,
+            h,
+            t,
+            blocks,
+            ..
+        } = curved_setup(crate::scene::procedural::dome(20.0, 12, 64), 11);
         assert_eq!(stage.curved.len(), 1);
-        let maps = noise_face_map();
-        let part = Placement {
-            cover: Cover::Part,
-            seed: 11,
-            ..FACES
-        };
         let first = stage.regions.len() as u32;
-        let curved = place_curved_maps(&maps, &stage.curved, first, &part);
-        let slots = stage.regions.len() + stage.curved.len() + 1;
-        let all: Vec<PlacedMap> = curved.iter().map(|c| c.map.clone()).collect();
-        let (mut h, t) = pack(&all, slots, 1 << 27).expect("pack");
-        let blocks = curved_blocks(&curved, &mut h).expect("blocks");
         let slot = first as usize + 1;
         assert!(h[slot].dims[3] & MAP_TRIPLANAR != 0 && h[slot].dims[3] & MAP_REVOLVED == 0);
         let (hs, bs) = (&h[slot], &blocks[slot]);
@@ -1231,27 +1264,18 @@ mod tests {
     /// (before) the two sides disagree there.
     #[test]
     fn curved_patches_give_the_same_slope_on_both_sides_of_a_facet_edge() {
-        use crate::scene::assemble::place_curved_maps;
         use crate::scene::{FlangeParams, flange};
         let fp = FlangeParams::default();
-        let stage = Stage::new(
-            flange(&fp),
-            [0.0; 3],
-            &crate::scene::config::TableConfig::default(),
-        );
-        let maps = noise_face_map();
-        let part = Placement {
-            cover: Cover::Part,
-            seed: 7,
-            ..FACES
-        };
-        let first = stage.regions.len() as u32;
-        let curved = place_curved_maps(&maps, &stage.curved, first, &part);
+        let CurvedSetup {
+            stage,
+            maps,
+            part,
+            curved,
+            h,
+            t,
+            blocks,
+        } = curved_setup(flange(&fp), 7);
         assert_eq!(curved.len(), stage.curved.len());
-        let slots = stage.regions.len() + stage.curved.len() + 1;
-        let all: Vec<PlacedMap> = curved.iter().map(|c| c.map.clone()).collect();
-        let (mut h, t) = pack(&all, slots, 1 << 27).expect("pack");
-        let blocks = curved_blocks(&curved, &mut h).expect("blocks");
         // Two bore facets sharing an edge (the bore's triangles lie at radius 10).
         let mesh = &stage.mesh;
         let n = stage.region_of.len();
