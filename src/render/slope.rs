@@ -1153,6 +1153,26 @@ mod tests {
         }
     }
 
+    /// The slopes at p of triangle `tris[k]`'s region in its own planar frame (what
+    /// curved facets had before curved patches).
+    fn per_facet_frames(
+        stage: &Stage,
+        maps: &[FaceMap],
+        part: &Placement,
+        tris: [usize; 2],
+    ) -> impl Fn(usize, Vec3) -> [f32; 2] {
+        let regions: Vec<RegionFrame> = tris
+            .iter()
+            .map(|&t| stage.regions[stage.region_of[t] as usize])
+            .collect();
+        let planar = place_maps(maps, &[frame_a()], &regions, part).expect("planar");
+        let (hp, tp) = pack(&planar, stage.regions.len() + 1, 1 << 27).expect("pack");
+        move |k: usize, p: Vec3| {
+            let hh = &hp[regions[k].id as usize + 1];
+            lookup(hh, &tp[(hh.dims[3] & MAP_BUFFER_MASK) as usize - 1], p)
+        }
+    }
+
     /// On a dome (a triplanar patch), two neighbouring facets interpolate the same
     /// smooth normal on their common edge, so (for one base normal) the blended slopes
     /// agree just across the edge; each facet's own planar frame (before) disagrees. At
@@ -1212,17 +1232,8 @@ mod tests {
         };
         let ng = (facet_n(t1) + facet_n(t2)).normalize();
         // The old way: each facet's own planar frame.
-        let regions: Vec<RegionFrame> = [t1, t2]
-            .iter()
-            .map(|&t| stage.regions[stage.region_of[t] as usize])
-            .collect();
-        let planar = place_maps(&maps, &[frame_a()], &regions, &part).expect("planar");
-        let (hp, tp) = pack(&planar, stage.regions.len() + 1, 1 << 27).expect("pack");
-        let planar_at = |k: usize, p: Vec3| {
-            let hh = &hp[regions[k].id as usize + 1];
-            let s = lookup(hh, &tp[(hh.dims[3] & MAP_BUFFER_MASK) as usize - 1], p);
-            Vec2::from(s).length()
-        };
+        let per_facet = per_facet_frames(&stage, &maps, &part, [t1, t2]);
+        let planar_at = |k: usize, p: Vec3| Vec2::from(per_facet(k, p)).length();
         let (mut worst_tri, mut worst_planar, mut bent) = (0.0f32, 0.0f32, 0.0f32);
         for k in 1..10 {
             let p = a + (b - a) * (k as f32 / 10.0);
@@ -1303,16 +1314,7 @@ mod tests {
         let tex = &t[(hs.dims[3] & MAP_BUFFER_MASK) as usize - 1];
         let centroid = |t: usize| mesh.corners(t).iter().copied().sum::<Vec3>() / 3.0;
         // The old way: each facet's own planar frame (place_maps with its region).
-        let regions: Vec<RegionFrame> = [t1, t2]
-            .iter()
-            .map(|&t| stage.regions[stage.region_of[t] as usize])
-            .collect();
-        let planar = place_maps(&maps, &[frame_a()], &regions, &part).expect("planar");
-        let (hp, tp) = pack(&planar, stage.regions.len() + 1, 1 << 27).expect("pack");
-        let planar_at = |k: usize, p: Vec3| {
-            let hh = &hp[regions[k].id as usize + 1];
-            lookup(hh, &tp[(hh.dims[3] & MAP_BUFFER_MASK) as usize - 1], p)
-        };
+        let planar_at = per_facet_frames(&stage, &maps, &part, [t1, t2]);
         let (mut worst_curved, mut worst_planar) = (0.0f32, 0.0f32);
         for k in 1..10 {
             let p = a + (b - a) * (k as f32 / 10.0);
