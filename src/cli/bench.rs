@@ -43,6 +43,10 @@ pub struct BenchGpuArgs {
     /// Also write the run's Chrome trace here.
     #[arg(long)]
     profile: Option<PathBuf>,
+    /// Images in flight (as `dataset run --in-flight`): 1 runs the stages one after the
+    /// other.
+    #[arg(long, default_value_t = dataset::DEFAULT_IN_FLIGHT, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    in_flight: usize,
 }
 
 /// The job text with `[render]` overrides.
@@ -109,6 +113,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             shard,
             progress: Some(&mut progress),
             profiler: Some(&profiler),
+            in_flight: a.in_flight,
             ..Default::default()
         },
     )

@@ -92,10 +92,15 @@ struct RunArgs {
     #[arg(long)]
     quiet: bool,
     /// Write the run's timeline as a Chrome trace (Perfetto, chrome://tracing): each image
-    /// and its stages on the runner's thread, the renderer's CPU phases, the GPU passes;
-    /// the GPU's busy share of the run goes to stderr.
+    /// and its stages on the thread that ran them, the renderer's CPU phases, the GPU
+    /// passes; the GPU's busy share of the run goes to stderr.
     #[arg(long)]
     profile: Option<PathBuf>,
+    /// Images in flight: 1 makes, renders and writes one image after the other; N >= 2
+    /// renders one while N - 1 writer threads write earlier ones and the next images'
+    /// meshes and textures are made ahead (same files either way).
+    #[arg(long, default_value_t = dataset::DEFAULT_IN_FLIGHT, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    in_flight: usize,
 }
 
 fn resolve_shard(a: &RunArgs) -> Result<Shard> {
@@ -270,6 +275,7 @@ fn run_job(a: RunArgs) -> Result<()> {
             fail_after: None,
             progress: Some(&mut progress),
             profiler: a.profile.as_ref().map(|_| &profiler),
+            in_flight: a.in_flight,
         },
     );
     bar.finish_and_clear();
