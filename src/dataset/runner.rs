@@ -693,9 +693,10 @@ impl Overlapped<'_> {
         let (job_tx, job_rx) = std::sync::mpsc::sync_channel::<(usize, RenderedItem)>(0);
         let job_rx = Mutex::new(job_rx);
         let (stopped, interrupted) = std::thread::scope(|s| -> Result<_> {
-            // One instance's views ahead: the next instance's mesh and textures are made
-            // while the current one's views render.
-            let ahead = self.prep.job.viewpoints().len().max(1);
+            // One object instance ahead: the channel holds one instance's views less one
+            // and the preparing thread the last, so the next instance's mesh and textures
+            // are made while the current one's first view renders, never further ahead.
+            let ahead = self.prep.job.viewpoints().len().saturating_sub(1);
             let (in_tx, in_rx) = std::sync::mpsc::sync_channel::<Result<ItemInputs>>(ahead);
             let mut inputs = Inputs::new(self.prep, self.profiler);
             let profiler = self.profiler;
