@@ -98,9 +98,21 @@ struct RunArgs {
     profile: Option<PathBuf>,
     /// Images in flight: 1 makes, renders and writes one image after the other; N >= 2
     /// renders one while N - 1 writer threads write earlier ones and the next images'
-    /// meshes and textures are made ahead (same files either way).
-    #[arg(long, default_value_t = dataset::DEFAULT_IN_FLIGHT, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
-    in_flight: usize,
+    /// meshes and textures are made ahead (same files either way). Default: 3 on a GPU,
+    /// 1 on a CPU Vulkan device (lavapipe), where the overlap only competes for the cores.
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    in_flight: Option<usize>,
+}
+
+/// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
+/// on a GPU, 1 on a CPU implementation (lavapipe), where the render uses the same cores
+/// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run").
+pub(super) fn in_flight(arg: Option<usize>, renderer: &GpuRenderer) -> usize {
+    arg.unwrap_or(if renderer.device_is_cpu() {
+        1
+    } else {
+        dataset::DEFAULT_IN_FLIGHT
+    })
 }
 
 fn resolve_shard(a: &RunArgs) -> Result<Shard> {
@@ -265,6 +277,7 @@ fn run_job(a: RunArgs) -> Result<()> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
+    let in_flight = in_flight(a.in_flight, &renderer);
     let result = dataset::run(
         &prep,
         &a.out,
@@ -275,7 +288,7 @@ fn run_job(a: RunArgs) -> Result<()> {
             fail_after: None,
             progress: Some(&mut progress),
             profiler: a.profile.as_ref().map(|_| &profiler),
-            in_flight: a.in_flight,
+            in_flight,
         },
     );
     bar.finish_and_clear();
