@@ -122,13 +122,11 @@ const float MAX_SLOPE = 11.43;
 // bend_towards_viewer.
 const float SHADE_MIN_COS = 0.1;
 
-// Bilinear slopes [dh/dx, dh/dy] (image axes, y down) at p: zero outside the map, or the
-// map repeated (MAP_WRAP).
-vec2 map_slopes(uint slot, vec3 p) {
-    MapHeader m = map_headers[slot];
+// Bilinear slopes [dh/dx, dh/dy] (image axes, y down) at map-plane coordinates q (mm
+// along the map's x and up axes from its centre): zero outside the map, or the map
+// repeated (MAP_WRAP). The header must have a map (buffer != 0).
+vec2 slopes_at(MapHeader m, vec2 q) {
     uint buf = m.dims.w & MAP_BUFFER_MASK;
-    if (buf == 0u) return vec2(0.0);
-    vec2 q = map_plane(slot, m, p);
     vec2 wh = vec2(m.dims.xy);
     float x = q.x * m.origin.w + 0.5 * wh.x;
     float y = -q.y * m.origin.w + 0.5 * wh.y;
@@ -163,13 +161,79 @@ vec2 map_slopes(uint slot, vec3 p) {
     return mix(a, c, ty);
 }
 
+// Bilinear slopes at p on a planar or revolved slot (zero without a map).
+vec2 map_slopes(uint slot, vec3 p) {
+    MapHeader m = map_headers[slot];
+    if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return vec2(0.0);
+    return slopes_at(m, map_plane(slot, m, p));
+}
+
+// Octahedral normal of Tri's w (scene::curved::encode_normal / decode_normal).
+vec3 oct_decode(float code) {
+    uint k = uint(code);
+    vec2 e = vec2(float(k / OCT_LEVELS), float(k % OCT_LEVELS)) / float(OCT_STEPS) * 2.0 - 1.0;
+    float z = 1.0 - abs(e.x) - abs(e.y);
+    if (z < 0.0) {
+        e = vec2((1.0 - abs(e.y)) * (e.x >= 0.0 ? 1.0 : -1.0),
+                 (1.0 - abs(e.x)) * (e.y >= 0.0 ? 1.0 : -1.0));
+    }
+    return normalize(vec3(e, z));
+}
+
+// The smooth normal of an object triangle of a triplanar patch at barycentrics bary.
+vec3 smooth_normal(uint prim, vec2 bary) {
+    vec3 n = oct_decode(tris[prim].a.w) * (1.0 - bary.x - bary.y)
+        + oct_decode(tris[prim].b.w) * bary.x + oct_decode(tris[prim].c.w) * bary.y;
+    float l = length(n);
+    return l > 0.0 ? n / l : n;
+}
+
+// Smallest triplanar weight whose projection is read (render::slope::TRIPLANAR_MIN_WEIGHT).
+const float TRIPLANAR_MIN_WEIGHT = 1e-3;
+
+// Shading normal on a triplanar slot (MAP_TRIPLANAR; CPU mirror: triplanar_normal in
+// src/render/slope.rs): the map projected along the frame's three axes (x = axis_x,
+// z = axis_up, y = z x x), each projection's slope vector brought into ng's tangent
+// plane, summed with weights |n_k|^4 / sum of the smooth normal ns.
+vec3 triplanar_normal(uint slot, MapHeader m, vec3 p, vec3 ng, vec3 ns) {
+    if (dot(ns, ng) <= 0.0) return ng;
+    vec3 e[3];
+    e[0] = m.axis_x.xyz;
+    e[2] = m.axis_up.xyz;
+    e[1] = cross(e[2], e[0]);
+    vec3 local = vec3(dot(ns, e[0]), dot(ns, e[1]), dot(ns, e[2]));
+    vec3 w = abs(local);
+    w = (w * w) * (w * w);
+    float sum = w.x + w.y + w.z;
+    w = sum > 0.0 ? w / sum : vec3(0.0, 0.0, 1.0);
+    vec3 d = p - m.origin.xyz;
+    vec2 place = curved_maps[slot].place.xy;
+    vec3 delta = vec3(0.0);
+    for (uint k = 0u; k < 3u; k++) {
+        if (w[k] < TRIPLANAR_MIN_WEIGHT) continue;
+        vec3 ax = e[(k + 1u) % 3u] * (local[k] >= 0.0 ? 1.0 : -1.0);
+        vec3 up = e[(k + 2u) % 3u];
+        vec2 s = slopes_at(m, vec2(dot(d, ax) - place.x, dot(d, up) - place.y));
+        float len = length(s);
+        if (len > MAX_SLOPE) s *= MAX_SLOPE / len;
+        ax -= dot(ax, ng) * ng;
+        up -= dot(up, ng) * ng;
+        delta += w[k] * (-s.x * ax + s.y * up);
+    }
+    if (delta == vec3(0.0)) return ng;
+    return normalize(ng + delta);
+}
+
 // Shading normal from the region's slope map; ng is the geometric normal facing the ray.
 // Exactly ng where the slopes are zero (a flat map renders as no map). The map axes are
 // projected into the triangle's plane, so triangles that are not coplanar with the
 // region (defect patches given to it) still get a normal in their own hemisphere.
-vec3 shading_normal(uint slot, vec3 p, vec3 ng) {
+vec3 shading_normal(uint slot, vec3 p, vec3 ng, uint prim, vec2 bary) {
     MapHeader m = map_headers[slot];
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
+    if ((m.dims.w & MAP_TRIPLANAR) != 0u) {
+        return triplanar_normal(slot, m, p, ng, smooth_normal(prim, bary));
+    }
     vec3 mx, mu;
     map_axes(slot, m, p, mx, mu);
     // Seen from inside (not the region's outward side): no perturbation.
@@ -378,11 +442,12 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                 || (map_headers[slot].dims.w & MAP_LABELLED_ONLY) == 0u)) {
             // LEAN at the primary hit: footprint = the pixel cone's width at the hit
             // (its angle shrinks off axis as cos^1.5), over |cos| on the surface, in
-            // texels; secondary hits read level 0, and so do curved (revolved) patches
-            // (LEAN there is not done: lean_level uses the planar projection).
+            // texels; secondary hits read level 0, and so do curved (revolved and
+            // triplanar) patches (LEAN there is not done: lean_level uses the planar
+            // projection).
             float lambda = 0.0;
             if (prm.texture_filter == FILTER_LEAN && depth == 0u
-                    && (map_headers[slot].dims.w & MAP_REVOLVED) == 0u) {
+                    && (map_headers[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
                 float c = max(dot(d, prm.cam.forward.xyz), 0.1);
                 float width = prm.pixel_angle * c * sqrt(c) * h.t
                     / max(abs(dot(ng, d)), LEAN_MIN_COS);
@@ -396,7 +461,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
                     surf.c.alpha = min(sqrt(surf.c.alpha * surf.c.alpha + var), 1.0);
                 }
             } else {
-                ns = bend_towards_viewer(shading_normal(slot, p, ng), ng, -d);
+                ns = bend_towards_viewer(shading_normal(slot, p, ng, h.prim, h.bary), ng, -d);
             }
         }
         vec3 tb, bt;

@@ -102,7 +102,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             }
         );
     }
-    let scene = RenderScene::assemble(&object, &cfg)?;
+    // Regions, curved patches, the finish's maps (a `file` height map read and turned into
+    // slopes, or synthesised), lights and camera.
+    let scene = profiler.cpu("assemble scene (regions, maps, slopes)", || {
+        RenderScene::assemble(&object, &cfg)
+    })?;
     print_region_materials(&scene.stage);
     let tables = profiler.cpu("energy tables", EnergyTables::compute);
     let ctx = profiler.cpu("Vulkan init", || {

@@ -1,5 +1,5 @@
 //! `synosis testbody`: writes the built-in test body (variant B or its mirror M) or the
-//! example flange.
+//! example flange or dome.
 
 use std::path::PathBuf;
 
@@ -13,11 +13,14 @@ pub enum VariantArg {
     M,
     /// The example flange (bore, bolt holes, chamfer; docs/testbody.md).
     Flange,
+    /// A hemispherical dome, 20 mm radius, 12 bands x 64 segments: a free-form curved
+    /// surface (triplanar finish; docs/testbody.md).
+    Dome,
 }
 
 #[derive(Args)]
 pub struct TestbodyArgs {
-    /// Which body: b (base), m (its mirror image across x = 0) or flange.
+    /// Which body: b (base), m (its mirror image across x = 0), flange or dome.
     #[arg(long, value_enum, default_value = "b")]
     pub variant: VariantArg,
     /// Output file (.glb, .gltf or .stl; STL carries no labels).
@@ -30,6 +33,7 @@ pub fn run(a: TestbodyArgs) -> anyhow::Result<()> {
         VariantArg::B => testbody(Variant::B),
         VariantArg::M => testbody(Variant::M),
         VariantArg::Flange => synosis::scene::flange(&Default::default()),
+        VariantArg::Dome => synosis::scene::procedural::dome(20.0, 12, 64),
     };
     synosis::scene::write_mesh(&mesh, &a.out)
         .with_context(|| format!("writing the test body to {}", a.out.display()))?;

@@ -84,9 +84,11 @@ impl GpuScene {
     ) -> Result<GpuScene, RenderError> {
         let ctx = &tracer.ctx;
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        // The stage, not only its mesh: triplanar patches' smooth normals ride in the
+        // shading triangles' w (`Stage::corner_w`).
         let geometry = Arc::new(TraceGeometry::build(
             ctx,
-            &stage.mesh,
+            stage,
             tracer.backend,
             0,
             profiler,

@@ -113,12 +113,14 @@ pub fn render_scene(
     let tracer = PathTracer::new(ctx, backend, tables)?;
     let settings: RenderSettings = settings.into();
     let mut gpu = GpuScene::new(&tracer, &scene.stage, opts.profiler)?;
-    gpu.set_face_maps_filtered(
-        &tracer,
-        &scene.face_maps,
-        &scene.placement,
-        settings.texture_filter,
-    )?;
+    crate::vk::timed(opts.profiler, "place and upload maps", || {
+        gpu.set_face_maps_filtered(
+            &tracer,
+            &scene.face_maps,
+            &scene.placement,
+            settings.texture_filter,
+        )
+    })?;
     render_frame(&tracer, &gpu, &scene.view, &settings, opts, progress)
 }
 

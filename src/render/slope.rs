@@ -13,9 +13,13 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
-use crate::gpu_interface::{MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_REVOLVED, MAP_WRAP};
+use crate::scene::curved::PatchKind;
+
+use crate::gpu_interface::{
+    MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_REVOLVED, MAP_TRIPLANAR, MAP_WRAP,
+};
 
 /// A curved patch's projection as the shader reads it (src/gpu_interface.in).
 pub use crate::gpu_interface::CurvedMapBlock;
@@ -196,7 +200,8 @@ pub fn lookup(h: &MapHeader, texels: &[u32], p: Vec3) -> [f32; 2] {
 
 /// The headers' projection blocks (`CurvedMapBlock`, one per slot, zeros for planar
 /// slots) for the curved patches' maps, which must be in `headers` already (`pack` of
-/// their `map`s with the planar ones): marks their headers `MAP_REVOLVED`.
+/// their `map`s with the planar ones): marks their headers `MAP_REVOLVED` or
+/// `MAP_TRIPLANAR`.
 pub fn curved_blocks(
     curved: &[crate::scene::assemble::PlacedCurved],
     headers: &mut [MapHeader],
@@ -210,6 +215,17 @@ pub fn curved_blocks(
         };
         if slot >= headers.len() || headers[slot].dims[3] & MAP_BUFFER_MASK == 0 {
             return Err(bad("a curved patch without its packed map".into()));
+        }
+        if c.kind == PatchKind::Triplanar {
+            if !c.offset_mm.iter().all(|x| x.is_finite()) {
+                return Err(bad("triplanar placement must be finite".into()));
+            }
+            headers[slot].dims[3] |= MAP_TRIPLANAR;
+            blocks[slot] = CurvedMapBlock {
+                profile: [0.0; 4],
+                place: [c.offset_mm[0], c.offset_mm[1], 0.0, 0.0],
+            };
+            continue;
         }
         let v = [
             c.sin_beta,
@@ -261,6 +277,65 @@ pub fn lookup_curved(h: &MapHeader, c: &CurvedMapBlock, texels: &[u32], p: Vec3)
         return [0.0; 2];
     }
     lookup_plane(h, texels, curved_plane(h, c, p))
+}
+
+/// Steepest slope a map may give (85 degrees; the shader's `MAX_SLOPE` in
+/// glsl/path_trace.comp, which this CPU mirror must equal).
+pub const MAX_SLOPE: f32 = 11.43;
+
+/// Smallest triplanar weight whose projection is read (below it the projection is left
+/// out; the shader's `TRIPLANAR_MIN_WEIGHT`).
+pub const TRIPLANAR_MIN_WEIGHT: f32 = 1e-3;
+
+/// The shading normal on a triplanar patch's slot, as the shader's `triplanar_normal`
+/// computes it: `ng` the geometric normal facing the viewer, `smooth` the patch's smooth
+/// normal at `p`. Projection k (frame axis e_k; x = `axis_x`, z = `axis_up`, y = z x x)
+/// reads the map at (p - centre) on the plane normal to e_k, its axes oriented so that
+/// their cross product is sign(smooth . e_k) e_k; the three slope vectors, brought into
+/// the tangent plane of `ng` as a planar map's are, are summed with the weights of
+/// `curved::triplanar_weights(smooth)`. Exactly `ng` where the map is flat or the point is
+/// seen from inside (smooth . ng <= 0).
+pub fn triplanar_normal(
+    h: &MapHeader,
+    c: &CurvedMapBlock,
+    texels: &[u32],
+    p: Vec3,
+    ng: Vec3,
+    smooth: Vec3,
+) -> Vec3 {
+    if h.dims[3] & MAP_BUFFER_MASK == 0 || smooth.dot(ng) <= 0.0 {
+        return ng;
+    }
+    let ex = Vec3::from_slice(&h.axis_x[..3]);
+    let ez = Vec3::from_slice(&h.axis_up[..3]);
+    let ey = ez.cross(ex);
+    let e = [ex, ey, ez];
+    let local = Vec3::new(smooth.dot(ex), smooth.dot(ey), smooth.dot(ez));
+    let w = crate::scene::curved::triplanar_weights(local);
+    let d = p - Vec3::from_slice(&h.origin[..3]);
+    let mut delta = Vec3::ZERO;
+    for k in 0..3 {
+        if w[k] < TRIPLANAR_MIN_WEIGHT {
+            continue;
+        }
+        let s = if local[k] >= 0.0 { 1.0 } else { -1.0 };
+        let (ax, up) = (e[(k + 1) % 3] * s, e[(k + 2) % 3]);
+        let q = [d.dot(ax) - c.place[0], d.dot(up) - c.place[1]];
+        let sl = Vec2::from(lookup_plane(h, texels, q));
+        let len = sl.length();
+        let sl = if len > MAX_SLOPE {
+            sl * (MAX_SLOPE / len)
+        } else {
+            sl
+        };
+        let ax = ax - ax.dot(ng) * ng;
+        let up = up - up.dot(ng) * ng;
+        delta += w[k] * (-sl.x * ax + sl.y * up);
+    }
+    if delta == Vec3::ZERO {
+        return ng;
+    }
+    (ng + delta).normalize()
 }
 
 /// Bilinear slopes at map-plane coordinates `q` (mm along map x and up from its centre).
@@ -1019,6 +1094,137 @@ mod tests {
         );
     }
 
+    /// Face A's map: 64 x 64 texels of 0.1 mm with pseudo-random slopes in +-0.5.
+    fn noise_face_map() -> [FaceMap; 1] {
+        let mut map = SlopeMap::flat(64, 64, 100.0);
+        for (i, v) in map.data.iter_mut().enumerate() {
+            let h = (i as u32).wrapping_mul(2_654_435_761);
+            *v = [
+                (h >> 8 & 0xff) as f32 / 255.0 - 0.5,
+                (h >> 16 & 0xff) as f32 / 255.0 - 0.5,
+            ];
+        }
+        [FaceMap {
+            face: FACE_A,
+            slopes: Arc::new(map),
+            rotation_deg: 0.0,
+            offset_mm: [0.0; 2],
+        }]
+    }
+
+    /// On a dome (a triplanar patch), two neighbouring facets interpolate the same
+    /// smooth normal on their common edge, so (for one base normal) the blended slopes
+    /// agree just across the edge; each facet's own planar frame (before) disagrees. At
+    /// the pole (smooth normal +Z) the blend is the map projected on the XY plane.
+    #[test]
+    fn triplanar_patches_are_continuous_across_facet_edges() {
+        use crate::scene::assemble::place_curved_maps;
+        use crate::scene::curved::decode_normal;
+        let stage = Stage::new(
+            crate::scene::procedural::dome(20.0, 12, 64),
+            [0.0; 3],
+            &crate::scene::config::TableConfig::default(),
+        );
+        assert_eq!(stage.curved.len(), 1);
+        let maps = noise_face_map();
+        let part = Placement {
+            cover: Cover::Part,
+            seed: 11,
+            ..FACES
+        };
+        let first = stage.regions.len() as u32;
+        let curved = place_curved_maps(&maps, &stage.curved, first, &part);
+        let slots = stage.regions.len() + stage.curved.len() + 1;
+        let all: Vec<PlacedMap> = curved.iter().map(|c| c.map.clone()).collect();
+        let (mut h, t) = pack(&all, slots, 1 << 27).expect("pack");
+        let blocks = curved_blocks(&curved, &mut h).expect("blocks");
+        let slot = first as usize + 1;
+        assert!(h[slot].dims[3] & MAP_TRIPLANAR != 0 && h[slot].dims[3] & MAP_REVOLVED == 0);
+        let (hs, bs) = (&h[slot], &blocks[slot]);
+        let tex = &t[(hs.dims[3] & MAP_BUFFER_MASK) as usize - 1];
+        let mesh = &stage.mesh;
+        let smooth_at = |t: usize, p: Vec3| {
+            // Barycentric interpolation of the coded corner normals, as the shader does.
+            let [a, b, c] = mesh.corners(t);
+            let n = (b - a).cross(c - a);
+            let (u, v) = (
+                (p - a).cross(c - a).dot(n) / n.length_squared(),
+                (b - a).cross(p - a).dot(n) / n.length_squared(),
+            );
+            let w = stage.corner_w[t].map(decode_normal);
+            (w[0] * (1.0 - u - v) + w[1] * u + w[2] * v).normalize()
+        };
+        // Two neighbouring dome facets (different regions) halfway up, sharing an edge
+        // that runs along a meridian (so the two sides differ in all three weights).
+        let n = stage.region_of.len();
+        let in_dome = |t: usize| stage.map_slot(t) == slot as u32;
+        let (t1, t2, a, b) = (0..n)
+            .filter(|&t| in_dome(t))
+            .flat_map(|t1| (0..n).map(move |t2| (t1, t2)))
+            .filter(|&(t1, t2)| in_dome(t2) && stage.region_of[t1] != stage.region_of[t2])
+            .find_map(|(t1, t2)| {
+                let (c1, c2) = (mesh.corners(t1), mesh.corners(t2));
+                let s: Vec<Vec3> = c1.iter().filter(|p| c2.contains(p)).copied().collect();
+                let ok = s.len() == 2
+                    && (s[0].z - s[1].z).abs() > 1.0
+                    && s[0].z.min(s[1].z) > 6.0
+                    && s[0].x.abs().min(s[0].y.abs()) > 3.0;
+                ok.then(|| (t1, t2, s[0], s[1]))
+            })
+            .expect("two neighbouring dome facets");
+        let centroid = |t: usize| mesh.corners(t).iter().copied().sum::<Vec3>() / 3.0;
+        let facet_n = |t: usize| {
+            let [a, b, c] = mesh.corners(t);
+            (b - a).cross(c - a).normalize()
+        };
+        let ng = (facet_n(t1) + facet_n(t2)).normalize();
+        // The old way: each facet's own planar frame.
+        let regions: Vec<RegionFrame> = [t1, t2]
+            .iter()
+            .map(|&t| stage.regions[stage.region_of[t] as usize])
+            .collect();
+        let planar = place_maps(&maps, &[frame_a()], &regions, &part).expect("planar");
+        let (hp, tp) = pack(&planar, stage.regions.len() + 1, 1 << 27).expect("pack");
+        let planar_at = |k: usize, p: Vec3| {
+            let hh = &hp[regions[k].id as usize + 1];
+            let s = lookup(hh, &tp[(hh.dims[3] & MAP_BUFFER_MASK) as usize - 1], p);
+            Vec2::from(s).length()
+        };
+        let (mut worst_tri, mut worst_planar, mut bent) = (0.0f32, 0.0f32, 0.0f32);
+        for k in 1..10 {
+            let p = a + (b - a) * (k as f32 / 10.0);
+            let step = |t: usize| (centroid(t) - p).normalize() * 1e-3;
+            let (p1, p2) = (p + step(t1), p + step(t2));
+            let n1 = triplanar_normal(hs, bs, tex, p1, ng, smooth_at(t1, p1));
+            let n2 = triplanar_normal(hs, bs, tex, p2, ng, smooth_at(t2, p2));
+            worst_tri = worst_tri.max((n1 - n2).length());
+            bent = bent.max(1.0 - n1.dot(ng));
+            worst_planar = worst_planar.max((planar_at(0, p1) - planar_at(1, p2)).abs());
+        }
+        assert!(bent > 1e-3, "the map does not reach the dome: {bent}");
+        // 2 um apart on a 100 um grid of slopes within +-0.5: normals at most 0.03 apart.
+        assert!(worst_tri < 0.03, "triplanar: {worst_tri}");
+        assert!(
+            worst_planar > 0.1,
+            "per-facet frames agree by chance: {worst_planar}"
+        );
+        // At the pole: the XY projection alone.
+        let pole = Vec3::new(0.0, 0.0, 20.0);
+        let got = triplanar_normal(hs, bs, tex, pole, Vec3::Z, Vec3::Z);
+        let d = pole - Vec3::from_slice(&hs.origin[..3]);
+        let s = lookup_plane(hs, tex, [d.x - bs.place[0], d.y - bs.place[1]]);
+        let want = Vec3::new(-s[0], s[1], 1.0).normalize();
+        assert!(
+            (got - want).length() < 1e-6 && s != [0.0; 2],
+            "{got} {want}"
+        );
+        // Seen from inside: no perturbation.
+        assert_eq!(
+            triplanar_normal(hs, bs, tex, pole, -Vec3::Z, Vec3::Z),
+            -Vec3::Z
+        );
+    }
+
     /// On the flange's bore (a curved patch), two neighbouring facets share one map
     /// frame: a point on their common edge gets the same slope from either side, and
     /// points just across the edge get nearly the same; with a planar frame per facet
@@ -1033,21 +1239,7 @@ mod tests {
             [0.0; 3],
             &crate::scene::config::TableConfig::default(),
         );
-        // A 64 x 64 map of 0.1 mm texels with pseudo-random slopes.
-        let mut map = SlopeMap::flat(64, 64, 100.0);
-        for (i, v) in map.data.iter_mut().enumerate() {
-            let h = (i as u32).wrapping_mul(2_654_435_761);
-            *v = [
-                (h >> 8 & 0xff) as f32 / 255.0 - 0.5,
-                (h >> 16 & 0xff) as f32 / 255.0 - 0.5,
-            ];
-        }
-        let maps = [FaceMap {
-            face: FACE_A,
-            slopes: Arc::new(map),
-            rotation_deg: 0.0,
-            offset_mm: [0.0; 2],
-        }];
+        let maps = noise_face_map();
         let part = Placement {
             cover: Cover::Part,
             seed: 7,

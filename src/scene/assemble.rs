@@ -12,7 +12,9 @@ use super::config::{
     CameraConfig, ConfigError, LightConfig, LightSampling, ObjectConfig, Pose, SceneConfig,
     TableConfig, TextureConfig, View,
 };
-use super::curved::{CurvedPatch, CurvedTolerance, curved_patches};
+use super::curved::{
+    CurvedPatch, CurvedTolerance, PatchKind, curved_patches, encode_normal, smooth_corner_normals,
+};
 use super::lights::{LightShape, LightSpec};
 use super::materials::{GltfMaterials, RegionMaterial, SurfaceMaterial};
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
@@ -199,6 +201,9 @@ pub struct PlacedCurved {
     pub offset_mm: [f32; 2],
     pub sin_beta: f32,
     pub cos_beta: f32,
+    /// Revolved (the fields above) or triplanar (`map` holds the patch's centroid,
+    /// `axis_x` = +X, `axis_up` = +Z; only `offset_mm` of the fields above is used).
+    pub kind: PatchKind,
 }
 
 /// With `Cover::Part`, each curved patch gets one of the face maps (chosen, with an
@@ -231,7 +236,9 @@ pub fn place_curved_maps(
                 rng.random_range(-0.5f32..=0.5) * wx,
                 rng.random_range(-0.5f32..=0.5) * wy,
             ];
-            let arc_radius = if p.full_turn {
+            let arc_radius = if p.kind == PatchKind::Triplanar {
+                0.0
+            } else if p.full_turn {
                 let turns = (std::f32::consts::TAU * p.radius / wx).round().max(1.0);
                 turns * wx / std::f32::consts::TAU
             } else {
@@ -251,6 +258,7 @@ pub fn place_curved_maps(
                 offset_mm: off,
                 sin_beta: p.sin_beta,
                 cos_beta: p.cos_beta,
+                kind: p.kind,
             }
         })
         .collect()
@@ -333,6 +341,22 @@ pub struct Stage {
     pub curved: Vec<CurvedPatch>,
     /// The curved patch of each planar region (`u32::MAX`: none).
     pub curved_of: Vec<u32>,
+    /// Per triangle of `mesh`, the shader's corner values (`trace::Triangles::corner_w`):
+    /// on triangles of triplanar patches the smooth normals, octahedral-coded
+    /// (`curved::encode_normal`); zeros elsewhere.
+    pub corner_w: Vec<[f32; 3]>,
+}
+
+impl crate::trace::Triangles for Stage {
+    fn positions(&self) -> &[Vec3] {
+        &self.mesh.positions
+    }
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.mesh.triangles
+    }
+    fn corner_w(&self) -> Option<&[[f32; 3]]> {
+        Some(&self.corner_w)
+    }
 }
 
 impl Stage {
@@ -349,6 +373,12 @@ impl Stage {
                 curved_of[r as usize] = i as u32;
             }
         }
+        let mut corner_w: Vec<[f32; 3]> =
+            smooth_corner_normals(&object, &region_of, &curved, &curved_of)
+                .into_iter()
+                .map(|n| n.map_or([0.0; 3], |n| n.map(encode_normal)))
+                .collect();
+        corner_w.extend([[0.0; 3]; 2]); // the table
         let regions = found
             .iter()
             .map(|r| RegionFrame {
@@ -387,6 +417,7 @@ impl Stage {
             surfaces: Vec::new(),
             curved,
             curved_of,
+            corner_w,
         }
     }
 

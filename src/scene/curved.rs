@@ -20,6 +20,14 @@
 //! u = radius * theta (theta about `a` from `e0`) and v = rho sin(beta) + h cos(beta)
 //! (rho its distance from the axis, h its height along `a` from `centre`): a function of
 //! the position alone, so two facets sharing an edge give the same (u, v) there.
+//!
+//! A group that does not fit (a fillet on a torus, a sphere, a free-form CAD patch)
+//! becomes a **triplanar** patch (`PatchKind::Triplanar`): the map is projected along
+//! each of the three world axes and the three slopes are blended with weights
+//! |n_k|^`TRIPLANAR_SHARPNESS` / sum (n the patch's smooth normal, interpolated from
+//! per-vertex normals: [`smooth_corner_normals`]). Every projection and the smooth
+//! normal are functions of the position on the surface, so the finish runs over the
+//! facet edges without a seam (docs/texture.md, "Curved regions").
 
 use std::collections::HashMap;
 
@@ -42,6 +50,9 @@ pub struct CurvedTolerance {
     /// Largest distance between a facet's normal line and the axis, as a fraction of the
     /// patch's radius (at least 1 um). Default 0.01.
     pub fit_distance: f64,
+    /// Groups that fit no surface of revolution become triplanar patches (else they
+    /// keep their facets as planar regions). Default true.
+    pub triplanar: bool,
 }
 
 impl Default for CurvedTolerance {
@@ -51,13 +62,31 @@ impl Default for CurvedTolerance {
             min_facets: 4,
             fit_angle_deg: 1.0,
             fit_distance: 0.01,
+            triplanar: true,
         }
     }
 }
 
+/// How a curved patch's map is projected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PatchKind {
+    /// About an axis, along a straight generatrix (a surface of revolution).
+    Revolved,
+    /// Along the three world axes, blended by the smooth normal (any other smooth
+    /// surface). Its `centre` is the facets' area-weighted centroid, `axis` = +Z, `e0` =
+    /// +X; `radius`, `sin_beta`, `cos_beta` and `full_turn` are unused (0, 0, 1, false).
+    Triplanar,
+}
+
+/// The exponent of the triplanar blend weights |n_k|^p: 4 keeps one projection
+/// dominant up to about 35 degrees from its axis and blends over the diagonals.
+pub const TRIPLANAR_SHARPNESS: f32 = 4.0;
+
 /// One curved patch and its map frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CurvedPatch {
+    /// The projection of its map.
+    pub kind: PatchKind,
     /// Its planar regions (facets), ascending ids.
     pub regions: Vec<u32>,
     /// Total facet area, mm^2.
@@ -78,7 +107,7 @@ pub struct CurvedPatch {
 }
 
 impl CurvedPatch {
-    /// (u, v) of `p`, mm: arc length about the axis at the patch radius from `e0`, and
+    /// (Revolved patches.) (u, v) of `p`, mm: arc length about the axis at the patch radius from `e0`, and
     /// the distance along the generatrix (see the module docs). theta is in (-pi, pi].
     pub fn uv(&self, p: Vec3) -> [f32; 2] {
         let (c, a, e0) = (
@@ -98,7 +127,7 @@ impl CurvedPatch {
         ]
     }
 
-    /// Unit tangents at `p`: along increasing u (about the axis) and increasing v (along
+    /// (Revolved patches.) Unit tangents at `p`: along increasing u (about the axis) and increasing v (along
     /// the generatrix); their cross product is the outward normal of the surface.
     pub fn tangents(&self, p: Vec3) -> (Vec3, Vec3) {
         let a = self.axis;
@@ -269,6 +298,7 @@ fn fit(facets: &[Facet], tol: &CurvedTolerance) -> Option<CurvedPatch> {
     let mut regions: Vec<u32> = facets.iter().map(|f| f.id).collect();
     regions.sort_unstable();
     Some(CurvedPatch {
+        kind: PatchKind::Revolved,
         regions,
         area: w,
         centre: centre.as_vec3(),
@@ -281,8 +311,117 @@ fn fit(facets: &[Facet], tol: &CurvedTolerance) -> Option<CurvedPatch> {
     })
 }
 
+/// A triplanar patch over `facets` (a smooth group that is no surface of revolution).
+fn triplanar(facets: &[Facet]) -> Option<CurvedPatch> {
+    let w: f64 = facets.iter().map(|f| f.area).sum();
+    if w <= 0.0 || w.is_nan() {
+        return None;
+    }
+    let centre = facets.iter().map(|f| f.centroid * f.area).sum::<DVec3>() / w;
+    let mut regions: Vec<u32> = facets.iter().map(|f| f.id).collect();
+    regions.sort_unstable();
+    Some(CurvedPatch {
+        kind: PatchKind::Triplanar,
+        regions,
+        area: w,
+        centre: centre.as_vec3(),
+        axis: Vec3::Z,
+        e0: Vec3::X,
+        radius: 0.0,
+        sin_beta: 0.0,
+        cos_beta: 1.0,
+        full_turn: false,
+    })
+}
+
+/// Triplanar blend weights at unit normal `n`: |n_k|^[`TRIPLANAR_SHARPNESS`], summing
+/// to 1 (the shader's `triplanar_weights`).
+pub fn triplanar_weights(n: Vec3) -> [f32; 3] {
+    let a = n.abs();
+    let w = [a.x, a.y, a.z].map(|c| (c * c) * (c * c));
+    let s = w[0] + w[1] + w[2];
+    if s > 0.0 {
+        w.map(|x| x / s)
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+/// A unit normal octahedral-coded as one float (`Tri`'s w, src/gpu_interface.in): the
+/// octahedron's two coordinates in [-1, 1] quantised to `OCT_STEPS` steps (under 0.1 degree
+/// at worst), coded as the integer u * `OCT_LEVELS` + v, which f32 holds exactly.
+pub fn encode_normal(n: Vec3) -> f32 {
+    use crate::gpu_interface::{OCT_LEVELS, OCT_STEPS};
+    let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
+    let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(1e-30);
+    let (x, y) = if n.z >= 0.0 {
+        (n.x, n.y)
+    } else {
+        ((1.0 - n.y.abs()) * sign(n.x), (1.0 - n.x.abs()) * sign(n.y))
+    };
+    let q = |c: f32| ((c.clamp(-1.0, 1.0) * 0.5 + 0.5) * OCT_STEPS as f32).round() as u32;
+    (q(x) * OCT_LEVELS + q(y)) as f32
+}
+
+/// The unit normal of [`encode_normal`]'s code (the shader's `oct_decode`).
+pub fn decode_normal(code: f32) -> Vec3 {
+    use crate::gpu_interface::{OCT_LEVELS, OCT_STEPS};
+    let k = code as u32;
+    let c = |i: u32| i as f32 / OCT_STEPS as f32 * 2.0 - 1.0;
+    let (x, y) = (c(k / OCT_LEVELS), c(k % OCT_LEVELS));
+    let z = 1.0 - x.abs() - y.abs();
+    let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
+    let (x, y) = if z < 0.0 {
+        ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y))
+    } else {
+        (x, y)
+    };
+    Vec3::new(x, y, z).normalize()
+}
+
+/// Smooth per-corner normals of the triangles of triplanar patches: at each corner the
+/// area-weighted mean normal of the patch's triangles that share its position (welded,
+/// 0.25 um), so neighbouring facets agree on their common edge; `None` for triangles
+/// outside a triplanar patch. `region_of`: each triangle's region; `curved_of`: the
+/// patch of each region (`u32::MAX`: none).
+pub fn smooth_corner_normals(
+    mesh: &Mesh,
+    region_of: &[u32],
+    patches: &[CurvedPatch],
+    curved_of: &[u32],
+) -> Vec<Option<[Vec3; 3]>> {
+    let patch_of = |t: usize| -> Option<u32> {
+        let r = *region_of.get(t)?;
+        let p = *curved_of.get(r as usize)?;
+        (p != u32::MAX && patches.get(p as usize)?.kind == PatchKind::Triplanar).then_some(p)
+    };
+    let welded = super::regions::weld_positions(mesh, 2.5e-4);
+    // Sum of area-weighted normals per (patch, welded vertex).
+    let mut sums: HashMap<(u32, u32), DVec3> = HashMap::new();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let Some(p) = patch_of(t) else { continue };
+        let [a, b, c] = tri.map(|i| mesh.positions[i as usize].as_dvec3());
+        let n2 = (b - a).cross(c - a); // twice the area times the unit normal
+        for &i in tri {
+            *sums.entry((p, welded[i as usize])).or_default() += n2;
+        }
+    }
+    mesh.triangles
+        .iter()
+        .enumerate()
+        .map(|(t, tri)| {
+            let p = patch_of(t)?;
+            Some(tri.map(|i| {
+                sums.get(&(p, welded[i as usize]))
+                    .map_or(Vec3::Z, |s| s.normalize_or_zero().as_vec3())
+            }))
+        })
+        .collect()
+}
+
 /// The curved patches of `mesh`: groups of its planar `regions` (ids = indices) without
-/// an inspected face that fit a surface of revolution (module docs). `region_of`: each
+/// an inspected face that fit a surface of revolution, or else (`tol.triplanar`) any
+/// other smooth group, projected triplanar (module docs). `region_of`: each
 /// triangle's region (`regions::region_per_triangle`). Patches are ordered by their
 /// smallest region id.
 pub fn curved_patches(
@@ -364,7 +503,13 @@ pub fn curved_patches(
                     }
                 })
                 .collect();
-            fit(&facets, tol)
+            fit(&facets, tol).or_else(|| {
+                if tol.triplanar {
+                    triplanar(&facets)
+                } else {
+                    None
+                }
+            })
         })
         .collect()
 }
@@ -384,6 +529,7 @@ mod tests {
 
     #[test]
     fn the_flange_has_seven_surfaces_of_revolution_and_the_test_body_none() {
+        // Neither revolved nor triplanar patches: the test bodies render as before.
         for v in [Variant::B, Variant::M] {
             assert!(patches(&testbody(v)).1.is_empty(), "{v:?}");
         }
@@ -404,6 +550,7 @@ mod tests {
             "{sizes:?}"
         );
         for c in &p {
+            assert_eq!(c.kind, PatchKind::Revolved);
             assert!(c.full_turn);
             assert!((c.axis.z.abs() - 1.0).abs() < 1e-6, "axis {}", c.axis);
             // The generatrix: vertical walls (beta 0), the chamfer at 45 degrees.
@@ -425,6 +572,66 @@ mod tests {
         // The facet centroids lie at R cos(pi / n) from the axis.
         let want = fp.bore_radius * (std::f64::consts::PI / fp.bore_segments as f64).cos();
         assert!((bore.radius as f64 - want).abs() < 1e-4, "{}", bore.radius);
+    }
+
+    #[test]
+    fn a_dome_is_one_triplanar_patch_with_smooth_corner_normals() {
+        let (rings, segs) = (8, 32);
+        let mesh = crate::scene::procedural::dome(10.0, rings, segs);
+        let (regions, p) = patches(&mesh);
+        // Every facet of the dome (quads and the pole's fan), not the bottom disc.
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert_eq!(p[0].kind, PatchKind::Triplanar);
+        assert_eq!(p[0].regions.len(), ((rings - 1) * segs + segs) as usize);
+        assert_eq!(regions.len(), p[0].regions.len() + 1);
+        // Without triplanar patches the dome keeps its facets planar (as before).
+        let region_of = region_per_triangle(&mesh, &regions);
+        let off = CurvedTolerance {
+            triplanar: false,
+            ..Default::default()
+        };
+        assert!(curved_patches(&mesh, &regions, &region_of, &off).is_empty());
+        let mut curved_of = vec![u32::MAX; regions.len()];
+        for &r in &p[0].regions {
+            curved_of[r as usize] = 0;
+        }
+        let normals = smooth_corner_normals(&mesh, &region_of, &p, &curved_of);
+        // Each corner's normal is the sphere's within a facet's half angle, and every
+        // triangle holding a position gives it the same normal.
+        let mut at: HashMap<[u32; 3], Vec3> = HashMap::new();
+        let mut outside = 0;
+        for (t, n) in normals.iter().enumerate() {
+            let Some(n) = n else {
+                outside += 1;
+                continue;
+            };
+            for (k, &i) in mesh.triangles[t].iter().enumerate() {
+                let q = mesh.positions[i as usize];
+                let want = q.normalize();
+                assert!(
+                    n[k].dot(want) > (6f32).to_radians().cos(),
+                    "{} {want}",
+                    n[k]
+                );
+                let key = q.to_array().map(f32::to_bits);
+                let prev = *at.entry(key).or_insert(n[k]);
+                assert_eq!(prev, n[k], "corner {q}");
+            }
+        }
+        assert_eq!(outside, segs as usize, "the bottom disc's triangles");
+        // The octahedral code keeps a normal within 0.1 degrees, everywhere.
+        for n in normals
+            .iter()
+            .flatten()
+            .flatten()
+            .chain(&[Vec3::X, -Vec3::Z, -Vec3::Y])
+        {
+            let back = decode_normal(encode_normal(*n));
+            assert!(back.dot(*n) > 0.1f32.to_radians().cos(), "{n} -> {back}");
+        }
+        let w = triplanar_weights(Vec3::new(0.6, 0.0, 0.8));
+        assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-6 && w[1] == 0.0 && w[2] > w[0]);
+        assert_eq!(triplanar_weights(Vec3::X), [1.0, 0.0, 0.0]);
     }
 
     #[test]

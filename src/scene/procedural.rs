@@ -52,3 +52,44 @@ pub fn bumpy_sphere(segments: u32, rings: u32, radius: f32, bump: f32) -> Mesh {
         labels,
     }
 }
+
+/// A closed hemispherical dome of radius `r` standing on the z = 0 plane: `rings` bands
+/// of planar quads (two triangles each; a fan at the pole), `segs` around, and a flat
+/// bottom disc (a fan): `2 * segs * rings` triangles. A smooth surface that is no
+/// surface of revolution with a straight generatrix: one triplanar patch
+/// (`scene::curved`; docs/testbody.md, "Dome").
+pub fn dome(r: f32, rings: u32, segs: u32) -> Mesh {
+    let mut m = Mesh::default();
+    let ring = |m: &mut Mesh, k: u32| -> Vec<u32> {
+        let lat = std::f32::consts::FRAC_PI_2 * k as f32 / rings as f32;
+        (0..segs)
+            .map(|j| {
+                let lon = std::f32::consts::TAU * j as f32 / segs as f32;
+                m.positions.push(Vec3::new(
+                    r * lat.cos() * lon.cos(),
+                    r * lat.cos() * lon.sin(),
+                    r * lat.sin(),
+                ));
+                m.positions.len() as u32 - 1
+            })
+            .collect()
+    };
+    let rows: Vec<Vec<u32>> = (0..rings).map(|k| ring(&mut m, k)).collect();
+    m.positions.push(Vec3::new(0.0, 0.0, r));
+    let pole = m.positions.len() as u32 - 1;
+    m.positions.push(Vec3::ZERO);
+    let bottom = m.positions.len() as u32 - 1;
+    for j in 0..segs as usize {
+        let j1 = (j + 1) % segs as usize;
+        for k in 0..rings as usize - 1 {
+            let (lo, hi) = (&rows[k], &rows[k + 1]);
+            m.triangles.push([lo[j], lo[j1], hi[j1]]);
+            m.triangles.push([lo[j], hi[j1], hi[j]]);
+        }
+        let top = &rows[rings as usize - 1];
+        m.triangles.push([top[j], top[j1], pole]);
+        m.triangles.push([rows[0][j1], rows[0][j], bottom]);
+    }
+    m.labels = vec![TriLabel::default(); m.triangles.len()];
+    m
+}

@@ -102,6 +102,12 @@ pub struct ShadeTri {
 pub trait Triangles {
     fn positions(&self) -> &[Vec3];
     fn triangles(&self) -> &[[u32; 3]];
+    /// A value per triangle corner for the shader, stored in `ShadeTri`'s w components
+    /// (the scene's smooth normals of triplanar patches: `Tri` in src/gpu_interface.in);
+    /// None: zeros.
+    fn corner_w(&self) -> Option<&[[f32; 3]]> {
+        None
+    }
 }
 
 /// Plain indexed triangles.
@@ -152,17 +158,40 @@ impl TraceGeometry {
         first_prim: u32,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
+        Self::build_with(
+            ctx,
+            geo,
+            backend,
+            first_prim,
+            software_bvh::DEFAULT_BVH_QUALITY,
+            profiler,
+        )
+    }
+
+    /// As [`TraceGeometry::build`], the software BVH built with obvhs's `quality` preset
+    /// (the ray-query backend ignores it).
+    pub fn build_with(
+        ctx: &Arc<Context>,
+        geo: &impl Triangles,
+        backend: Backend,
+        first_prim: u32,
+        quality: software_bvh::BvhQuality,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let (positions, triangles) = (geo.positions(), geo.triangles());
+        let corner_w = geo.corner_w();
         let shade: Vec<ShadeTri> = timed(profiler, "upload geometry", || {
             triangles
                 .iter()
-                .map(|t| {
+                .enumerate()
+                .map(|(k, t)| {
                     let p = t.map(|i| positions[i as usize]);
+                    let w = corner_w.and_then(|c| c.get(k)).copied().unwrap_or([0.0; 3]);
                     ShadeTri {
-                        a: p[0].extend(0.0).into(),
-                        b: p[1].extend(0.0).into(),
-                        c: p[2].extend(0.0).into(),
+                        a: p[0].extend(w[0]).into(),
+                        b: p[1].extend(w[1]).into(),
+                        c: p[2].extend(w[2]).into(),
                     }
                 })
                 .collect()
@@ -191,7 +220,7 @@ impl TraceGeometry {
                     software_bvh::empty()
                 } else {
                     timed(profiler, "BVH build (obvhs)", || {
-                        software_bvh::flatten(&software_bvh::build_bvh(&tris), &tris)
+                        software_bvh::flatten(&software_bvh::build_bvh_with(&tris, quality), &tris)
                     })
                 };
                 if first_prim != 0 {
@@ -258,6 +287,20 @@ impl TraceScene {
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
         let object = Arc::new(TraceGeometry::build(ctx, mesh, backend, 0, profiler)?);
+        Self::layered(ctx, object, &TriangleSoup::default(), profiler)
+    }
+
+    /// One mesh, its software BVH built with obvhs's `quality` preset (benchmarks).
+    pub fn build_with(
+        ctx: &Arc<Context>,
+        mesh: &impl Triangles,
+        backend: Backend,
+        quality: software_bvh::BvhQuality,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
+        let object = Arc::new(TraceGeometry::build_with(
+            ctx, mesh, backend, 0, quality, profiler,
+        )?);
         Self::layered(ctx, object, &TriangleSoup::default(), profiler)
     }
 

@@ -36,15 +36,63 @@ pub fn obvhs_triangles(positions: &[glam::Vec3], triangles: &[[u32; 3]]) -> Vec<
         .collect()
 }
 
-/// Builds the BVH2 (obvhs PLOC, medium quality: about Embree's build time with faster
-/// traversal, per obvhs).
+/// obvhs's build presets (PLOC with reinsertion; `BvhBuildParams`), fastest to slowest.
+/// Their build time and the traversal speed they give are measured by
+/// `examples/bench_bvh` (docs/benchmarks.md, "BVH build presets").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BvhQuality {
+    /// One triangle per leaf, no reinsertion, no collapse.
+    Fastest,
+    VeryFast,
+    Fast,
+    /// About Embree's build time with faster traversal (per obvhs).
+    Medium,
+    /// With pre-splitting of large triangles.
+    Slow,
+}
+
+impl BvhQuality {
+    pub const ALL: [BvhQuality; 5] = [
+        BvhQuality::Fastest,
+        BvhQuality::VeryFast,
+        BvhQuality::Fast,
+        BvhQuality::Medium,
+        BvhQuality::Slow,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BvhQuality::Fastest => "fastest",
+            BvhQuality::VeryFast => "very_fast",
+            BvhQuality::Fast => "fast",
+            BvhQuality::Medium => "medium",
+            BvhQuality::Slow => "slow",
+        }
+    }
+
+    fn params(self) -> obvhs::BvhBuildParams {
+        match self {
+            BvhQuality::Fastest => obvhs::BvhBuildParams::fastest_build(),
+            BvhQuality::VeryFast => obvhs::BvhBuildParams::very_fast_build(),
+            BvhQuality::Fast => obvhs::BvhBuildParams::fast_build(),
+            BvhQuality::Medium => obvhs::BvhBuildParams::medium_build(),
+            BvhQuality::Slow => obvhs::BvhBuildParams::slow_build(),
+        }
+    }
+}
+
+/// The preset every scene is built with.
+pub const DEFAULT_BVH_QUALITY: BvhQuality = BvhQuality::Medium;
+
+/// Builds the BVH2 with [`DEFAULT_BVH_QUALITY`].
 pub fn build_bvh(tris: &[Triangle]) -> Bvh2 {
+    build_bvh_with(tris, DEFAULT_BVH_QUALITY)
+}
+
+/// Builds the BVH2 with obvhs's `quality` preset.
+pub fn build_bvh_with(tris: &[Triangle], quality: BvhQuality) -> Bvh2 {
     let mut core = std::time::Duration::ZERO;
-    obvhs::bvh2::builder::build_bvh2_from_tris(
-        tris,
-        obvhs::BvhBuildParams::medium_build(),
-        &mut core,
-    )
+    obvhs::bvh2::builder::build_bvh2_from_tris(tris, quality.params(), &mut core)
 }
 
 /// A BVH no ray can hit anything in: one node whose two children are the same leaf of one
