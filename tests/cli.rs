@@ -85,6 +85,18 @@ fn bad_input_fails_before_any_work_naming_the_input() {
         &["render.bounces"],
     );
     assert!(!dp.join("o").exists(), "a refused job leaves no folder");
+    // Images in flight: 1 to 64 (a usage error: clap's exit code 2).
+    let o = synosis(
+        &["dataset", "run", job, "--out", "o", "--in-flight", "0"],
+        dp,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("--in-flight") && err.contains("1..=64"),
+        "{err}"
+    );
+    assert!(!dp.join("o").exists());
     // A missing job file: the OS error once.
     let e = assert_fails(
         &synosis(&["dataset", "run", "missing.toml", "--out", "o"], dp),
@@ -334,6 +346,14 @@ fn bench_gpu_writes_its_table() {
     assert!(v["images"].as_u64().unwrap() > 0);
     assert!(v["rays"]["primary_mrays_s"].as_f64().unwrap() > 0.0);
     assert!(dp.join("run.json").is_file());
+    // The default images in flight: 1 on a CPU Vulkan device (lavapipe), 3 on a GPU.
+    let cpu = v["device"].as_str().unwrap().contains("llvmpipe");
+    let want = if cpu { 1 } else { 3 };
+    assert_eq!(v["in_flight"].as_u64(), Some(want));
+    assert!(
+        table.contains(&format!("| images in flight | {want} |")),
+        "{table}"
+    );
     // A non-empty work folder is refused before any work.
     let o = synosis(
         &["bench-gpu", "--job", job.to_str().unwrap(), "--out", "data"],

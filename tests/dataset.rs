@@ -1834,3 +1834,160 @@ fn deep_sensor_writes_16_bit_codes() {
         .sum();
     assert!(top > 0, "the report read 12-bit codes as 8-bit values");
 }
+
+/// Runs the whole job with `in_flight` images in flight (1: one after the other); the
+/// progress calls it made.
+fn run_in_flight(
+    f: &Fixture,
+    out: &Path,
+    in_flight: usize,
+    textures: &mut (dyn TextureSource + Send),
+) -> (
+    Result<dataset::RunReport, DatasetError>,
+    Vec<(usize, usize)>,
+) {
+    let mut calls = Vec::new();
+    let mut progress = |done: usize, total: usize| calls.push((done, total));
+    let r = dataset::run(
+        &f.prep,
+        out,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        textures,
+        RunOptions {
+            progress: Some(&mut progress),
+            in_flight,
+            ..Default::default()
+        },
+    );
+    (r, calls)
+}
+
+/// The shard manifest's image indices, in file order.
+fn manifest_order(out: &Path) -> Vec<usize> {
+    dataset::read_manifest(&out.join("manifests/shard-0-of-1.jsonl"), false)
+        .unwrap()
+        .iter()
+        .map(|e| e.index)
+        .collect()
+}
+
+#[test]
+fn overlapped_runs_write_the_same_files_as_one_image_at_a_time() {
+    let f = fixture(2, 2);
+    let total = f.prep.plan.items.len();
+    let one = f.root.join("one");
+    let mut tex = FlatTexturesTestDouble { made: 0 };
+    let (r, calls_one) = run_in_flight(&f, &one, 1, &mut tex);
+    assert_eq!(r.unwrap().rendered, total);
+    let made_one = tex.made;
+    let want: Vec<(usize, usize)> = (1..=total).map(|k| (k, total)).collect();
+    assert_eq!(calls_one, want);
+    for in_flight in [2, 4] {
+        let out = f.root.join(format!("overlapped-{in_flight}"));
+        let mut tex = FlatTexturesTestDouble { made: 0 };
+        let (r, calls) = run_in_flight(&f, &out, in_flight, &mut tex);
+        assert_eq!(r.unwrap().rendered, total);
+        assert_same_dataset(&one, &out);
+        assert_eq!(manifest_order(&out), manifest_order(&one));
+        assert_eq!(listing(&out), listing(&one));
+        // The progress counts written images, one call each, in order.
+        assert_eq!(calls, want, "in_flight {in_flight}");
+        // The same texture cache misses (the inputs are made in the same order).
+        assert_eq!(tex.made, made_one, "in_flight {in_flight}");
+    }
+}
+
+/// TEST DOUBLE: flat textures that fail from the `fail_at`-th make on.
+struct FailingTexturesTestDouble {
+    made: usize,
+    fail_at: usize,
+}
+
+impl TextureSource for FailingTexturesTestDouble {
+    fn make(
+        &mut self,
+        f: &Finish,
+        i: u32,
+        s: u64,
+        size: usize,
+        spacing_um: f64,
+    ) -> Result<TextureMap, String> {
+        self.made += 1;
+        if self.made > self.fail_at {
+            return Err("out of texture memory (test double)".into());
+        }
+        FlatTexturesTestDouble { made: 0 }.make(f, i, s, size, spacing_um)
+    }
+}
+
+#[test]
+fn a_failed_write_or_texture_stops_an_overlapped_run_as_it_stops_a_sequential_one() {
+    let f = fixture(2, 2);
+    let total = f.prep.plan.items.len();
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    // An image file that cannot be written: a folder in its place.
+    let blocked = |out: &Path| {
+        let p = out.join("images/000004/mask.png");
+        std::fs::create_dir_all(p.join("in-the-way")).unwrap();
+        p
+    };
+    let mut errors = Vec::new();
+    for in_flight in [1, 3] {
+        let out = f.root.join(format!("write-{in_flight}"));
+        let obstacle = blocked(&out);
+        let (r, calls) =
+            run_in_flight(&f, &out, in_flight, &mut FlatTexturesTestDouble { made: 0 });
+        let err = r.unwrap_err();
+        assert!(matches!(err, DatasetError::Io { .. }), "{err:?}");
+        let msg = err.to_string();
+        assert!(msg.contains("000004/mask.png"), "{msg}");
+        errors.push(msg.replace(&format!("write-{in_flight}"), "OUT"));
+        // The images before it are written and listed, none after it.
+        assert_eq!(
+            manifest_order(&out),
+            vec![0, 1, 2, 3],
+            "in_flight {in_flight}"
+        );
+        assert_eq!(calls.len(), 4);
+        assert!(!out.join("manifest.jsonl").exists());
+        // No temporary file is left. One at a time, no later image was started; with
+        // writers in parallel a later one may be written whole, but is not listed (a
+        // resume makes it again).
+        let names = listing(&out);
+        assert!(
+            names.iter().all(|n| !n.contains(".tmp")),
+            "in_flight {in_flight}: {names:?}"
+        );
+        if in_flight == 1 {
+            assert!(!out.join("images/000005").exists());
+        }
+        // Resumable: with the obstacle gone it ends as an uninterrupted run.
+        std::fs::remove_dir_all(&obstacle).unwrap();
+        let (r, _) = run_in_flight(&f, &out, in_flight, &mut FlatTexturesTestDouble { made: 0 });
+        assert_eq!(r.unwrap().already_done, 4);
+        assert_same_dataset(&full, &out);
+    }
+    assert_eq!(errors[0], errors[1]);
+    // A texture that cannot be made for a later instance: the earlier images are all
+    // written and listed, in both modes, with the same error.
+    let mut errors = Vec::new();
+    let mut orders = Vec::new();
+    for in_flight in [1, 3] {
+        let out = f.root.join(format!("texture-{in_flight}"));
+        let mut tex = FailingTexturesTestDouble {
+            made: 0,
+            fail_at: 2,
+        };
+        let (r, calls) = run_in_flight(&f, &out, in_flight, &mut tex);
+        let err = r.unwrap_err();
+        assert!(matches!(err, DatasetError::Texture { .. }), "{err:?}");
+        errors.push(err.to_string());
+        let order = manifest_order(&out);
+        assert!(!order.is_empty() && order.len() < total, "{order:?}");
+        assert_eq!(calls.len(), order.len());
+        orders.push(order);
+    }
+    assert_eq!(errors[0], errors[1]);
+    assert_eq!(orders[0], orders[1]);
+}

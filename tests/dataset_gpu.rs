@@ -90,6 +90,61 @@ fn smoke_job_renders_on_the_gpu_ray_query_backend() {
     smoke(AccelChoice::RayQuery, "rq");
 }
 
+/// Every file of a dataset folder's images/ (and manifest lines without timing), by
+/// relative path, as a content hash.
+fn hashed_files(dir: &std::path::Path) -> Vec<(String, String)> {
+    let mut v = Vec::new();
+    let mut stack = vec![dir.join("images")];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                let hash = dataset::files::content_hash(&std::fs::read(&p).unwrap());
+                v.push((rel, hash));
+            }
+        }
+    }
+    v.sort();
+    v
+}
+
+#[test]
+fn overlapped_gpu_run_writes_the_same_files_as_one_image_at_a_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut r = GpuRenderer::new(AccelChoice::Software, true)
+        .unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
+    // Shard 0 of 4: two instances (the second's mesh and textures made ahead) of two
+    // views each.
+    let shard = Shard { index: 0, count: 4 };
+    let mut lines = Vec::new();
+    let mut hashes = Vec::new();
+    for in_flight in [1, 3] {
+        let out = tmp.path().join(format!("in-flight-{in_flight}"));
+        let rep = common::run_small_smoke_with(&mut r, &out, shard, in_flight);
+        assert_eq!(rep.rendered, 4);
+        let entries =
+            dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
+        lines.push(
+            entries
+                .into_iter()
+                .map(|mut e| {
+                    e.finished_unix = 0;
+                    e.render_seconds = 0.0;
+                    e.stage_seconds.clear();
+                    e
+                })
+                .collect::<Vec<_>>(),
+        );
+        hashes.push(hashed_files(&out));
+    }
+    assert_eq!(hashes[0].len(), 4 * dataset::runner::IMAGE_FILES.len());
+    assert_eq!(hashes[0], hashes[1]);
+    assert_eq!(lines[0], lines[1]);
+}
+
 #[test]
 fn face_textures_reach_the_image() {
     use std::sync::Arc;

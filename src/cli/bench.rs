@@ -43,6 +43,10 @@ pub struct BenchGpuArgs {
     /// Also write the run's Chrome trace here.
     #[arg(long)]
     profile: Option<PathBuf>,
+    /// Images in flight (as `dataset run --in-flight`): 1 runs the stages one after the
+    /// other. Default: 3 on a GPU, 1 on a CPU Vulkan device (lavapipe).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    in_flight: Option<usize>,
 }
 
 /// The job text with `[render]` overrides.
@@ -93,6 +97,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
+    let in_flight = super::dataset::in_flight(a.in_flight, &renderer);
     let bar = indicatif::ProgressBar::new(0);
     let mut progress = |done: usize, total: usize| {
         bar.set_length(total as u64);
@@ -109,6 +114,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             shard,
             progress: Some(&mut progress),
             profiler: Some(&profiler),
+            in_flight,
             ..Default::default()
         },
     )
@@ -162,6 +168,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
         prep.plan.instances.len().div_ceil(count),
         n_inst
     );
+    println!("| images in flight | {in_flight} |");
     println!("| start-up (Vulkan, pipelines, energy tables) | {startup_s:.2} s |");
     println!(
         "| per image | {per_image:.2} s ({:.0} images per hour) |",
@@ -189,6 +196,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             "renderer": describe,
             "images": entries.len(),
             "width": w, "height": h, "spp": spp,
+            "in_flight": in_flight,
             "startup_s": startup_s,
             "per_image_s": per_image,
             "images_per_hour": 3600.0 / per_image,

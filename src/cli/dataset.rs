@@ -92,10 +92,27 @@ struct RunArgs {
     #[arg(long)]
     quiet: bool,
     /// Write the run's timeline as a Chrome trace (Perfetto, chrome://tracing): each image
-    /// and its stages on the runner's thread, the renderer's CPU phases, the GPU passes;
-    /// the GPU's busy share of the run goes to stderr.
+    /// and its stages on the thread that ran them, the renderer's CPU phases, the GPU
+    /// passes; the GPU's busy share of the run goes to stderr.
     #[arg(long)]
     profile: Option<PathBuf>,
+    /// Images in flight: 1 makes, renders and writes one image after the other; N >= 2
+    /// renders one while N - 1 writer threads write earlier ones and the next images'
+    /// meshes and textures are made ahead (same files either way). Default: 3 on a GPU,
+    /// 1 on a CPU Vulkan device (lavapipe), where the overlap only competes for the cores.
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    in_flight: Option<usize>,
+}
+
+/// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
+/// on a GPU, 1 on a CPU implementation (lavapipe), where the render uses the same cores
+/// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run").
+pub(super) fn in_flight(arg: Option<usize>, renderer: &GpuRenderer) -> usize {
+    arg.unwrap_or(if renderer.device_is_cpu() {
+        1
+    } else {
+        dataset::DEFAULT_IN_FLIGHT
+    })
 }
 
 fn resolve_shard(a: &RunArgs) -> Result<Shard> {
@@ -260,6 +277,7 @@ fn run_job(a: RunArgs) -> Result<()> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
+    let in_flight = in_flight(a.in_flight, &renderer);
     let result = dataset::run(
         &prep,
         &a.out,
@@ -270,6 +288,7 @@ fn run_job(a: RunArgs) -> Result<()> {
             fail_after: None,
             progress: Some(&mut progress),
             profiler: a.profile.as_ref().map(|_| &profiler),
+            in_flight,
         },
     );
     bar.finish_and_clear();

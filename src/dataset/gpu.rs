@@ -56,6 +56,13 @@ impl GpuRenderer {
             profile: None,
         })
     }
+
+    /// True when the Vulkan device is a CPU implementation (lavapipe): there the "GPU"
+    /// work runs on the same cores as the run's CPU stages, so overlapping them gains
+    /// nothing (`dataset run` then defaults to one image in flight).
+    pub fn device_is_cpu(&self) -> bool {
+        self.ctx.info.is_cpu
+    }
 }
 
 /// What a GPU scene is built from besides the table: the mesh (by key) and which

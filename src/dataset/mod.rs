@@ -27,7 +27,7 @@ pub use plan::{InstancePlan, ItemPlan, Label, Plan, Split, expand};
 pub use post::{Frame, PostStep};
 pub use renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 pub use runner::{
-    ManifestEntry, Prepared, RunOptions, RunReport, Shard, finish, merge, postprocess_dir, prepare,
-    prepare_text, read_manifest, render_one, run,
+    DEFAULT_IN_FLIGHT, ManifestEntry, Prepared, RunOptions, RunReport, Shard, finish, merge,
+    postprocess_dir, prepare, prepare_text, read_manifest, render_one, run,
 };
 pub use textures::{TextureCache, TextureSource};

@@ -5,7 +5,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -373,9 +374,20 @@ pub struct RunOptions<'a> {
     /// Called after each image: (done in this shard, total in this shard).
     pub progress: Option<&'a mut dyn FnMut(usize, usize)>,
     /// Collects the run's timeline (`dataset run --profile`): each image and its stages
-    /// on the runner's thread, the renderer's CPU phases and GPU passes.
+    /// on the thread that ran them, the renderer's CPU phases and GPU passes.
     pub profiler: Option<&'a Profiler>,
+    /// Images in flight at once (`dataset run --in-flight`, default
+    /// [`DEFAULT_IN_FLIGHT`]): 1 makes each image's inputs, renders and writes it one
+    /// after the other on the calling thread; N >= 2 renders on the calling thread while
+    /// N - 1 writer threads write the images rendered before and a preparing thread
+    /// makes the next images' meshes and textures (at most one object instance ahead).
+    /// The files and manifest are the same byte for byte (docs/dataset.md, "How a run
+    /// is scheduled"). 0 is taken as 1.
+    pub in_flight: usize,
 }
+
+/// Images in flight by default: one rendering, two being written.
+pub const DEFAULT_IN_FLIGHT: usize = 3;
 
 impl Default for RunOptions<'_> {
     fn default() -> Self {
@@ -384,6 +396,7 @@ impl Default for RunOptions<'_> {
             fail_after: None,
             progress: None,
             profiler: None,
+            in_flight: DEFAULT_IN_FLIGHT,
         }
     }
 }
@@ -407,7 +420,7 @@ pub fn run(
     prep: &Prepared,
     out: &Path,
     renderer: &mut dyn ImageRenderer,
-    textures: &mut dyn TextureSource,
+    textures: &mut (dyn TextureSource + Send),
     opts: RunOptions,
 ) -> Result<RunReport> {
     if opts.shard.count == 0 || opts.shard.index >= opts.shard.count {
@@ -495,7 +508,7 @@ fn run_locked(
     prep: &Prepared,
     out: &Path,
     renderer: &mut dyn ImageRenderer,
-    textures: &mut dyn TextureSource,
+    textures: &mut (dyn TextureSource + Send),
     mut opts: RunOptions,
     rendered: &mut usize,
     created: &mut Vec<PathBuf>,
@@ -532,22 +545,44 @@ fn run_locked(
         .iter()
         .filter(|i| !done.contains_key(&i.index))
         .collect();
-    let mut ctx = Ctx::new(prep, opts.profiler)?;
     let already = mine.len() - todo.len();
-    for item in todo {
-        if opts.fail_after == Some(*rendered) {
-            // Simulate a kill in the middle of an image: one file in place, no line.
-            let dir = out.join("images").join(item.id());
-            std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
-            files::write_gray8(&dir.join("faces.png"), 1, 1, &[0])?;
-            return Err(DatasetError::Interrupted { done: *rendered });
+    let todo: Vec<&ItemPlan> = todo.into_iter().copied().collect();
+    if opts.in_flight <= 1 {
+        let mut ctx = Ctx::new(prep, opts.profiler)?;
+        for item in todo {
+            if opts.fail_after == Some(*rendered) {
+                return Err(interrupt(out, item, *rendered)?);
+            }
+            let entry = ctx.render_item(item, out, renderer, textures)?;
+            append_line(&manifest_path, &entry)?;
+            *rendered += 1;
+            if let Some(p) = opts.progress.as_deref_mut() {
+                p(already + *rendered, mine.len());
+            }
         }
-        let entry = ctx.render_item(item, out, renderer, textures)?;
-        append_line(&manifest_path, &entry)?;
-        *rendered += 1;
-        if let Some(p) = opts.progress.as_deref_mut() {
-            p(already + *rendered, mine.len());
-        }
+    } else {
+        let camera = image_camera_record(&prep.job)?;
+        let mut progress = |done: usize| {
+            if let Some(p) = opts.progress.as_deref_mut() {
+                p(already + done, mine.len());
+            }
+        };
+        let overlapped = Overlapped {
+            prep,
+            out,
+            camera: &camera,
+            manifest: &manifest_path,
+            profiler: opts.profiler,
+            writers: opts.in_flight - 1,
+        };
+        overlapped.run(
+            &todo,
+            renderer,
+            textures,
+            opts.fail_after,
+            &mut progress,
+            rendered,
+        )?;
     }
     if exclusive {
         finish_locked(out)?;
@@ -559,6 +594,223 @@ fn run_locked(
         stray_temps_removed: stray,
         finished: exclusive,
     })
+}
+
+/// The `fail_after` test hook: what a kill in the middle of `item` leaves (one file in
+/// place, no manifest line), as [`DatasetError::Interrupted`].
+fn interrupt(out: &Path, item: &ItemPlan, done: usize) -> Result<DatasetError> {
+    let dir = out.join("images").join(item.id());
+    std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
+    files::write_gray8(&dir.join("faces.png"), 1, 1, &[0])?;
+    Ok(DatasetError::Interrupted { done })
+}
+
+/// Manifest lines appended in the order of the run's list, whichever writer finishes
+/// first: finished images wait in `ready` until every image before them is appended.
+struct Commit {
+    /// Position in the run's list of the next image to append.
+    next: usize,
+    ready: BTreeMap<usize, Result<ManifestEntry>>,
+    /// The error of image `next` (its write or its line), which ends the run.
+    error: Option<DatasetError>,
+}
+
+/// What the writer threads share.
+struct Commits<'a> {
+    state: Mutex<Commit>,
+    /// The lowest position whose write failed (usize::MAX: none): later images are
+    /// neither rendered nor written.
+    failed: AtomicUsize,
+    manifest: &'a Path,
+}
+
+impl Commits<'_> {
+    fn state(&self) -> std::sync::MutexGuard<'_, Commit> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Image `pos` is written (or failed): appends every line whose turn has come.
+    fn done(&self, pos: usize, result: Result<ManifestEntry>) {
+        if result.is_err() {
+            self.failed.fetch_min(pos, Ordering::SeqCst);
+        }
+        let mut c = self.state();
+        c.ready.insert(pos, result);
+        while c.error.is_none() {
+            let next = c.next;
+            let Some(r) = c.ready.remove(&next) else {
+                break;
+            };
+            match r.and_then(|e| append_line(self.manifest, &e)) {
+                Ok(()) => c.next += 1,
+                Err(e) => {
+                    self.failed.fetch_min(next, Ordering::SeqCst);
+                    c.error = Some(e);
+                }
+            }
+        }
+    }
+}
+
+/// A run with several images in flight: the calling thread renders (the renderer
+/// stays on it); a "prepare" thread makes the next images' inputs (mesh, textures)
+/// through a channel of one object instance's views; `writers` "writer" threads take
+/// rendered images through a rendezvous channel (so at most `writers + 1` rendered
+/// images exist) and write them; manifest lines are appended in the list's order
+/// ([`Commits`]). The first error in the list's order ends the run, as it would end a
+/// run of one image at a time: every image before it is written and listed, none
+/// after it is listed.
+struct Overlapped<'a> {
+    prep: &'a Prepared,
+    out: &'a Path,
+    camera: &'a CameraRecord,
+    manifest: &'a Path,
+    profiler: Option<&'a Profiler>,
+    writers: usize,
+}
+
+impl Overlapped<'_> {
+    fn run(
+        &self,
+        todo: &[&ItemPlan],
+        renderer: &mut dyn ImageRenderer,
+        textures: &mut (dyn TextureSource + Send),
+        fail_after: Option<usize>,
+        progress: &mut dyn FnMut(usize),
+        rendered: &mut usize,
+    ) -> Result<()> {
+        let commits = Commits {
+            state: Mutex::new(Commit {
+                next: 0,
+                ready: BTreeMap::new(),
+                error: None,
+            }),
+            failed: AtomicUsize::new(usize::MAX),
+            manifest: self.manifest,
+        };
+        let spawn_err = |e| DatasetError::io(self.out, e);
+        // Rendered images to the writers; the receiving end shared by them.
+        let (job_tx, job_rx) = std::sync::mpsc::sync_channel::<(usize, RenderedItem)>(0);
+        let job_rx = Mutex::new(job_rx);
+        let (stopped, interrupted) = std::thread::scope(|s| -> Result<_> {
+            // One object instance ahead: the channel holds one instance's views less one
+            // and the preparing thread the last, so the next instance's mesh and textures
+            // are made while the current one's first view renders, never further ahead.
+            let ahead = self.prep.job.viewpoints().len().saturating_sub(1);
+            let (in_tx, in_rx) = std::sync::mpsc::sync_channel::<Result<ItemInputs>>(ahead);
+            let mut inputs = Inputs::new(self.prep, self.profiler);
+            let profiler = self.profiler;
+            let preparing = std::thread::Builder::new()
+                .name("prepare".into())
+                .spawn_scoped(s, move || {
+                    for item in todo {
+                        let start = profiler.map(Profiler::now_us);
+                        let r = inputs.make(item, textures);
+                        image_span(profiler, item, start);
+                        let failed = r.is_err();
+                        if in_tx.send(r).is_err() || failed {
+                            break;
+                        }
+                    }
+                })
+                .map_err(spawn_err)?;
+            let mut writers = Vec::new();
+            for w in 0..self.writers {
+                let (job_rx, commits) = (&job_rx, &commits);
+                let handle = std::thread::Builder::new()
+                    .name(format!("writer {}", w + 1))
+                    .spawn_scoped(s, move || {
+                        loop {
+                            let next = job_rx.lock().unwrap_or_else(|p| p.into_inner()).recv();
+                            let Ok((pos, rendered)) = next else {
+                                break;
+                            };
+                            if pos > commits.failed.load(Ordering::SeqCst) {
+                                continue; // an earlier image failed: this one is not written
+                            }
+                            let start = self.profiler.map(Profiler::now_us);
+                            let item = rendered.item;
+                            let r = write_stage(
+                                self.prep,
+                                self.camera,
+                                self.out,
+                                rendered,
+                                None,
+                                self.profiler,
+                            );
+                            image_span(self.profiler, item, start);
+                            commits.done(pos, r);
+                        }
+                    })
+                    .map_err(spawn_err)?;
+                writers.push(handle);
+            }
+            let mut reported = 0;
+            let mut report = |upto: usize| {
+                while reported < upto {
+                    reported += 1;
+                    progress(reported);
+                }
+            };
+            // The render loop's own error (inputs or render), at its position.
+            let mut stopped = None;
+            let mut interrupted = None;
+            for (pos, &item) in todo.iter().enumerate() {
+                report(commits.state().next);
+                if commits.failed.load(Ordering::SeqCst) != usize::MAX {
+                    break;
+                }
+                if fail_after == Some(pos) {
+                    interrupted = Some(item);
+                    break;
+                }
+                let Ok(got) = in_rx.recv() else {
+                    break; // the preparing thread panicked: the scope re-raises it
+                };
+                let start = self.profiler.map(Profiler::now_us);
+                let r = got.and_then(|i| render_stage(self.prep, item, i, renderer, self.profiler));
+                image_span(self.profiler, item, start);
+                match r {
+                    Ok(r) => {
+                        if job_tx.send((pos, r)).is_err() {
+                            break; // every writer panicked: the scope re-raises it
+                        }
+                    }
+                    Err(e) => {
+                        stopped = Some(e);
+                        break;
+                    }
+                }
+            }
+            drop(job_tx);
+            drop(in_rx);
+            for w in writers {
+                if let Err(p) = w.join() {
+                    std::panic::resume_unwind(p);
+                }
+            }
+            if let Err(p) = preparing.join() {
+                std::panic::resume_unwind(p);
+            }
+            report(commits.state().next);
+            Ok((stopped, interrupted))
+        })?;
+        let c = commits
+            .state
+            .into_inner()
+            .unwrap_or_else(|p| p.into_inner());
+        *rendered = c.next;
+        if let Some(e) = c.error {
+            return Err(e);
+        }
+        if let Some(e) = stopped {
+            return Err(e);
+        }
+        if let Some(item) = interrupted {
+            return Err(interrupt(self.out, item, *rendered)?);
+        }
+        Ok(())
+    }
 }
 
 /// Checks an entry's files against the sizes and hashes it lists: `Err(reason)` when a
@@ -750,28 +1002,72 @@ fn claim_dir(out: &Path, job_text: &str) -> Result<()> {
     }
 }
 
-/// State kept between images: the current instance's mesh, the texture cache and the
-/// images' camera.
-struct Ctx<'p> {
+/// Times consecutive stages of one image on the current thread: each `stage` call records
+/// the seconds since the previous one (or since `Laps::start`) under its name, in the
+/// image's `stage_seconds` and, when profiling, as a CPU span on this thread.
+struct Laps<'p> {
+    lap: Instant,
+    profiler: Option<&'p Profiler>,
+}
+
+impl<'p> Laps<'p> {
+    fn start(profiler: Option<&'p Profiler>) -> Self {
+        Laps {
+            lap: Instant::now(),
+            profiler,
+        }
+    }
+
+    fn stage(&mut self, name: &str, stages: &mut BTreeMap<String, f64>) {
+        let secs = self.lap.elapsed().as_secs_f64();
+        stages.insert(name.to_string(), secs);
+        if let Some(p) = self.profiler {
+            p.cpu_span(name, p.now_us() - secs * 1e6, secs * 1e6);
+        }
+        self.lap = Instant::now();
+    }
+}
+
+/// The CPU inputs of one image, made before it renders (on the preparing thread when
+/// images overlap): the instance's mesh, its region materials and face textures.
+struct ItemInputs {
+    mesh: Arc<Mesh>,
+    gltf: Option<Arc<GltfMaterials>>,
+    materials: Vec<crate::scene::materials::RegionMaterial>,
+    face_textures: Vec<FaceTexture>,
+    /// "defects" and "textures" seconds.
+    stages: BTreeMap<String, f64>,
+}
+
+/// One image rendered, waiting for its write stage.
+struct RenderedItem<'p> {
+    item: &'p ItemPlan,
+    img: RenderedImage,
+    /// Every stage so far ("defects", "textures", "render", the renderer's parts).
+    stages: BTreeMap<String, f64>,
+    /// `ImageRenderer::describe` of the renderer that made it.
+    renderer: String,
+}
+
+/// State kept between images by the stage that makes their inputs: the current
+/// instance's mesh and the texture cache.
+struct Inputs<'p> {
     prep: &'p Prepared,
     cache: TextureCache,
     /// The current instance's mesh, with its triangles' glTF materials when the object
     /// has them.
     mesh: Option<(usize, Arc<Mesh>, Option<Arc<GltfMaterials>>)>,
-    camera: CameraRecord,
     profiler: Option<&'p Profiler>,
 }
 
-impl<'p> Ctx<'p> {
-    fn new(prep: &'p Prepared, profiler: Option<&'p Profiler>) -> Result<Self> {
-        let camera = image_camera_record(&prep.job)?;
-        Ok(Ctx {
+impl<'p> Inputs<'p> {
+    fn new(prep: &'p Prepared, profiler: Option<&'p Profiler>) -> Self {
+        Inputs {
             prep,
             cache: TextureCache::new(prep.job.texture.cache as usize),
             mesh: None,
-            camera,
             profiler,
-        })
+        }
     }
 
     /// The mesh of an instance: the object, with its defect set imprinted if defective,
@@ -821,32 +1117,17 @@ impl<'p> Ctx<'p> {
         Ok((m, g))
     }
 
-    fn render_item(
-        &mut self,
-        item: &ItemPlan,
-        out: &Path,
-        renderer: &mut dyn ImageRenderer,
-        textures: &mut dyn TextureSource,
-    ) -> Result<ManifestEntry> {
-        let t0 = Instant::now();
+    /// The image's mesh ("defects" stage), region materials and face textures
+    /// ("textures" stage: cache misses made through `textures`).
+    fn make(&mut self, item: &ItemPlan, textures: &mut dyn TextureSource) -> Result<ItemInputs> {
         let job = &self.prep.job;
         let inst: &InstancePlan = &self.prep.plan.instances[item.instance];
         let finish = &job.finishes[inst.finish];
         let params = plan::instance_params(job, inst);
         let mut stages = BTreeMap::new();
-        let mut lap = Instant::now();
-        let profiler = self.profiler;
-        let image_start_us = profiler.map(Profiler::now_us);
-        let mut stage = |name: &str, stages: &mut BTreeMap<String, f64>| {
-            let secs = lap.elapsed().as_secs_f64();
-            stages.insert(name.to_string(), secs);
-            if let Some(p) = profiler {
-                p.cpu_span(name, p.now_us() - secs * 1e6, secs * 1e6);
-            }
-            lap = Instant::now();
-        };
+        let mut laps = Laps::start(self.profiler);
         let (mesh, gltf) = self.mesh(item.instance)?;
-        stage("defects", &mut stages);
+        laps.stage("defects", &mut stages);
         let materials = job.objects[inst.object]
             .region_materials(
                 inst.object,
@@ -881,111 +1162,229 @@ impl<'p> Ctx<'p> {
                 offset_px: [fc.offset_px[0] as f32, fc.offset_px[1] as f32],
             });
         }
-        stage("textures", &mut stages);
-        let viewpoints = job.viewpoints();
-        let vp = &viewpoints[item.view];
-        let view = &vp.name().to_string();
-        let pose = match vp {
-            super::job::Viewpoint::Pose(p) => Some(*p),
-            super::job::Viewpoint::View(_) => None,
-        };
-        let req = ImageRequest {
-            pose,
-            camera: &job.camera_config,
-            lights: &job.lights,
-            materials: &materials,
-            gltf_materials: gltf.as_deref(),
-            mesh: &mesh,
-            mesh_key: match inst.defect_set {
-                Some(_) => (1u64 << 32) | item.instance as u64,
-                None => inst.object as u64,
-            },
-            view,
-            alpha: params.alpha as f32,
+        laps.stage("textures", &mut stages);
+        Ok(ItemInputs {
+            mesh,
+            gltf,
+            materials,
             face_textures,
-            placement: Placement {
-                cover: job.mapping.cover,
-                seed: derive(inst.seed, &[tag::REGIONS]),
-                rotation_range_deg: job.mapping.rotation_deg as f32,
-                defects: job.mapping.defects,
-            },
-            width: job.render.width as u32,
-            height: job.render.height as u32,
-            spp: job.render.spp as u32,
-            bounces: job.render.bounces as u32,
-            seed: item.seed,
-        };
-        let fail = |message: String| DatasetError::Render {
-            index: item.index,
-            id: item.id(),
-            message,
-        };
-        let img = renderer.render(&req).map_err(fail)?;
-        if let (Some(p), Some(r)) = (profiler, renderer.last_profile()) {
-            p.absorb(r);
-        }
-        img.check(&req).map_err(fail)?;
-        stage("render", &mut stages);
-        stages.extend(renderer.last_stages());
-        let dir = out.join("images").join(item.id());
-        std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
-        let mut hashes = write_raw(&dir, &img)?;
-        let (frame, exposed) = raw_frame(job, &finish.name, item.seed, &self.camera, &img)
-            .map_err(|message| DatasetError::Render {
+            stages,
+        })
+    }
+}
+
+/// The render stage of one image ("render": request, acceleration structure, path
+/// tracing, annotation, readback, checks; plus the renderer's own parts).
+fn render_stage<'p>(
+    prep: &Prepared,
+    item: &'p ItemPlan,
+    inputs: ItemInputs,
+    renderer: &mut dyn ImageRenderer,
+    profiler: Option<&Profiler>,
+) -> Result<RenderedItem<'p>> {
+    let job = &prep.job;
+    let inst: &InstancePlan = &prep.plan.instances[item.instance];
+    let params = plan::instance_params(job, inst);
+    let mut stages = inputs.stages;
+    let mut laps = Laps::start(profiler);
+    let viewpoints = job.viewpoints();
+    let vp = &viewpoints[item.view];
+    let pose = match vp {
+        super::job::Viewpoint::Pose(p) => Some(*p),
+        super::job::Viewpoint::View(_) => None,
+    };
+    let req = ImageRequest {
+        pose,
+        camera: &job.camera_config,
+        lights: &job.lights,
+        materials: &inputs.materials,
+        gltf_materials: inputs.gltf.as_deref(),
+        mesh: &inputs.mesh,
+        mesh_key: match inst.defect_set {
+            Some(_) => (1u64 << 32) | item.instance as u64,
+            None => inst.object as u64,
+        },
+        view: vp.name(),
+        alpha: params.alpha as f32,
+        face_textures: inputs.face_textures,
+        placement: Placement {
+            cover: job.mapping.cover,
+            seed: derive(inst.seed, &[tag::REGIONS]),
+            rotation_range_deg: job.mapping.rotation_deg as f32,
+            defects: job.mapping.defects,
+        },
+        width: job.render.width as u32,
+        height: job.render.height as u32,
+        spp: job.render.spp as u32,
+        bounces: job.render.bounces as u32,
+        seed: item.seed,
+    };
+    let fail = |message: String| DatasetError::Render {
+        index: item.index,
+        id: item.id(),
+        message,
+    };
+    let img = renderer.render(&req).map_err(fail)?;
+    if let (Some(p), Some(r)) = (profiler, renderer.last_profile()) {
+        p.absorb(r);
+    }
+    img.check(&req).map_err(fail)?;
+    laps.stage("render", &mut stages);
+    stages.extend(renderer.last_stages());
+    Ok(RenderedItem {
+        item,
+        img,
+        stages,
+        renderer: renderer.describe(),
+    })
+}
+
+/// The write stage of one image ("write": raw files, sensor, post-processing, PNG / EXR
+/// / JSON encoding, labels, sizes) and its manifest entry (not yet appended).
+/// `render_seconds` is `started.elapsed()` when given, else the sum of the image's
+/// stages (its work on whichever threads, waiting between stages not counted).
+fn write_stage(
+    prep: &Prepared,
+    camera: &CameraRecord,
+    out: &Path,
+    rendered: RenderedItem,
+    started: Option<Instant>,
+    profiler: Option<&Profiler>,
+) -> Result<ManifestEntry> {
+    let RenderedItem {
+        item,
+        img,
+        mut stages,
+        renderer,
+    } = rendered;
+    let job = &prep.job;
+    let inst: &InstancePlan = &prep.plan.instances[item.instance];
+    let finish = &job.finishes[inst.finish];
+    let params = plan::instance_params(job, inst);
+    let mut laps = Laps::start(profiler);
+    let dir = out.join("images").join(item.id());
+    std::fs::create_dir_all(&dir).map_err(|e| DatasetError::io(&dir, e))?;
+    let mut hashes = write_raw(&dir, &img)?;
+    let (frame, exposed) =
+        raw_frame(job, &finish.name, item.seed, camera, &img).map_err(|message| {
+            DatasetError::Render {
                 index: item.index,
                 id: item.id(),
                 message: format!("[sensor]: {message}"),
-            })?;
-        let (post_hashes, mut defects, noise_sigma) =
-            write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
-        if let Some(k) = inst.defect_set {
-            name_defects(&mut defects, &self.prep.defect_sets[k]);
-        }
-        hashes.extend(post_hashes);
-        let sizes = file_sizes(&dir, &hashes)?;
-        stage("write", &mut stages);
-        if let (Some(p), Some(t)) = (profiler, image_start_us) {
-            p.cpu_span(&format!("image {}", item.id()), t, p.now_us() - t);
-        }
-        let rel = |f: &str| format!("images/{}/{f}", item.id());
-        Ok(ManifestEntry {
-            index: item.index,
-            id: item.id(),
-            image: rel("image.png"),
-            faces: rel("faces.png"),
-            viewpoint: view.clone(),
-            pose: pose.cloned(),
-            finish: finish.name.clone(),
-            texture_type: finish.texture_type(),
-            split: inst.split,
-            object: job.objects[inst.object].name.clone(),
-            instance: inst.id.clone(),
-            label: inst.label,
-            defect_set: inst.defect_set,
-            alpha: params.alpha,
-            roughness: params.roughness,
-            face_textures: params.faces,
-            seed: item.seed,
-            width: req.width,
-            height: req.height,
-            spp: req.spp,
-            bounces: req.bounces,
-            renderer: renderer.describe(),
-            noise_sigma,
-            camera: Some(self.camera.clone()),
-            exposure_ev: exposed.exposure_ev,
-            exposure_ms: exposed.exposure_ms,
-            bit_depth: job.sensor.model.deep_bit_depth(),
-            defects,
-            files: hashes,
-            sizes,
-            finished_unix: std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(0),
-            render_seconds: t0.elapsed().as_secs_f64(),
-            stage_seconds: stages,
+            }
+        })?;
+    drop(img);
+    let (post_hashes, mut defects, noise_sigma) =
+        write_post(&dir, job, &finish.texture_type(), item.seed, frame)?;
+    if let Some(k) = inst.defect_set {
+        name_defects(&mut defects, &prep.defect_sets[k]);
+    }
+    hashes.extend(post_hashes);
+    let sizes = file_sizes(&dir, &hashes)?;
+    laps.stage("write", &mut stages);
+    let render_seconds = match started {
+        Some(t0) => t0.elapsed().as_secs_f64(),
+        None => ["defects", "textures", "render", "write"]
+            .iter()
+            .filter_map(|k| stages.get(*k))
+            .sum(),
+    };
+    let viewpoints = job.viewpoints();
+    let vp = &viewpoints[item.view];
+    let pose = match vp {
+        super::job::Viewpoint::Pose(p) => Some(*p),
+        super::job::Viewpoint::View(_) => None,
+    };
+    let rel = |f: &str| format!("images/{}/{f}", item.id());
+    Ok(ManifestEntry {
+        index: item.index,
+        id: item.id(),
+        image: rel("image.png"),
+        faces: rel("faces.png"),
+        viewpoint: vp.name().to_string(),
+        pose: pose.cloned(),
+        finish: finish.name.clone(),
+        texture_type: finish.texture_type(),
+        split: inst.split,
+        object: job.objects[inst.object].name.clone(),
+        instance: inst.id.clone(),
+        label: inst.label,
+        defect_set: inst.defect_set,
+        alpha: params.alpha,
+        roughness: params.roughness,
+        face_textures: params.faces,
+        seed: item.seed,
+        width: job.render.width as u32,
+        height: job.render.height as u32,
+        spp: job.render.spp as u32,
+        bounces: job.render.bounces as u32,
+        renderer,
+        noise_sigma,
+        camera: Some(camera.clone()),
+        exposure_ev: exposed.exposure_ev,
+        exposure_ms: exposed.exposure_ms,
+        bit_depth: job.sensor.model.deep_bit_depth(),
+        defects,
+        files: hashes,
+        sizes,
+        finished_unix: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0),
+        render_seconds,
+        stage_seconds: stages,
+    })
+}
+
+/// Records "image <id>" on this thread from `start_us` to now (when profiling).
+fn image_span(profiler: Option<&Profiler>, item: &ItemPlan, start_us: Option<f64>) {
+    if let (Some(p), Some(t)) = (profiler, start_us) {
+        p.cpu_span(&format!("image {}", item.id()), t, p.now_us() - t);
+    }
+}
+
+/// State kept between images when they are made one after the other (`render-one`,
+/// `in_flight = 1`): the inputs' state and the images' camera.
+struct Ctx<'p> {
+    prep: &'p Prepared,
+    inputs: Inputs<'p>,
+    camera: CameraRecord,
+    profiler: Option<&'p Profiler>,
+}
+
+impl<'p> Ctx<'p> {
+    fn new(prep: &'p Prepared, profiler: Option<&'p Profiler>) -> Result<Self> {
+        let camera = image_camera_record(&prep.job)?;
+        Ok(Ctx {
+            prep,
+            inputs: Inputs::new(prep, profiler),
+            camera,
+            profiler,
         })
+    }
+
+    /// Every stage of one image on this thread: inputs, render, write.
+    fn render_item(
+        &mut self,
+        item: &ItemPlan,
+        out: &Path,
+        renderer: &mut dyn ImageRenderer,
+        textures: &mut dyn TextureSource,
+    ) -> Result<ManifestEntry> {
+        let t0 = Instant::now();
+        let image_start_us = self.profiler.map(Profiler::now_us);
+        let inputs = self.inputs.make(item, textures)?;
+        let rendered = render_stage(self.prep, item, inputs, renderer, self.profiler)?;
+        let entry = write_stage(
+            self.prep,
+            &self.camera,
+            out,
+            rendered,
+            Some(t0),
+            self.profiler,
+        )?;
+        image_span(self.profiler, item, image_start_us);
+        Ok(entry)
     }
 }
 

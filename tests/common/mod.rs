@@ -48,6 +48,16 @@ pub fn run_small_smoke(
     out: &std::path::Path,
     shard: synosis::dataset::Shard,
 ) -> synosis::dataset::RunReport {
+    run_small_smoke_with(renderer, out, shard, synosis::dataset::DEFAULT_IN_FLIGHT)
+}
+
+/// As [`run_small_smoke`], with `in_flight` images in flight (1: one after the other).
+pub fn run_small_smoke_with(
+    renderer: &mut dyn synosis::dataset::ImageRenderer,
+    out: &std::path::Path,
+    shard: synosis::dataset::Shard,
+    in_flight: usize,
+) -> synosis::dataset::RunReport {
     use synosis::dataset::{self, RunOptions};
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -62,6 +72,7 @@ pub fn run_small_smoke(
     let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
     let opts = RunOptions {
         shard,
+        in_flight,
         ..Default::default()
     };
     dataset::run(&prep, out, renderer, &mut textures, opts).unwrap()
