@@ -3,6 +3,9 @@
 //! the post-processing. Images come from a CPU *test double* renderer (below), not the
 //! GPU renderer: these tests check the job machinery, not the pixels.
 
+#[path = "common/files.rs"]
+mod files;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -272,22 +275,7 @@ fn manifest_without_times(dir: &Path) -> Vec<serde_json::Value> {
 
 /// Every file under images/ and coco/, by relative path, with its bytes.
 fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut m = BTreeMap::new();
-    for sub in ["images", "coco"] {
-        let mut stack = vec![dir.join(sub)];
-        while let Some(d) = stack.pop() {
-            for e in std::fs::read_dir(&d).unwrap().flatten() {
-                let p = e.path();
-                if p.is_dir() {
-                    stack.push(p);
-                } else {
-                    let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
-                    m.insert(rel, std::fs::read(&p).unwrap());
-                }
-            }
-        }
-    }
-    m
+    files::files_under(dir, &["images", "coco"])
 }
 
 fn assert_same_dataset(a: &Path, b: &Path) {

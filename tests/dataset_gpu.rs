@@ -93,22 +93,10 @@ fn smoke_job_renders_on_the_gpu_ray_query_backend() {
 /// Every file of a dataset folder's images/ (and manifest lines without timing), by
 /// relative path, as a content hash.
 fn hashed_files(dir: &std::path::Path) -> Vec<(String, String)> {
-    let mut v = Vec::new();
-    let mut stack = vec![dir.join("images")];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
-                let hash = dataset::files::content_hash(&std::fs::read(&p).unwrap());
-                v.push((rel, hash));
-            }
-        }
-    }
-    v.sort();
-    v
+    common::files::files_under(dir, &["images"])
+        .into_iter()
+        .map(|(rel, bytes)| (rel, dataset::files::content_hash(&bytes)))
+        .collect()
 }
 
 #[test]

@@ -2,6 +2,8 @@
 
 #![allow(dead_code)]
 
+pub mod files;
+
 use std::sync::Arc;
 
 use glam::Vec3;
