@@ -99,10 +99,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
     let in_flight = super::dataset::in_flight(a.in_flight, &renderer);
     let bar = indicatif::ProgressBar::new(0);
-    let mut progress = |done: usize, total: usize| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    };
+    let mut progress = super::dataset::bar_progress(&bar);
     let loop_start_us = profiler.now_us();
     let t1 = Instant::now();
     dataset::run(

@@ -200,6 +200,14 @@ impl Viewpoint<'_> {
             Viewpoint::Pose(p) => &p.name,
         }
     }
+
+    /// The pose of a `[[pose]]` viewpoint; None for a face-relative view.
+    pub fn pose(&self) -> Option<&JobPose> {
+        match self {
+            Viewpoint::View(_) => None,
+            Viewpoint::Pose(p) => Some(p),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

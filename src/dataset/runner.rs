@@ -1189,10 +1189,7 @@ fn render_stage<'p>(
     let mut laps = Laps::start(profiler);
     let viewpoints = job.viewpoints();
     let vp = &viewpoints[item.view];
-    let pose = match vp {
-        super::job::Viewpoint::Pose(p) => Some(*p),
-        super::job::Viewpoint::View(_) => None,
-    };
+    let pose = vp.pose();
     let req = ImageRequest {
         pose,
         camera: &job.camera_config,
@@ -1291,10 +1288,7 @@ fn write_stage(
     };
     let viewpoints = job.viewpoints();
     let vp = &viewpoints[item.view];
-    let pose = match vp {
-        super::job::Viewpoint::Pose(p) => Some(*p),
-        super::job::Viewpoint::View(_) => None,
-    };
+    let pose = vp.pose();
     let rel = |f: &str| format!("images/{}/{f}", item.id());
     Ok(ManifestEntry {
         index: item.index,
