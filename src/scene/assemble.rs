@@ -343,7 +343,8 @@ pub struct Stage {
     pub curved_of: Vec<u32>,
     /// Per triangle of `mesh`, the shader's corner values (`trace::Triangles::corner_w`):
     /// on triangles of triplanar patches the smooth normals, octahedral-coded
-    /// (`curved::encode_normal`); zeros elsewhere.
+    /// (`curved::encode_normal`); zeros elsewhere. Empty (all zeros) when the object has
+    /// no triplanar patch.
     pub corner_w: Vec<[f32; 3]>,
 }
 
@@ -355,7 +356,7 @@ impl crate::trace::Triangles for Stage {
         &self.mesh.triangles
     }
     fn corner_w(&self) -> Option<&[[f32; 3]]> {
-        Some(&self.corner_w)
+        (!self.corner_w.is_empty()).then_some(self.corner_w.as_slice())
     }
 }
 
@@ -373,12 +374,15 @@ impl Stage {
                 curved_of[r as usize] = i as u32;
             }
         }
-        let mut corner_w: Vec<[f32; 3]> =
+        let corner_w: Vec<[f32; 3]> = if curved.iter().any(|p| p.kind == PatchKind::Triplanar) {
             smooth_corner_normals(&object, &region_of, &curved, &curved_of)
                 .into_iter()
                 .map(|n| n.map_or([0.0; 3], |n| n.map(encode_normal)))
-                .collect();
-        corner_w.extend([[0.0; 3]; 2]); // the table
+                .chain([[0.0; 3]; 2]) // the table
+                .collect()
+        } else {
+            Vec::new()
+        };
         let regions = found
             .iter()
             .map(|r| RegionFrame {

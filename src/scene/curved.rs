@@ -352,7 +352,6 @@ pub fn triplanar_weights(n: Vec3) -> [f32; 3] {
 /// at worst), coded as the integer u * `OCT_LEVELS` + v, which f32 holds exactly.
 pub fn encode_normal(n: Vec3) -> f32 {
     use crate::gpu_interface::{OCT_LEVELS, OCT_STEPS};
-    let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
     let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(1e-30);
     let (x, y) = if n.z >= 0.0 {
         (n.x, n.y)
@@ -363,6 +362,11 @@ pub fn encode_normal(n: Vec3) -> f32 {
     (q(x) * OCT_LEVELS + q(y)) as f32
 }
 
+/// +1 or -1 (+1 at zero): the octahedral fold's sign.
+fn sign(x: f32) -> f32 {
+    if x >= 0.0 { 1.0 } else { -1.0 }
+}
+
 /// The unit normal of [`encode_normal`]'s code (the shader's `oct_decode`).
 pub fn decode_normal(code: f32) -> Vec3 {
     use crate::gpu_interface::{OCT_LEVELS, OCT_STEPS};
@@ -370,7 +374,6 @@ pub fn decode_normal(code: f32) -> Vec3 {
     let c = |i: u32| i as f32 / OCT_STEPS as f32 * 2.0 - 1.0;
     let (x, y) = (c(k / OCT_LEVELS), c(k % OCT_LEVELS));
     let z = 1.0 - x.abs() - y.abs();
-    let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
     let (x, y) = if z < 0.0 {
         ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y))
     } else {
