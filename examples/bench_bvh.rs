@@ -8,13 +8,11 @@
 use std::time::Instant;
 
 use synosis::defect::{DefectSpec, imprint_with_stats, sample_defects};
-use synosis::render::raycast::{benchmark_rays, trace_rays};
+use synosis::render::raycast::{benchmark_rays, trace_rays, traversal_work};
 use synosis::scene::Mesh;
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::scene::testbody::{Variant, testbody};
-use synosis::trace::software_bvh::{
-    BvhQuality, TraversalStats, build_bvh_with, cpu_closest_hit_counted, flatten, obvhs_triangles,
-};
+use synosis::trace::software_bvh::{BvhQuality, build_bvh_with, flatten, obvhs_triangles};
 use synosis::trace::{Backend, TraceScene};
 use synosis::vk::{Context, ContextOptions};
 
@@ -58,20 +56,9 @@ fn main() -> anyhow::Result<()> {
                 bvh = Some(b);
             }
             let bvh = bvh.expect("built");
-            // Work per ray (the CPU reference visits nodes in the shader's order): what the
-            // tree's quality buys, independent of the machine's load.
             let work = |rays: &[synosis::render::raycast::RayIn]| {
-                let mut st = TraversalStats::default();
-                for r in rays.iter().step_by(8) {
-                    let (o, d) = (r.origin.into(), r.dir.into());
-                    cpu_closest_hit_counted(&bvh, &tris, o, d, r.tmin, r.tmax, &mut st);
-                }
-                let n = rays.len().div_ceil(8) as f64;
-                format!(
-                    "{:.1} + {:.1}",
-                    st.box_tests as f64 / n,
-                    st.triangle_tests as f64 / n
-                )
+                let (boxes, triangles) = traversal_work(&bvh, &tris, rays, 8);
+                format!("{boxes:.1} + {triangles:.1}")
             };
             let (wp, wr) = (work(&primary), work(&random));
             let scene = TraceScene::build_with(&ctx, mesh, Backend::Software, q, None)?;

@@ -5,11 +5,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use synosis::render::raycast::{benchmark_rays, trace_rays};
+use synosis::render::raycast::{benchmark_rays, trace_rays, traversal_work};
 use synosis::scene::procedural::bumpy_sphere;
-use synosis::trace::software_bvh::{
-    TraversalStats, build_bvh, cpu_closest_hit, cpu_closest_hit_counted, obvhs_triangles,
-};
+use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
 use synosis::trace::{Backend, TraceScene};
 use synosis::vk::{Context, ContextOptions};
 
@@ -104,24 +102,8 @@ fn main() -> anyhow::Result<()> {
     println!("| rays | box tests / ray | triangle tests / ray |");
     println!("|---|---|---|");
     for (name, rays) in [("primary", &primary), ("random", &random)] {
-        let mut st = TraversalStats::default();
-        for r in rays.iter().step_by(16) {
-            cpu_closest_hit_counted(
-                &bvh,
-                &tris,
-                r.origin.into(),
-                r.dir.into(),
-                r.tmin,
-                r.tmax,
-                &mut st,
-            );
-        }
-        let n = rays.len().div_ceil(16) as f64;
-        println!(
-            "| {name} | {:.1} | {:.1} |",
-            st.box_tests as f64 / n,
-            st.triangle_tests as f64 / n
-        );
+        let (boxes, triangles) = traversal_work(&bvh, &tris, rays, 16);
+        println!("| {name} | {boxes:.1} | {triangles:.1} |");
     }
     Ok(())
 }
