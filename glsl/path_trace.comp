@@ -28,6 +28,9 @@ layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 ligh
 layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams prm; };
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
+// Per-pixel sum of squared sample radiance, written only when prm.accum_sq != 0 (the
+// variance estimate behind `[render] noise_target`; else a placeholder of one float).
+layout(std430, set = 0, binding = PT_ACCUM_SQ) buffer AccumSq { float accum_sq[]; };
 #include "common/material.glsl"
 
 // Slope maps, one header per slot: slot 0 (table, light) never has a map, slot r + 1 is
@@ -547,8 +550,12 @@ void main() {
     if (px >= prm.width || py >= prm.height) return;
     uint i = py * prm.width + px;
     float sum = 0.0;
+    float sq = 0.0;
     for (uint s = 0u; s < pc.sample_count; s++) {
-        sum += radiance_sample(i, px, py, pc.sample_start + s);
+        float r = radiance_sample(i, px, py, pc.sample_start + s);
+        sum += r;
+        sq += r * r;
     }
     accum[i] += sum;
+    if (prm.accum_sq != 0u) accum_sq[i] += sq;
 }

@@ -32,6 +32,7 @@ fn the_largest_documented_image_renders_in_several_dispatches() {
     let opts = FrameOptions {
         annotate_grid: None,
         profiler: None,
+        noise: None,
     };
     let f =
         render_scene(&ctx, &scene, &cfg, Backend::Software, &tables, opts, |_| {}).expect("render");

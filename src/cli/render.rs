@@ -125,6 +125,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let opts = FrameOptions {
         annotate_grid: Some(DEFAULT_COVERAGE_GRID),
         profiler: Some(&profiler),
+        noise: None,
     };
     let frame = render_scene(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
         bar.set_position(done as u64)

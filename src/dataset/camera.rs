@@ -206,3 +206,40 @@ pub fn expose(
         }
     }
 }
+
+/// The noise criterion of `[render] noise_target` for one image: the camera's
+/// responsivity (from the record, as the sensor step builds it), its EMVA sensor and the
+/// factor the sensor step puts on the exposure time (the finish's `exposure`, the image's
+/// jitter 2^ev). None without a target; an error for the linear model (the job's check
+/// refuses that) or an EMVA sensor without `camera.f_number`.
+pub fn noise_stop(
+    job: &Job,
+    finish: &str,
+    image_seed: u64,
+    camera: &CameraRecord,
+) -> Result<Option<crate::render::noise::NoiseStop>, String> {
+    let Some(target) = job.render.noise_target else {
+        return Ok(None);
+    };
+    let SensorModel::Emva(sensor) = &job.sensor.model else {
+        return Err("render.noise_target needs the EMVA 1288 sensor".into());
+    };
+    let n = camera
+        .f_number
+        .ok_or("the [sensor] model needs camera.f_number (the lens's working f-number)")?;
+    let finish_factor = job
+        .finishes
+        .iter()
+        .find(|f| f.name == finish)
+        .map_or(1.0, |f| f.exposure_factor());
+    let ev = exposure_jitter_ev(job, image_seed);
+    Ok(Some(crate::render::noise::NoiseStop {
+        camera: crate::render::noise::CameraNoise {
+            resp: Responsivity::new(&camera.sensor_camera(), camera.focal_mm as f64, n, sensor),
+            sensor: sensor.clone(),
+            exposure_factor: finish_factor * ev.map_or(1.0, f64::exp2),
+        },
+        target,
+        min_spp: job.render.first_check_spp(),
+    }))
+}

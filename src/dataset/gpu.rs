@@ -9,6 +9,7 @@ use std::sync::Arc;
 use super::renderer::{ImageRenderer, ImageRequest, RenderedImage};
 use crate::render::annotate::DEFAULT_COVERAGE_GRID;
 use crate::render::energy::EnergyTables;
+use crate::render::noise::NoiseEstimate;
 use crate::render::slope::FaceMap;
 use crate::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
 use crate::scene::assemble::{DefectSurface, Stage, ViewSetup};
@@ -33,6 +34,8 @@ pub struct GpuRenderer {
     stages: Vec<(String, f64)>,
     /// The timeline of the last image (CPU phases, GPU passes).
     profile: Option<Profiler>,
+    /// Samples and noise estimate of the last image.
+    samples: Option<(u32, Option<NoiseEstimate>)>,
 }
 
 impl GpuRenderer {
@@ -54,6 +57,7 @@ impl GpuRenderer {
             base: SceneConfig::default(),
             stages: Vec::new(),
             profile: None,
+            samples: None,
         })
     }
 
@@ -137,6 +141,10 @@ impl ImageRenderer for GpuRenderer {
         self.profile.as_ref()
     }
 
+    fn last_samples(&self) -> Option<(u32, Option<NoiseEstimate>)> {
+        self.samples
+    }
+
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
         // The scene defaults with the job's camera (intrinsics and lens).
         let mut base = self.base.clone();
@@ -159,6 +167,7 @@ impl ImageRenderer for GpuRenderer {
         }
         let pose = cfg.camera.pose().map_err(|e| e.to_string())?;
         self.profile = None;
+        self.samples = None;
         let profiler = Profiler::new();
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
@@ -180,6 +189,7 @@ impl ImageRenderer for GpuRenderer {
         let opts = FrameOptions {
             annotate_grid: Some(DEFAULT_COVERAGE_GRID),
             profiler: Some(&profiler),
+            noise: req.noise,
         };
         let settings = RenderSettings::from(&cfg);
         let frame = render_frame(tracer, scene, &setup, &settings, opts, |_| {})
@@ -202,7 +212,12 @@ impl ImageRenderer for GpuRenderer {
             ("render.path_trace_gpu".into(), secs(&["path trace"])),
             ("render.annotate_gpu".into(), secs(&["annotate"])),
         ];
+        if req.noise.is_some() {
+            self.stages
+                .push(("render.noise_estimate".into(), secs(&["noise estimate"])));
+        }
         self.profile = Some(profiler);
+        self.samples = Some((frame.spp, frame.noise));
         self.ctx.check_validation().map_err(|e| e.to_string())?;
         let ann = frame
             .annotation

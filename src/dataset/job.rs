@@ -217,6 +217,28 @@ pub struct RenderSettings {
     pub height: i64,
     pub spp: i64,
     pub bounces: i64,
+    /// Stop adding samples once the render noise is at most this fraction of the
+    /// camera's own temporal noise (rms of each over the object's pixels; EMVA 1288
+    /// sensor only), in [0.01, 100]; `spp` is then the maximum. None: exactly `spp`.
+    /// docs/dataset.md, "Samples chosen from a noise target".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_target: Option<f64>,
+    /// Samples before the first noise check (with `noise_target`), [2, spp]; default
+    /// [`DEFAULT_MIN_SPP`] (or `spp` when smaller).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_spp: Option<i64>,
+}
+
+/// `[render] min_spp` when not given: few enough that a low-noise image stops early, many
+/// enough that the per-pixel variance estimate has seen the radiance's spread.
+pub const DEFAULT_MIN_SPP: i64 = 64;
+
+impl RenderSettings {
+    /// Samples before the first noise check: `min_spp`, default [`DEFAULT_MIN_SPP`],
+    /// never more than `spp`.
+    pub fn first_check_spp(&self) -> u32 {
+        self.min_spp.unwrap_or(DEFAULT_MIN_SPP).min(self.spp).max(1) as u32
+    }
 }
 
 /// The object material's roughness, drawn uniformly per object instance from a range
@@ -861,6 +883,26 @@ impl Job {
         }
         self.int("render.spp", r.spp, 1, 1 << 16)?;
         self.int("render.bounces", r.bounces, 1, 64)?;
+        if let Some(t) = r.noise_target {
+            self.real("render.noise_target", t, 0.01, 100.0)?;
+            if let SensorModel::Linear { .. } = self.sensor.model {
+                return Err(self.field(
+                    "render.noise_target",
+                    t,
+                    "needs the EMVA 1288 sensor (`[sensor] exposure = \"auto\"` or `{ ms = .. }`): the target is the render noise over the camera's own noise, and the linear model has none; remove it to render exactly `spp`",
+                ));
+            }
+        }
+        if let Some(m) = r.min_spp {
+            if r.noise_target.is_none() {
+                return Err(self.field(
+                    "render.min_spp",
+                    m,
+                    "is the first noise check of `render.noise_target`: give that too, or remove it",
+                ));
+            }
+            self.int("render.min_spp", m, 2, r.spp.max(2))?;
+        }
         self.check_viewpoints()?;
         crate::scene::lights::resolve_all(&self.lights).map_err(|e| DatasetError::Parse {
             file: self.origin.clone(),

@@ -99,9 +99,13 @@ pub struct ImageRequest<'a> {
     pub placement: crate::scene::assemble::Placement,
     pub width: u32,
     pub height: u32,
+    /// Samples per pixel; with `noise` the most it may take.
     pub spp: u32,
     pub bounces: u32,
     pub seed: u64,
+    /// Stop before `spp` once the render noise is below the camera's by this criterion
+    /// (`[render] noise_target`; `camera::noise_stop`). None: exactly `spp`.
+    pub noise: Option<&'a crate::render::noise::NoiseStop>,
 }
 
 /// What the renderer returns, every buffer row-major with row 0 at the top.
@@ -180,6 +184,12 @@ pub trait ImageRenderer {
     /// The timeline of the last `render` call (CPU phases, GPU passes) for a run's
     /// profile (`dataset run --profile`); none by default.
     fn last_profile(&self) -> Option<&crate::vk::Profiler> {
+        None
+    }
+    /// Samples per pixel of the last `render` call and, when the request had a noise
+    /// target, the criterion's last estimate; None: the request's `spp` (a renderer
+    /// without the noise criterion ignores `noise`).
+    fn last_samples(&self) -> Option<(u32, Option<crate::render::noise::NoiseEstimate>)> {
         None
     }
 }

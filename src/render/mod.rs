@@ -7,6 +7,7 @@ pub mod annotate;
 pub mod bsdf;
 pub mod energy;
 pub mod gpu_scene;
+pub mod noise;
 pub mod path_trace;
 pub mod pixels;
 pub mod raycast;

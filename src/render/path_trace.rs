@@ -7,6 +7,7 @@ use std::sync::Arc;
 use super::annotate::Annotation;
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
+use super::noise::{NoiseEstimate, NoiseStop};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use super::view::View;
@@ -27,6 +28,8 @@ pub enum RenderError {
     Vk(#[from] VkError),
     #[error(transparent)]
     Slope(#[from] super::slope::SlopeError),
+    #[error("noise target: {0}")]
+    Noise(#[from] super::sensor::SensorError),
 }
 
 /// A finished render: mean radiance per pixel (row 0 at the top) and GPU time.
@@ -43,6 +46,10 @@ pub struct FrameOptions<'a> {
     /// Run the annotation pass too, with this many coverage rays per pixel side.
     pub annotate_grid: Option<u32>,
     pub profiler: Option<&'a Profiler>,
+    /// Stop adding samples once the render noise is below the camera's by this
+    /// criterion (`[render] noise_target`); `RenderSettings::spp` is then the maximum.
+    /// None: exactly `spp` samples, as before.
+    pub noise: Option<&'a NoiseStop>,
 }
 
 /// A rendered image and, when asked for, its annotation from the same camera rays'
@@ -50,9 +57,20 @@ pub struct FrameOptions<'a> {
 pub struct Frame {
     pub radiance: Radiance,
     pub annotation: Option<Annotation>,
+    /// Samples per pixel rendered (`spp`, or fewer when a noise target stopped it).
+    pub spp: u32,
+    /// The noise criterion's last estimate, at `spp` (with a noise target only).
+    pub noise: Option<NoiseEstimate>,
 }
 
 /// Renders one view of `scene`; `progress(done_spp)` after each batch (one graph each).
+///
+/// With `opts.noise`, after the batch that reaches each check (the first at `min_spp`,
+/// the next where the estimate predicts the target, [`NoiseStop::next_check`]) the two
+/// per-pixel sums are read back and the criterion evaluated; the render stops when it is
+/// at most the target, or at `spp`. The batches are those of a fixed-spp render, so the
+/// image equals a render of the chosen spp byte for byte. The decision depends on float
+/// sums: another device may stop at another batch.
 pub fn render_frame(
     tracer: &PathTracer,
     scene: &GpuScene,
@@ -61,17 +79,22 @@ pub fn render_frame(
     opts: FrameOptions<'_>,
     mut progress: impl FnMut(u32),
 ) -> Result<Frame, RenderError> {
-    let view = View::new(
+    let view = View::with_variance(
         tracer,
         scene,
         setup,
         settings,
         opts.annotate_grid,
+        opts.noise.is_some(),
         opts.profiler,
     )?;
     let (spp, batch) = (settings.spp, settings.batch_spp.max(1));
     let mut done = 0u32;
     let mut gpu_ms = 0.0;
+    let mut next_check = opts.noise.map(|n| n.first_check(spp));
+    // (exposure mask, object mask) from the annotation of the first batch.
+    let mut masks: Option<(Vec<bool>, Vec<bool>)> = None;
+    let mut estimate: Option<NoiseEstimate> = None;
     while done < spp {
         let count = batch.min(spp - done);
         let mut g = Graph::new(tracer.context(), "path trace");
@@ -84,8 +107,20 @@ pub fn render_frame(
             .sum::<f64>();
         done += count;
         progress(done);
+        if let (Some(stop), Some(at)) = (opts.noise, next_check)
+            && (done >= at || done == spp)
+        {
+            let est = crate::vk::timed(opts.profiler, "noise estimate", || {
+                noise_estimate(&view, stop, done, &mut masks)
+            })?;
+            estimate = Some(est);
+            if est.ratio <= stop.target {
+                break;
+            }
+            next_check = Some(stop.next_check(done, est.ratio));
+        }
     }
-    let (data, annotation) = view.read(spp)?;
+    let (data, annotation) = view.read(done)?;
     let (width, height) = (setup.camera.width, setup.camera.height);
     let radiance = Radiance {
         width,
@@ -96,7 +131,33 @@ pub fn render_frame(
     Ok(Frame {
         radiance,
         annotation,
+        spp: done,
+        noise: estimate,
     })
+}
+
+/// The noise criterion after `done` samples; `masks` (auto exposure's pixels: the
+/// inspected faces 1..=3; the rms's: the object, face != 0) from the view's annotation,
+/// read once (every pixel without an annotation).
+fn noise_estimate(
+    view: &View,
+    stop: &NoiseStop,
+    done: u32,
+    masks: &mut Option<(Vec<bool>, Vec<bool>)>,
+) -> Result<NoiseEstimate, RenderError> {
+    let (sum, sq) = view.read_sums()?;
+    let sq = sq.expect("a view with a noise target sums squares");
+    if masks.is_none() {
+        *masks = Some(match view.read_annotation()? {
+            Some(a) => (
+                a.face.iter().map(|f| (1..=3).contains(f)).collect(),
+                a.face.iter().map(|&f| f != 0).collect(),
+            ),
+            None => (vec![true; sum.len()], vec![true; sum.len()]),
+        });
+    }
+    let (exposure, object) = masks.as_ref().expect("just filled");
+    Ok(stop.camera.estimate(&sum, &sq, done, exposure, object)?)
 }
 
 /// Renders a whole assembled scene once: builds the path tracer and the GPU scene for
@@ -137,6 +198,7 @@ pub fn path_trace(
     let opts = FrameOptions {
         annotate_grid: None,
         profiler,
+        noise: None,
     };
     render_scene(ctx, scene, settings, backend, tables, opts, progress).map(|f| f.radiance)
 }

@@ -149,14 +149,15 @@ pub fn exposure_time_s(
     }
 }
 
-/// The `pct` percentile (0..100) of `v` by the nearest-rank method (sorts `v`).
+/// The `pct` percentile (0..100) of `v` by the nearest-rank method (reorders `v`: a
+/// selection, not a full sort; the same value a sort would give).
 pub fn percentile(v: &mut [f64], pct: f64) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
-    v.sort_by(|a, b| a.total_cmp(b));
     let rank = ((pct / 100.0) * v.len() as f64).ceil() as usize;
-    v[rank.clamp(1, v.len()) - 1]
+    let k = rank.clamp(1, v.len()) - 1;
+    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }
 
 /// One exposure: digital numbers per pixel (row-major, `bit_depth` bits) and the

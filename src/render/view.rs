@@ -84,6 +84,10 @@ pub struct View<'s> {
     emitters: Buffer,
     params: Buffer,
     accum: Buffer,
+    /// The per-pixel sum of squared sample radiance when the view estimates its noise
+    /// (`variance`), else one float the shader never writes.
+    accum_sq: Buffer,
+    variance: bool,
     annotation: Option<(AnnotationTargets, u32)>,
     camera: Camera,
     tiling: Tiling,
@@ -100,6 +104,21 @@ impl<'s> View<'s> {
         setup: &ViewSetup,
         settings: &RenderSettings,
         annotate_grid: Option<u32>,
+        profiler: Option<&Profiler>,
+    ) -> Result<View<'s>, RenderError> {
+        Self::with_variance(tracer, scene, setup, settings, annotate_grid, false, profiler)
+    }
+
+    /// [`View::new`]; with `variance` the path tracer also sums each sample's squared
+    /// radiance per pixel ([`View::read_sums`]), the noise estimate of
+    /// `[render] noise_target` (src/render/noise.rs). Without it, nothing changes.
+    pub fn with_variance(
+        tracer: &PathTracer,
+        scene: &'s GpuScene,
+        setup: &ViewSetup,
+        settings: &RenderSettings,
+        annotate_grid: Option<u32>,
+        variance: bool,
         profiler: Option<&Profiler>,
     ) -> Result<View<'s>, RenderError> {
         let ctx = &tracer.ctx;
@@ -133,6 +152,7 @@ impl<'s> View<'s> {
         if !emitting {
             params.emitter_count = 0;
         }
+        params.accum_sq = variance as u32;
         let annotation = match annotate_grid {
             Some(grid) => Some((AnnotationTargets::new(ctx, width, height)?, grid)),
             None => None,
@@ -146,6 +166,13 @@ impl<'s> View<'s> {
             emitters: Buffer::from_slice(ctx, "light list", &blocks, storage)?,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
+            accum_sq: if variance {
+                Buffer::new(ctx, "radiance square sum", n * 4, usage, MemoryKind::Readback)?
+            } else {
+                // A binding may not be empty; never written (accum_sq = 0).
+                Buffer::new(ctx, "radiance square sum (unused)", 4, usage, MemoryKind::Readback)?
+            },
+            variance,
             annotation,
             camera: *cam,
             tiling: Tiling::new(width, height, ctx.info.max_workgroup_count[0]),
@@ -175,12 +202,16 @@ impl<'s> View<'s> {
         let en = g.import(&tracer.energy);
         let pr = g.import(&self.params);
         let mut acc = g.import(&self.accum);
+        let mut acc_sq = g.import(&self.accum_sq);
         let mh = g.import(headers);
         let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(&texels[k]));
         let moments = self.scene.moment_buffers();
         let [m0, m1, m2] = [0, 1, 2].map(|k| g.import(&moments[k]));
         if start == 0 {
             g.fill("clear radiance", &mut acc, 0);
+            if self.variance {
+                g.fill("clear radiance squares", &mut acc_sq, 0);
+            }
             if let Some((targets, grid)) = &self.annotation {
                 let labels = g.import(&self.scene.labels);
                 let size = (self.camera.width, self.camera.height);
@@ -227,8 +258,29 @@ impl<'s> View<'s> {
                 .read(B::Moments0.at(off), &m0)
                 .read(B::Moments1.at(off), &m1)
                 .read(B::Moments2.at(off), &m2)
+                .read_write(B::AccumSq.at(off), &mut acc_sq)
                 .push(&push)
                 .submit();
+        }
+    }
+
+    /// The per-pixel sums so far: radiance, and squared radiance when the view was made
+    /// `with_variance` (else None).
+    pub fn read_sums(&self) -> Result<(Vec<f32>, Option<Vec<f32>>), RenderError> {
+        let sum: Vec<f32> = self.accum.read()?;
+        let sq = if self.variance {
+            Some(self.accum_sq.read()?)
+        } else {
+            None
+        };
+        Ok((sum, sq))
+    }
+
+    /// The annotation so far (complete after the first batch); None if not asked for.
+    pub fn read_annotation(&self) -> Result<Option<Annotation>, RenderError> {
+        match &self.annotation {
+            Some((targets, _)) => Ok(Some(targets.read()?)),
+            None => Ok(None),
         }
     }
 

@@ -163,6 +163,7 @@ pub fn render_faces_with(
     let opts = FrameOptions {
         annotate_grid: Some(1),
         profiler: None,
+        noise: None,
     };
     let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
     assert_clean(&ctx);

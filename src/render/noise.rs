@@ -1,0 +1,296 @@
+//! The render's own noise against the camera's: the criterion behind `[render]
+//! noise_target` (docs/dataset.md, "Samples chosen from a noise target").
+//!
+//! The path tracer can add each sample's squared radiance into a second per-pixel sum
+//! (`PathParams::accum_sq`). With the radiance sum S and the square sum Q of n samples,
+//! the sample variance is s^2 = (Q - S^2 / n) / (n - 1) and the variance of the pixel's
+//! mean s^2 / n. *Approximation (independent samples)*: this treats a pixel's samples as
+//! independent; with the Sobol sampler the mean's true error is lower, so the estimate is
+//! conservative (on textured faces the Sobol gain measured in issue 15 is nil, so it is
+//! close there).
+//!
+//! The render noise is brought into the sensor's codes exactly as the sensor step will
+//! expose the image ([`exposure_time_s`] on the current mean image, times the caller's
+//! factor), and compared with the camera's own temporal noise at each pixel's mean level
+//! (EMVA 1288: shot noise + dark noise + quantisation, the model [`super::sensor::capture`]
+//! samples from). The ratio of the two rms values over the object's pixels is what
+//! `noise_target` bounds.
+
+use super::sensor::{Responsivity, SensorError, exposure_time_s, saturation_electrons};
+use crate::scene::config::SensorConfig;
+
+/// The camera the noise is measured against: its responsivity, its sensor and the factor
+/// the sensor step puts on the (auto or fixed) exposure time (a finish's exposure, the
+/// image's random exposure 2^ev).
+#[derive(Clone, Debug)]
+pub struct CameraNoise {
+    pub resp: Responsivity,
+    pub sensor: SensorConfig,
+    pub exposure_factor: f64,
+}
+
+/// When to stop adding samples: the render noise over the camera noise at most `target`
+/// (`[render] noise_target`), not before `min_spp` samples (`[render] min_spp`), never
+/// beyond the render's `spp`.
+#[derive(Clone, Debug)]
+pub struct NoiseStop {
+    pub camera: CameraNoise,
+    pub target: f64,
+    pub min_spp: u32,
+}
+
+/// The largest jump between two checks, as a factor on the samples done: the next check
+/// is where the estimate predicts the target (noise falls as 1 / sqrt(spp)), but at most
+/// this many times the samples done (an early estimate may be off).
+pub const MAX_CHECK_GROWTH: u32 = 4;
+/// The smallest step between two checks, as a fraction of the samples done (1 / this):
+/// bounds the number of readbacks (logarithmic in spp) and the overshoot past the spp
+/// the target needs (at most about 1 / 16 = 6 %, plus one batch).
+pub const MIN_CHECK_STEP_DIVISOR: u32 = 16;
+
+/// One evaluation of the criterion.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseEstimate {
+    /// Samples per pixel the estimate is of.
+    pub spp: u32,
+    /// rms render noise over rms camera noise, over the counted pixels.
+    pub ratio: f64,
+    /// rms render noise (standard error of the mean) in sensor codes (DN).
+    pub render_rms_dn: f64,
+    /// rms camera temporal noise in sensor codes (DN).
+    pub camera_rms_dn: f64,
+    /// Pixels counted: the object's, less those whose mean signal is at or above
+    /// saturation (their code is clipped: no noise of either kind).
+    pub pixels: usize,
+    /// The exposure time the sensor step will use for this mean image, s.
+    pub exposure_s: f64,
+}
+
+/// The camera's temporal noise variance in codes (DN^2) at a mean signal of
+/// `mean_electrons`: K^2 (mu_e + sigma_d^2) + 1/12 (shot noise, dark noise, uniform
+/// quantisation of a unit step).
+pub fn camera_variance_dn(sensor: &SensorConfig, mean_electrons: f64) -> f64 {
+    let k = sensor.gain_dn_per_electron;
+    let sd = sensor.dark_noise_electrons;
+    k * k * (mean_electrons.max(0.0) + sd * sd) + 1.0 / 12.0
+}
+
+/// Variance of a pixel's mean radiance from the sums of `n` samples (`sum` of radiance,
+/// `sum_sq` of squared radiance): s^2 / n with s^2 = (Q - S^2 / n) / (n - 1), clamped at 0
+/// (rounding of the f32 sums). Infinite for n < 2 (no spread is known).
+pub fn mean_variance(sum: f64, sum_sq: f64, n: u32) -> f64 {
+    if n < 2 {
+        return f64::INFINITY;
+    }
+    let n = n as f64;
+    let s2 = ((sum_sq - sum * sum / n) / (n - 1.0)).max(0.0);
+    s2 / n
+}
+
+impl CameraNoise {
+    /// The criterion after `n` samples. `sum`, `sum_sq`: the path tracer's per-pixel sums;
+    /// `exposure_mask`: the pixels auto exposure looks at (the inspected faces, as the
+    /// sensor step); `object_mask`: the pixels the rms is taken over (all when it selects
+    /// none). The mean image is the one [`super::View::read`] would return at `n`.
+    pub fn estimate(
+        &self,
+        sum: &[f32],
+        sum_sq: &[f32],
+        n: u32,
+        exposure_mask: &[bool],
+        object_mask: &[bool],
+    ) -> Result<NoiseEstimate, SensorError> {
+        let px = self.resp.electrons_per_s.len();
+        if sum.len() != px
+            || sum_sq.len() != px
+            || exposure_mask.len() != px
+            || object_mask.len() != px
+        {
+            return Err(SensorError::Invalid(format!(
+                "noise estimate: {} / {} sums and {} / {} mask values for {px} pixels",
+                sum.len(),
+                sum_sq.len(),
+                exposure_mask.len(),
+                object_mask.len()
+            )));
+        }
+        let inv = 1.0 / n.max(1) as f32;
+        let mean: Vec<f32> = sum.iter().map(|v| v * inv).collect();
+        let t = exposure_time_s(&self.resp, &mean, Some(exposure_mask), &self.sensor)?
+            * self.exposure_factor;
+        let all = !object_mask.iter().any(|&m| m);
+        let k = self.sensor.gain_dn_per_electron;
+        let full = saturation_electrons(&self.sensor);
+        let (mut render, mut camera, mut pixels) = (0.0f64, 0.0f64, 0usize);
+        for i in 0..px {
+            if !(all || object_mask[i]) {
+                continue;
+            }
+            let e_per_l = self.resp.electrons_per_s[i] * t;
+            let l = mean[i].max(0.0) as f64;
+            let mu = l * e_per_l;
+            if mu >= full {
+                continue;
+            }
+            let var_l = mean_variance(sum[i] as f64, sum_sq[i] as f64, n);
+            render += (k * e_per_l).powi(2) * var_l;
+            camera += camera_variance_dn(&self.sensor, mu);
+            pixels += 1;
+        }
+        let (render_rms_dn, camera_rms_dn) = if pixels == 0 {
+            (0.0, 0.0)
+        } else {
+            (
+                (render / pixels as f64).sqrt(),
+                (camera / pixels as f64).sqrt(),
+            )
+        };
+        let ratio = if pixels == 0 {
+            0.0
+        } else {
+            render_rms_dn / camera_rms_dn
+        };
+        Ok(NoiseEstimate {
+            spp: n,
+            ratio,
+            render_rms_dn,
+            camera_rms_dn,
+            pixels,
+            exposure_s: t,
+        })
+    }
+}
+
+impl NoiseStop {
+    /// Samples at the first check: `min_spp` (at least 2, at most `spp`).
+    pub fn first_check(&self, spp: u32) -> u32 {
+        self.min_spp.max(2).min(spp)
+    }
+
+    /// Samples at the next check after an estimate of `ratio` at `done` samples: where
+    /// the noise is predicted to reach the target (done (ratio / target)^2), kept within
+    /// [done + done / MIN_CHECK_STEP_DIVISOR, MAX_CHECK_GROWTH done] and at least one
+    /// more sample. The render checks at the first batch end at or after it.
+    pub fn next_check(&self, done: u32, ratio: f64) -> u32 {
+        let predicted = (done as f64 * (ratio / self.target).powi(2)).ceil();
+        let lo = done as f64 + (done.div_ceil(MIN_CHECK_STEP_DIVISOR)).max(1) as f64;
+        let hi = done as f64 * MAX_CHECK_GROWTH as f64;
+        let next = if predicted.is_finite() {
+            predicted.clamp(lo, hi.max(lo))
+        } else {
+            hi.max(lo)
+        };
+        next.min(u32::MAX as f64) as u32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sensor() -> SensorConfig {
+        SensorConfig {
+            exposure: crate::scene::config::ExposureSetting::Fixed { ms: 2.0 },
+            gain_dn_per_electron: 0.5,
+            dark_noise_electrons: 3.0,
+            saturation_electrons: 1000.0,
+            bit_depth: 12,
+            ..SensorConfig::default()
+        }
+    }
+
+    #[test]
+    fn camera_variance_is_shot_dark_and_quantisation() {
+        let s = sensor();
+        // K^2 (mu + sd^2) + 1/12 = 0.25 (400 + 9) + 1/12.
+        let v = camera_variance_dn(&s, 400.0);
+        assert!((v - (102.25 + 1.0 / 12.0)).abs() < 1e-12, "{v}");
+        // Dark: only the dark noise and quantisation.
+        assert!((camera_variance_dn(&s, 0.0) - (2.25 + 1.0 / 12.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mean_variance_of_known_samples() {
+        // Samples 1, 2, 3, 6: mean 3, s^2 = (4 + 1 + 0 + 9) / 3 = 14/3, of the mean 14/12.
+        let x = [1.0f64, 2.0, 3.0, 6.0];
+        let (s, q) = (x.iter().sum::<f64>(), x.iter().map(|v| v * v).sum::<f64>());
+        assert!((mean_variance(s, q, 4) - 14.0 / 12.0).abs() < 1e-12);
+        assert_eq!(mean_variance(1.0, 1.0, 1), f64::INFINITY);
+        // Rounding below zero is clamped.
+        assert_eq!(mean_variance(3.0, 2.999_999, 3), 0.0);
+    }
+
+    #[test]
+    fn estimate_by_hand_with_fixed_and_auto_exposure() {
+        let s = sensor();
+        // Two object pixels and a background pixel (not counted), 1e5 e-/s per unit
+        // radiance; fixed 2 ms times a factor 1.5: 300 e- per unit radiance.
+        let resp = Responsivity::uniform(3, 1, 1.0e5);
+        let cam = CameraNoise {
+            resp,
+            sensor: s.clone(),
+            exposure_factor: 1.5,
+        };
+        let n = 4u32;
+        // Pixel 0: samples 1, 2, 3, 6 (mean 3, var of mean 14/12); pixel 1: all 0.5;
+        // pixel 2 (background): anything.
+        let sum = [12.0f32, 2.0, 100.0];
+        let sum_sq = [50.0f32, 1.0, 1.0e4];
+        let object = [true, true, false];
+        let est = cam.estimate(&sum, &sum_sq, n, &object, &object).unwrap();
+        assert!((est.exposure_s - 3e-3).abs() < 1e-15);
+        // Render: (K * 300)^2 * [14/12, 0]; camera: K^2 (900 + 9) + 1/12 and
+        // K^2 (150 + 9) + 1/12 (pixel 0's 900 e- is below the 1000 e- full well).
+        let render = (0.5f64 * 300.0).powi(2) * 14.0 / 12.0 / 2.0;
+        let camera: f64 = (0.25 * 909.0 + 0.25 * 159.0 + 2.0 / 12.0) / 2.0;
+        assert_eq!(est.pixels, 2);
+        assert!((est.render_rms_dn - render.sqrt()).abs() < 1e-9, "{est:?}");
+        assert!((est.camera_rms_dn - camera.sqrt()).abs() < 1e-9, "{est:?}");
+        assert!((est.ratio - (render / camera).sqrt()).abs() < 1e-12);
+
+        // Auto exposure: the 99.5th percentile of the exposure mask's rate (pixel 0:
+        // 3 * 1e5 e-/s) at 0.9 of saturation (the ADC's 4095 / 0.5 = 8190 e- is above
+        // the full well: 1000 e-), times the factor.
+        let auto = CameraNoise {
+            sensor: SensorConfig {
+                exposure: crate::scene::config::ExposureSetting::Auto(
+                    crate::scene::config::AutoExposure,
+                ),
+                ..s
+            },
+            ..cam.clone()
+        };
+        let est = auto.estimate(&sum, &sum_sq, n, &object, &object).unwrap();
+        let t = 0.9 * 1000.0 / 3.0e5 * 1.5;
+        assert!((est.exposure_s / t - 1.0).abs() < 1e-12, "{est:?}");
+        // Pixel 0 is now at 1.5 x 900 e- (above the full well): only pixel 1 counts,
+        // which has no render noise.
+        assert_eq!(est.pixels, 1);
+        assert_eq!(est.ratio, 0.0);
+        // An empty object mask counts every pixel; wrong lengths are an error.
+        let est = cam.estimate(&sum, &sum_sq, n, &object, &[false; 3]).unwrap();
+        assert_eq!(est.pixels, 2, "the background pixel's mean is saturated");
+        assert!(cam.estimate(&sum, &sum_sq, n, &object, &[true]).is_err());
+    }
+
+    #[test]
+    fn checks_follow_the_prediction_within_bounds() {
+        let stop = NoiseStop {
+            camera: CameraNoise {
+                resp: Responsivity::uniform(1, 1, 1.0),
+                sensor: sensor(),
+                exposure_factor: 1.0,
+            },
+            target: 1.0,
+            min_spp: 16,
+        };
+        assert_eq!(stop.first_check(1000), 16);
+        assert_eq!(stop.first_check(8), 8);
+        // Ratio 1.5 at 64 spp: predicted 64 * 2.25 = 144.
+        assert_eq!(stop.next_check(64, 1.5), 144);
+        // Far off: at most 4x; barely above: at least done / 16 more.
+        assert_eq!(stop.next_check(64, 10.0), 256);
+        assert_eq!(stop.next_check(1024, 1.001), 1088);
+        assert_eq!(stop.next_check(3, 1.001), 4);
+    }
+}
