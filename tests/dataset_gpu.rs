@@ -159,6 +159,7 @@ fn face_textures_reach_the_image() {
             spp: 8,
             bounces: 2,
             seed: 3,
+            noise: None,
         };
         r.render(&req).unwrap()
     };
@@ -253,6 +254,7 @@ rim_width = 0.5
             spp: 8,
             bounces: 2,
             seed: 5,
+            noise: None,
         };
         let img = r.render(&req).unwrap();
         let label: Vec<u8> = img.class.clone();

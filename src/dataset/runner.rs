@@ -312,9 +312,15 @@ pub struct ManifestEntry {
     pub seed: u64,
     pub width: u32,
     pub height: u32,
+    /// Samples per pixel of this image (`[render] spp`, or fewer when
+    /// `[render] noise_target` stopped the render earlier).
     pub spp: u32,
     pub bounces: u32,
     pub renderer: String,
+    /// With `[render] noise_target`: the estimated render noise over the camera's own
+    /// temporal noise at `spp` (rms of each over the object's pixels; src/render/noise.rs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_ratio: Option<f64>,
     pub noise_sigma: Option<f64>,
     /// The camera's intrinsics and lens at the image's resolution (OpenCV camera matrix
     /// and distortion; the pose is `viewpoint` / `pose`).
@@ -1047,6 +1053,10 @@ struct RenderedItem<'p> {
     stages: BTreeMap<String, f64>,
     /// `ImageRenderer::describe` of the renderer that made it.
     renderer: String,
+    /// Samples per pixel rendered (`[render] spp`, or fewer with `noise_target`).
+    spp: u32,
+    /// The noise criterion's final ratio (with `noise_target`).
+    noise_ratio: Option<f64>,
 }
 
 /// State kept between images by the stage that makes their inputs: the current
@@ -1190,6 +1200,20 @@ fn render_stage<'p>(
     let viewpoints = job.viewpoints();
     let vp = &viewpoints[item.view];
     let pose = vp.pose();
+    let noise = match job.render.noise_target {
+        None => None,
+        Some(_) => {
+            let camera = image_camera_record(job)?;
+            let finish = &job.finishes[inst.finish].name;
+            super::camera::noise_stop(job, finish, item.seed, &camera).map_err(|m| {
+                DatasetError::Render {
+                    index: item.index,
+                    id: item.id(),
+                    message: format!("render.noise_target: {m}"),
+                }
+            })?
+        }
+    };
     let req = ImageRequest {
         pose,
         camera: &job.camera_config,
@@ -1215,6 +1239,7 @@ fn render_stage<'p>(
         spp: job.render.spp as u32,
         bounces: job.render.bounces as u32,
         seed: item.seed,
+        noise: noise.as_ref(),
     };
     let fail = |message: String| DatasetError::Render {
         index: item.index,
@@ -1228,11 +1253,14 @@ fn render_stage<'p>(
     img.check(&req).map_err(fail)?;
     laps.stage("render", &mut stages);
     stages.extend(renderer.last_stages());
+    let (spp, estimate) = renderer.last_samples().unwrap_or((req.spp, None));
     Ok(RenderedItem {
         item,
         img,
         stages,
         renderer: renderer.describe(),
+        spp,
+        noise_ratio: estimate.map(|e| e.ratio),
     })
 }
 
@@ -1253,6 +1281,8 @@ fn write_stage(
         img,
         mut stages,
         renderer,
+        spp,
+        noise_ratio,
     } = rendered;
     let job = &prep.job;
     let inst: &InstancePlan = &prep.plan.instances[item.instance];
@@ -1310,9 +1340,10 @@ fn write_stage(
         seed: item.seed,
         width: job.render.width as u32,
         height: job.render.height as u32,
-        spp: job.render.spp as u32,
+        spp,
         bounces: job.render.bounces as u32,
         renderer,
+        noise_ratio,
         noise_sigma,
         camera: Some(camera.clone()),
         exposure_ev: exposed.exposure_ev,

@@ -268,7 +268,9 @@ mod tests {
         assert_eq!(est.pixels, 1);
         assert_eq!(est.ratio, 0.0);
         // An empty object mask counts every pixel; wrong lengths are an error.
-        let est = cam.estimate(&sum, &sum_sq, n, &object, &[false; 3]).unwrap();
+        let est = cam
+            .estimate(&sum, &sum_sq, n, &object, &[false; 3])
+            .unwrap();
         assert_eq!(est.pixels, 2, "the background pixel's mean is saturated");
         assert!(cam.estimate(&sum, &sum_sq, n, &object, &[true]).is_err());
     }

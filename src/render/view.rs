@@ -106,7 +106,15 @@ impl<'s> View<'s> {
         annotate_grid: Option<u32>,
         profiler: Option<&Profiler>,
     ) -> Result<View<'s>, RenderError> {
-        Self::with_variance(tracer, scene, setup, settings, annotate_grid, false, profiler)
+        Self::with_variance(
+            tracer,
+            scene,
+            setup,
+            settings,
+            annotate_grid,
+            false,
+            profiler,
+        )
     }
 
     /// [`View::new`]; with `variance` the path tracer also sums each sample's squared
@@ -167,10 +175,22 @@ impl<'s> View<'s> {
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
             accum_sq: if variance {
-                Buffer::new(ctx, "radiance square sum", n * 4, usage, MemoryKind::Readback)?
+                Buffer::new(
+                    ctx,
+                    "radiance square sum",
+                    n * 4,
+                    usage,
+                    MemoryKind::Readback,
+                )?
             } else {
                 // A binding may not be empty; never written (accum_sq = 0).
-                Buffer::new(ctx, "radiance square sum (unused)", 4, usage, MemoryKind::Readback)?
+                Buffer::new(
+                    ctx,
+                    "radiance square sum (unused)",
+                    4,
+                    usage,
+                    MemoryKind::Readback,
+                )?
             },
             variance,
             annotation,
