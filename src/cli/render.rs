@@ -7,6 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
+use synosis::render::noise::{CameraNoise, NoiseStop};
 use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene};
 use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
@@ -122,16 +123,45 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let start = std::time::Instant::now();
+    // `[render] noise_target`: the camera the sensor step below exposes (validate checked
+    // that a [sensor] and camera.f_number are there).
+    let noise = match (cfg.render.noise_target, &cfg.sensor, cfg.camera.f_number) {
+        (Some(target), Some(s), Some(n)) => Some(NoiseStop {
+            camera: CameraNoise {
+                resp: Responsivity::new(&scene.view.camera, cfg.camera.focal_mm as f64, n, s),
+                sensor: s.clone(),
+                exposure_factor: 1.0,
+            },
+            target: target as f64,
+            min_spp: cfg
+                .render
+                .min_spp
+                .unwrap_or(synosis::render::noise::DEFAULT_MIN_SPP)
+                .min(cfg.render.spp),
+        }),
+        _ => None,
+    };
     let opts = FrameOptions {
         annotate_grid: Some(DEFAULT_COVERAGE_GRID),
         profiler: Some(&profiler),
-        noise: None,
+        noise: noise.as_ref(),
     };
     let frame = render_scene(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
         bar.set_position(done as u64)
     })?;
     let img = frame.radiance;
     bar.finish_and_clear();
+    if let Some(e) = &frame.noise {
+        eprintln!(
+            "noise target {}: stopped at {} spp, render noise {:.3} DN rms over camera noise {:.3} DN rms = {:.3} ({} object pixels)",
+            cfg.render.noise_target.unwrap_or_default(),
+            frame.spp,
+            e.render_rms_dn,
+            e.camera_rms_dn,
+            e.ratio,
+            e.pixels
+        );
+    }
     let secs = start.elapsed().as_secs_f64();
     ctx.check_validation()?;
     std::fs::create_dir_all(&a.out)
@@ -191,7 +221,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         cfg.camera.describe_pose(),
         w,
         h,
-        cfg.render.spp,
+        frame.spp,
         cfg.render.sampler,
         cfg.light.describe(),
         cfg.texture.kind,

@@ -229,9 +229,8 @@ pub struct RenderSettings {
     pub min_spp: Option<i64>,
 }
 
-/// `[render] min_spp` when not given: few enough that a low-noise image stops early, many
-/// enough that the per-pixel variance estimate has seen the radiance's spread.
-pub const DEFAULT_MIN_SPP: i64 = 64;
+/// `[render] min_spp` when not given (`render::noise::DEFAULT_MIN_SPP`).
+pub const DEFAULT_MIN_SPP: i64 = crate::render::noise::DEFAULT_MIN_SPP as i64;
 
 impl RenderSettings {
     /// Samples before the first noise check: `min_spp`, default [`DEFAULT_MIN_SPP`],

@@ -39,6 +39,11 @@ pub struct NoiseStop {
     pub min_spp: u32,
 }
 
+/// Samples before the first check when `min_spp` is not given (`[render] min_spp` of
+/// scene and job files): few enough that a low-noise image stops early, many enough that
+/// the per-pixel variance estimate has seen the radiance's spread.
+pub const DEFAULT_MIN_SPP: u32 = 64;
+
 /// The largest jump between two checks, as a factor on the samples done: the next check
 /// is where the estimate predicts the target (noise falls as 1 / sqrt(spp)), but at most
 /// this many times the samples done (an early estimate may be off).

@@ -835,6 +835,14 @@ pub struct RenderConfig {
     /// Footprint multiplier of "lean" (the mip level is log2 of the footprint in texels
     /// times this), [0.25, 4].
     pub texture_filter_scale: f32,
+    /// Stop adding samples once the render noise is at most this fraction of the
+    /// camera's own temporal noise (`[sensor]` needed), [0.01, 100]; `spp` is then the
+    /// maximum. None: exactly `spp`. docs/dataset.md, "Samples chosen from a noise
+    /// target" (src/render/noise.rs).
+    pub noise_target: Option<f32>,
+    /// Samples before the first noise check (with `noise_target`), [2, spp]; default 64
+    /// (or `spp` when smaller).
+    pub min_spp: Option<u32>,
 }
 
 /// How the path tracer reads slope maps (`[render] texture_filter`).
@@ -872,6 +880,8 @@ impl Default for RenderConfig {
             sampler: SamplerKind::Sobol,
             texture_filter: TextureFilter::None,
             texture_filter_scale: 1.0,
+            noise_target: None,
+            min_spp: None,
         }
     }
 }
@@ -1305,6 +1315,24 @@ impl SceneConfig {
             false,
             "[0.25, 4]",
         )?;
+        if let Some(t) = r.noise_target {
+            range_f("render.noise_target", t, 0.01, 100.0, false, "[0.01, 100]")?;
+            if self.sensor.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "render.noise_target",
+                    message: "needs a [sensor] section (the EMVA 1288 camera): the target is the render noise over the camera's own noise, and the linear exposure model has none".into(),
+                });
+            }
+        }
+        if let Some(m) = r.min_spp {
+            if r.noise_target.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "render.min_spp",
+                    message: "is the first noise check of render.noise_target: give that too, or remove it".into(),
+                });
+            }
+            range_u("render.min_spp", m, 2, r.spp.max(2), "[2, render.spp]")?;
+        }
         let t = &self.texture;
         if !["flat", "test-grooves", "file"].contains(&t.kind.as_str()) {
             return Err(ConfigError::Invalid {

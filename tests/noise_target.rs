@@ -1,0 +1,186 @@
+//! `[render] noise_target` on lavapipe, validation on: a render with a noise target
+//! stops before its maximum spp at an image equal, byte for byte, to a fixed-spp render
+//! of the spp it chose, and the per-pixel variance estimate is honest (within a factor
+//! of the measured error against an independent high-spp reference). Tiny images, few
+//! bounces: seconds.
+
+mod common;
+
+use synosis::render::energy::EnergyTables;
+use synosis::render::noise::{CameraNoise, NoiseStop};
+use synosis::render::path_trace::{Frame, FrameOptions, RenderScene, load_object, render_frame};
+use synosis::render::sensor::{Responsivity, saturation_electrons};
+use synosis::render::settings::SamplerKind;
+use synosis::render::{GpuScene, PathTracer, RenderSettings};
+use synosis::scene::config::{SceneConfig, SensorConfig};
+use synosis::trace::Backend;
+
+/// The test body, face A seen at 20 degrees, test grooves (texture noise), 32 x 24.
+fn scene_config(seed: u32, sampler: SamplerKind) -> SceneConfig {
+    let mut cfg = SceneConfig::default();
+    cfg.set_resolution(32, 24).unwrap();
+    cfg.camera.view = "A20".into();
+    cfg.texture.kind = "test-grooves".into();
+    cfg.material.alpha = 0.02;
+    cfg.render.max_bounces = 2;
+    cfg.render.batch_spp = 8;
+    cfg.render.seed = seed;
+    cfg.render.sampler = sampler;
+    cfg.validate().unwrap();
+    cfg
+}
+
+fn stop(scene: &RenderScene, target: f64, min_spp: u32) -> NoiseStop {
+    let sensor = SensorConfig::default();
+    NoiseStop {
+        camera: CameraNoise {
+            resp: Responsivity::new(&scene.view.camera, 25.0, 4.0, &sensor),
+            sensor,
+            exposure_factor: 1.0,
+        },
+        target,
+        min_spp,
+    }
+}
+
+/// The path tracer (software traversal, as on data-centre GPUs) and the scene on it,
+/// built once: pipelines are what costs on lavapipe.
+struct Gpu {
+    ctx: std::sync::Arc<synosis::vk::Context>,
+    tracer: PathTracer,
+    gpu_scene: GpuScene,
+    scene: RenderScene,
+}
+
+impl Gpu {
+    fn new(cfg: &SceneConfig) -> Gpu {
+        let ctx = common::gpu();
+        let tracer = PathTracer::new(&ctx, Backend::Software, &EnergyTables::compute()).unwrap();
+        let object = load_object(cfg).unwrap();
+        let scene = RenderScene::assemble(&object, cfg).unwrap();
+        let mut gpu_scene = GpuScene::new(&tracer, &scene.stage, None).unwrap();
+        gpu_scene
+            .set_face_maps_filtered(
+                &tracer,
+                &scene.face_maps,
+                &scene.placement,
+                cfg.render.texture_filter,
+            )
+            .unwrap();
+        Gpu {
+            ctx,
+            tracer,
+            gpu_scene,
+            scene,
+        }
+    }
+
+    fn render(&self, cfg: &SceneConfig, spp: u32, noise: Option<&NoiseStop>) -> Frame {
+        let mut cfg = cfg.clone();
+        cfg.render.spp = spp;
+        let opts = FrameOptions {
+            annotate_grid: Some(4),
+            profiler: None,
+            noise,
+        };
+        let settings = RenderSettings::from(&cfg);
+        let f = render_frame(
+            &self.tracer,
+            &self.gpu_scene,
+            &self.scene.view,
+            &settings,
+            opts,
+            |_| {},
+        )
+        .expect("render");
+        common::assert_clean(&self.ctx);
+        f
+    }
+}
+
+#[test]
+fn a_noise_target_stops_early_at_the_image_of_a_fixed_spp_render() {
+    let cfg = scene_config(7, SamplerKind::Sobol);
+    let gpu = Gpu::new(&cfg);
+    let scene = &gpu.scene;
+    // Probe: a target never reached runs to the maximum and reports its estimate there.
+    let probe = gpu.render(&cfg, 64, Some(&stop(scene, 1e-9, 8)));
+    assert_eq!(probe.spp, 64);
+    let r64 = probe.noise.expect("estimate").ratio;
+    assert!(r64 > 0.0 && r64.is_finite(), "{r64}");
+    // A target the 64-spp image meets: the render stops well before 512 spp.
+    let target = r64 * 1.05;
+    let f = gpu.render(&cfg, 512, Some(&stop(scene, target, 8)));
+    let est = f.noise.expect("estimate");
+    eprintln!(
+        "ratio {r64:.4} at 64 spp; target {target:.4}: stopped at {} spp with {:.4} ({} px, render {:.4} DN, camera {:.4} DN)",
+        f.spp, est.ratio, est.pixels, est.render_rms_dn, est.camera_rms_dn
+    );
+    assert!(f.spp >= 8 && f.spp < 512, "{}", f.spp);
+    assert_eq!(f.spp % 8, 0, "stops at a batch end");
+    assert_eq!(est.spp, f.spp);
+    assert!(est.ratio <= target);
+    assert!(est.pixels > 100, "object pixels counted: {}", est.pixels);
+    // The same image as a plain render of that many samples (no square sums).
+    let fixed = gpu.render(&cfg, f.spp, None);
+    assert_eq!(fixed.spp, f.spp);
+    assert!(fixed.noise.is_none());
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert!(
+        bits(&f.radiance.data) == bits(&fixed.radiance.data),
+        "the progressive render differs from the fixed-spp one"
+    );
+    assert_eq!(f.annotation, fixed.annotation);
+    // And the probe's 64-spp image equals a plain 64-spp render too (the square sums
+    // change nothing).
+    let plain = gpu.render(&cfg, 64, None);
+    assert!(bits(&probe.radiance.data) == bits(&plain.radiance.data));
+}
+
+/// Measured rms error (DN) of `frame` against `reference` over the pixels the estimate
+/// counts (object, not saturated), with the estimate's exposure.
+fn measured_rms_dn(stop: &NoiseStop, frame: &Frame, reference: &[f32], t: f64) -> f64 {
+    let s = &stop.camera.sensor;
+    let full = saturation_electrons(s);
+    let face = &frame.annotation.as_ref().unwrap().face;
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for (i, (&l, &r)) in frame.radiance.data.iter().zip(reference).enumerate() {
+        let e = stop.camera.resp.electrons_per_s[i] * t;
+        if face[i] == 0 || l as f64 * e >= full {
+            continue;
+        }
+        sum += (s.gain_dn_per_electron * e * (l as f64 - r as f64)).powi(2);
+        n += 1;
+    }
+    (sum / n as f64).sqrt()
+}
+
+#[test]
+fn the_noise_estimate_is_within_a_factor_two_of_the_measured_error() {
+    let gpu = Gpu::new(&scene_config(11, SamplerKind::Sobol));
+    let scene = &gpu.scene;
+    for (sampler, spp) in [(SamplerKind::Independent, 32), (SamplerKind::Sobol, 32)] {
+        let cfg = scene_config(11, sampler);
+        let s = stop(scene, 1e-9, spp);
+        let f = gpu.render(&cfg, spp, Some(&s));
+        let est = f.noise.expect("estimate");
+        // An independent reference: another seed, 16 x the samples (its own error adds
+        // 1/16 to the measured variance).
+        let ref_cfg = scene_config(1234, sampler);
+        let reference = gpu.render(&ref_cfg, spp * 16, None);
+        let measured = measured_rms_dn(&s, &f, &reference.radiance.data, est.exposure_s);
+        let q = est.render_rms_dn / measured;
+        eprintln!(
+            "{sampler:?} {spp} spp: estimated {:.4} DN, measured {measured:.4} DN (x{q:.3}), camera {:.4} DN",
+            est.render_rms_dn, est.camera_rms_dn
+        );
+        assert!(measured > 0.0);
+        match sampler {
+            // Independent samples: the estimate is the error's expectation.
+            SamplerKind::Independent => assert!((0.5..=2.0).contains(&q), "{q}"),
+            // Sobol: conservative (estimated >= measured), not by more than the
+            // approximation allows on a textured face.
+            SamplerKind::Sobol => assert!((0.8..=4.0).contains(&q), "{q}"),
+        }
+    }
+}
