@@ -1575,6 +1575,12 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         m => panic!("{m:?}"),
     }
     assert_eq!(job.camera_config.f_number, Some(8.0));
+    let target = emva.replace("spp = 1", "spp = 64\nnoise_target = 1.0\nmin_spp = 16");
+    let job = dataset::prepare_text(&target, "job", tmp.path())
+        .unwrap()
+        .job;
+    assert_eq!(job.render.noise_target, Some(1.0));
+    assert_eq!(job.render.first_check_spp(), 16);
     let cases: Vec<(String, &str)> = vec![
         (
             with("[sensor]\nexposure = 1.0\nbit_depth = 12"),
@@ -1593,6 +1599,23 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
             "unknown field `gian`",
         ),
         (with("[sensor]\nexposure = \"auto\""), "camera.f_number"),
+        // A noise target is relative to the camera's noise: the linear model has none.
+        (
+            good.replace("spp = 1", "spp = 1\nnoise_target = 1.0"),
+            "render.noise_target",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nnoise_target = 0.001"),
+            "render.noise_target",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nnoise_target = 1.0\nmin_spp = 128"),
+            "render.min_spp",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nmin_spp = 16"),
+            "render.min_spp",
+        ),
         (with("[camera]\nf_number = 0.1"), "camera.f_number"),
         (with("[camera]\nview = \"A0\""), "camera.view"),
         (with("[camera]\nexposure = 2.0"), "camera.exposure"),

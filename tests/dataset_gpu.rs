@@ -404,3 +404,56 @@ defect_free = 1
         assert_ne!(read(&out, "radiance.exr"), read(&pout, "radiance.exr"));
     }
 }
+
+/// `[render] noise_target` in a job: each image stops at its own spp (at most `spp`),
+/// recorded in the manifest with the final noise ratio.
+#[test]
+fn a_noise_target_picks_each_images_spp() {
+    use synosis::dataset::RunOptions;
+    let tmp = tempfile::tempdir().unwrap();
+    let mut r = GpuRenderer::new(AccelChoice::Software, true)
+        .unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
+    let target = 4.0;
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/smoke-dataset.toml"
+    ))
+    .unwrap()
+    .replace("width = 64", "width = 32")
+    .replace("height = 48", "height = 24")
+    .replace(
+        "spp = 4",
+        &format!("spp = 256\nnoise_target = {target}\nmin_spp = 8"),
+    )
+    .replace(
+        "[texture]",
+        "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\n[texture]",
+    );
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
+    let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+    let out = tmp.path().join("noise");
+    let opts = RunOptions {
+        shard: Shard { index: 0, count: 4 },
+        ..Default::default()
+    };
+    let rep = dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap();
+    assert_eq!(rep.rendered, 4);
+    let entries = dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
+    for e in &entries {
+        let ratio = e.noise_ratio.expect("noise_ratio recorded");
+        eprintln!("{}: {} spp, noise ratio {ratio:.3}", e.id, e.spp);
+        assert!((8..=256).contains(&e.spp), "{}", e.spp);
+        assert!(
+            e.spp == 256 || ratio <= target,
+            "{}: {ratio} at {}",
+            e.id,
+            e.spp
+        );
+        assert!(e.stage_seconds.contains_key("render.noise_estimate"));
+    }
+    assert!(
+        entries.iter().any(|e| e.spp < 256),
+        "no image stopped before the maximum"
+    );
+}

@@ -419,7 +419,7 @@ fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> S
     );
     let _ = write!(
         s,
-        "<h1>Realism report</h1><p>Job {}: {} x {} px, {} spp. Per finish: examples \
+        "<h1>Realism report</h1><p>Job {}: {} x {} px, {}. Per finish: examples \
          (dents red, scratches blue), the object's grey-level histogram, the milling marks' \
          spectral peak at the projected path spacing rho over the noise floor, and the \
          defects' visibility (|mean inside - mean of the ring| / 255) with the filter's \
@@ -427,7 +427,11 @@ fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> S
         esc(&job.origin),
         job.render.width,
         job.render.height,
-        job.render.spp,
+        match job.render.noise_target {
+            // Each image's own spp is in the manifest.
+            Some(t) => format!("up to {} spp (noise target {t})", job.render.spp),
+            None => format!("{} spp", job.render.spp),
+        },
         threshold.map_or("(none)".into(), |t| format!("{t}"))
     );
     s.push_str(
