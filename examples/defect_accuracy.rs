@@ -4,7 +4,9 @@
 //! test body. Run: cargo run --release --example defect_accuracy
 
 use glam::DVec2;
-use synosis::defect::{Defect, DefectSet, Dent, Scratch, Shape, imprint_with_stats};
+use synosis::defect::{
+    Defect, DefectSet, Dent, Scratch, ScratchProfile, Shape, imprint_with_stats,
+};
 use synosis::scene::testbody::{Variant, face_frames, testbody};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -21,7 +23,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rim_width: 0.5,
         })
     };
-    let straight = |w: f64, depth: f64| {
+    let straight = |w: f64, depth: f64, profile: ScratchProfile| {
         let path: Vec<[f64; 2]> = (0..=50)
             .map(|i| [-4.0 + 0.16 * i as f64, 0.05 * i as f64])
             .collect();
@@ -36,6 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             length_mm: len,
             step_mm: 0.16,
             curviness_deg: 0.0,
+            profile,
         })
     };
     let cases: Vec<(&str, Shape, f64)> = vec![
@@ -56,7 +59,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ),
         (
             "scratch w=0.1 mm, depth 0.02, L=8.4",
-            straight(0.1, 0.02),
+            straight(0.1, 0.02, ScratchProfile::Parabolic),
+            0.0,
+        ),
+        (
+            "round scratch w=0.1 mm, depth 0.05 (half tube), L=8.4",
+            straight(0.1, 0.05, ScratchProfile::Round),
             0.0,
         ),
     ];
@@ -68,14 +76,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (depth, analytic) = match &shape {
             Shape::Dent(d) => (d.depth_mm, analytic),
             Shape::Scratch(s) => {
-                let len = s.length_mm;
-                // Parabolic profile: cross-section 2/3 w d, plus two half-paraboloid end caps
-                // (together one paraboloid, pi r^2 d / 2).
-                let caps = std::f64::consts::PI / 2.0 * (s.width_mm / 2.0).powi(2) * s.depth_mm[0];
-                (
-                    s.depth_mm[0],
-                    2.0 / 3.0 * s.width_mm * s.depth_mm[0] * len + caps,
-                )
+                let (len, r, d) = (s.length_mm, s.width_mm / 2.0, s.depth_mm[0]);
+                let pi = std::f64::consts::PI;
+                let volume = match s.profile {
+                    // Cross-section 2/3 w d, plus two half-paraboloid end caps (together
+                    // one paraboloid, pi r^2 d / 2).
+                    ScratchProfile::Parabolic => {
+                        2.0 / 3.0 * s.width_mm * d * len + pi / 2.0 * r * r * d
+                    }
+                    // A circular segment (radius R, sagitta d) swept along the path, plus
+                    // the two half spherical caps at the ends (together one cap).
+                    ScratchProfile::Round => {
+                        let big_r = (r * r + d * d) / (2.0 * d);
+                        let segment =
+                            big_r * big_r * ((big_r - d) / big_r).acos() - (big_r - d) * r;
+                        segment * len + pi * d * d * (3.0 * big_r - d) / 3.0
+                    }
+                };
+                (d, volume)
             }
         };
         for resolution in [4.0, 8.0, 16.0] {

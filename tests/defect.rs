@@ -3,8 +3,8 @@
 
 use glam::{DVec2, DVec3};
 use synosis::defect::{
-    DefectError, DefectSet, DefectSpec, DefectTool, Shape, check_closed_manifold, imprint,
-    sample_defects,
+    DefectError, DefectSet, DefectSpec, DefectTool, ScratchProfile, Shape, check_closed_manifold,
+    imprint, sample_defects,
 };
 use synosis::scene::mesh::face_from_name;
 use synosis::scene::testbody::{FaceFrame, Variant, face_frames, testbody};
@@ -313,6 +313,100 @@ fn a_straight_scratch_is_as_long_and_deep_as_specified() {
     assert!(
         (0.03 * 0.95..=0.03 + 1e-5).contains(&max_depth),
         "measured depth {max_depth}"
+    );
+}
+
+/// `profile = "round"` with depth 0.5: the paper's scratch tool read as a tube of the
+/// scratch's diameter sunk to its axis; every vertex across the groove lies on the half
+/// circle, and the cross-section removes pi r^2 / 2 per mm of path.
+#[test]
+fn a_round_scratch_is_a_half_tube() {
+    let b = testbody(Variant::B);
+    let spec = dents_only(
+        r#"
+        faces = ["A"]
+        [[scratch]]
+        name = "tube"
+        quantity = 1
+        width_mm = 0.1
+        depth = 0.5
+        path_length_mm = 6.0
+        step_mm = 0.5
+        curviness_deg = 0
+        depth_variation = 0
+        profile = "round"
+        "#,
+    );
+    let set = sample_defects(&b, &spec, 11).unwrap();
+    let out = imprint(&b, &set).unwrap();
+    check_imprinted(&b, &set, &out);
+    let Shape::Scratch(s) = &set.defects[0].shape else {
+        unreachable!()
+    };
+    assert_eq!(s.profile, ScratchProfile::Round);
+    let r = s.width_mm / 2.0;
+    let f = frame_of(&face_frames(&b), "A");
+    let a = DVec2::from(s.path_uv_mm[0]);
+    let dir = (DVec2::from(*s.path_uv_mm.last().unwrap()) - a).normalize();
+    let mut across = 0;
+    for p in face_vertices(&out, f) {
+        let q = uv(f, p) - a;
+        let (t, dist) = (q.dot(dir), q.perp_dot(dir).abs());
+        if t > 0.5 && t < s.length_mm - 0.5 && dist < r {
+            // On the circle of radius r about the path (radial distance: f32 vertex
+            // positions would make a depth comparison fail near the vertical walls).
+            let radial = (depth(f, p).powi(2) + dist * dist).sqrt();
+            assert!(
+                (radial - r).abs() < 1e-5,
+                "vertex at {dist} mm from the path, depth {}: {radial} mm from the axis, not {r}",
+                depth(f, p)
+            );
+            across += 1;
+        }
+    }
+    assert!(across > 100, "only {across} vertices inside the groove");
+    // Volume: the half tube along the path plus a hemisphere at the two ends together.
+    let n = f.normal.as_dvec3();
+    let mut removed = 0.0;
+    for t in 0..out.triangles.len() {
+        if out.labels[t].instance == 1 {
+            let area = 0.5 * out.area_normal(t).as_dvec3().dot(n);
+            removed += area
+                * out
+                    .corners(t)
+                    .iter()
+                    .map(|p| depth(f, p.as_dvec3()))
+                    .sum::<f64>()
+                / 3.0;
+        }
+    }
+    let pi = std::f64::consts::PI;
+    let analytic = pi * r * r / 2.0 * s.length_mm + 2.0 / 3.0 * pi * r.powi(3);
+    // Piecewise-linear chords under a circle remove a little less (edges of w / 8).
+    assert!(
+        removed < analytic && removed > 0.97 * analytic,
+        "removed {removed} mm^3 vs half tube {analytic}"
+    );
+    // Deeper than half the width is an undercut: refused, naming the field.
+    let err = DefectSpec::from_toml_str(
+        r#"
+        [[scratch]]
+        name = "deep"
+        quantity = 1
+        width_mm = 0.1
+        depth = [0.2, 0.6]
+        path_length_mm = 6.0
+        step_mm = 0.5
+        curviness_deg = 0
+        profile = "round"
+        "#,
+        "deep.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("scratch[0] (deep).depth") && err.contains("0.5"),
+        "{err}"
     );
 }
 

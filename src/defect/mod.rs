@@ -17,7 +17,7 @@ mod tool;
 pub use check::check_closed_manifold;
 pub use imprint::{ImprintStats, imprint, imprint_traced, imprint_with_stats};
 pub use sample::{Defect, DefectSet, Dent, Scratch, Shape, sample_defects};
-pub use spec::{DefectSpec, DentSpec, Range, ScratchSpec};
+pub use spec::{DefectSpec, DentSpec, Range, ScratchProfile, ScratchSpec};
 pub use tool::DefectTool;
 
 use std::path::PathBuf;

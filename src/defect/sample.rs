@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::DefectError;
 use super::region::Region;
-use super::spec::{DefectSpec, DentSpec, Range, ScratchSpec};
+use super::spec::{DefectSpec, DentSpec, Range, ScratchProfile, ScratchSpec};
 use super::tool::DefectTool;
 use crate::scene::Mesh;
 use crate::scene::mesh::{CLASS_DENT, CLASS_SCRATCH, FaceId, face_from_name, face_name};
@@ -34,7 +34,7 @@ pub struct Dent {
     pub rim_width: f64,
 }
 
-/// A scratch: a polyline in face-local coordinates swept with a parabolic profile.
+/// A scratch: a polyline in face-local coordinates swept with its profile.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scratch {
@@ -46,6 +46,9 @@ pub struct Scratch {
     pub length_mm: f64,
     pub step_mm: f64,
     pub curviness_deg: f64,
+    /// The cross-section (sidecars written before it existed: parabolic).
+    #[serde(default)]
+    pub profile: ScratchProfile,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -291,6 +294,7 @@ fn sample_scratch(
                 length_mm: arc,
                 step_mm: s.step_mm,
                 curviness_deg: curviness,
+                profile: s.profile,
             }),
         };
         if DefectTool::new(&defect, spec.resolution).fits(region) {

@@ -66,9 +66,21 @@ pub struct DentSpec {
     pub rim_width: f64,
 }
 
+/// The cross-section of a scratch across its path (docs/defects.md, "Tools").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScratchProfile {
+    /// `h = -depth (1 - (2 s / w)^2)`: a shallow round-bottomed groove.
+    #[default]
+    Parabolic,
+    /// A circular arc with chord `w` and sagitta `depth`: the cross-section of a round
+    /// tool; `depth = 0.5` (of the width) is a tube of diameter `w` sunk to its axis.
+    Round,
+}
+
 /// A scratch kind: a random walk on the face (steps of `step_mm`, heading turned by a
-/// normal deviate of standard deviation `curviness_deg` per step) swept with a rounded
-/// (parabolic) profile of width `width_mm` and depth `depth * width_mm`; the depth varies
+/// normal deviate of standard deviation `curviness_deg` per step) swept with a
+/// `profile` of width `width_mm` and depth `depth * width_mm`; the depth varies
 /// along the path by up to `depth_variation` (fraction), smoothly over about 1 mm.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -83,6 +95,8 @@ pub struct ScratchSpec {
     pub curviness_deg: Range,
     #[serde(default = "default_depth_variation")]
     pub depth_variation: f64,
+    #[serde(default)]
+    pub profile: ScratchProfile,
 }
 
 /// The whole specification.
@@ -181,6 +195,7 @@ impl DefectSpec {
                     step_mm: 0.1,
                     curviness_deg: Range::new(0.0, 2.0),
                     depth_variation: default_depth_variation(),
+                    profile: ScratchProfile::Parabolic,
                 },
                 ScratchSpec {
                     name: "curvy scratch".into(),
@@ -191,6 +206,7 @@ impl DefectSpec {
                     step_mm: 1.0,
                     curviness_deg: Range::new(10.0, 30.0),
                     depth_variation: default_depth_variation(),
+                    profile: ScratchProfile::Parabolic,
                 },
             ],
         }
@@ -277,6 +293,13 @@ impl DefectSpec {
             scalar(&f("step_mm"), s.step_mm, 1e-3, 50.0)?;
             range(&f("curviness_deg"), s.curviness_deg, 0.0, 180.0)?;
             scalar(&f("depth_variation"), s.depth_variation, 0.0, 0.95)?;
+            if s.profile == ScratchProfile::Round && s.depth.max > 0.5 {
+                return Err(bad(
+                    &f("depth"),
+                    &format!("[{}, {}]", s.depth.min, s.depth.max),
+                    "at most 0.5 with profile = \"round\" (a circular arc deeper than half its chord would undercut the face)",
+                ));
+            }
             if s.path_length_mm.max / s.step_mm > 100_000.0 {
                 return Err(bad(
                     &f("step_mm"),

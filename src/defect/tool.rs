@@ -5,6 +5,24 @@ use glam::DVec2;
 
 use super::region::{Region, point_segment_distance};
 use super::sample::{Defect, Shape};
+use super::spec::ScratchProfile;
+
+/// How far below the face a scratch of `profile`, centre depth `dep` and half-width `r`
+/// reaches at squared distance `dist2 < r^2` from its path.
+fn scratch_depth_at(profile: ScratchProfile, dep: f64, r: f64, dist2: f64) -> f64 {
+    match profile {
+        ScratchProfile::Parabolic => dep * (1.0 - dist2 / (r * r)),
+        // The circle through the groove's edges (+-r, 0) and its bottom (0, -dep): radius
+        // R = (r^2 + dep^2) / (2 dep), centre R - dep above the bottom.
+        ScratchProfile::Round => {
+            if dep <= 0.0 {
+                return 0.0;
+            }
+            let big_r = (r * r + dep * dep) / (2.0 * dep);
+            ((big_r * big_r - dist2).max(0.0).sqrt() - (big_r - dep)).max(0.0)
+        }
+    }
+}
 
 /// A defect compiled for fast evaluation. Heights are along the face normal, in mm:
 /// negative below the face (removed material), positive for a raised rim, 0 outside.
@@ -36,6 +54,7 @@ enum Kind {
         pts: Vec<DVec2>,
         depth: Vec<f64>,
         r: f64,
+        profile: ScratchProfile,
     },
 }
 
@@ -88,6 +107,7 @@ impl DefectTool {
                         pts,
                         depth: s.depth_mm.clone(),
                         r,
+                        profile: s.profile,
                     },
                 }
             }
@@ -130,7 +150,12 @@ impl DefectTool {
                     0.0
                 }
             }
-            Kind::Scratch { pts, depth, r } => {
+            Kind::Scratch {
+                pts,
+                depth,
+                r,
+                profile,
+            } => {
                 let r = *r;
                 let mut h = 0.0f64;
                 for i in 0..pts.len().saturating_sub(1) {
@@ -152,7 +177,7 @@ impl DefectTool {
                     let dist2 = (p - (a + e * t)).length_squared();
                     if dist2 < r * r {
                         let dep = depth[i] + (depth[i + 1] - depth[i]) * t;
-                        h = h.min(-dep * (1.0 - dist2 / (r * r)));
+                        h = h.min(-scratch_depth_at(*profile, dep, r, dist2));
                     }
                 }
                 h

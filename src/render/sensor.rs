@@ -10,7 +10,7 @@ use rand_distr::{Distribution, Normal, Poisson};
 use rand_pcg::Pcg64Mcg;
 
 use crate::scene::Camera;
-use crate::scene::config::{Blooming, ExposureSetting, SensorConfig};
+use crate::scene::config::{AutoStatistic, Blooming, ExposureSetting, SensorConfig};
 
 /// Planck's constant, J s.
 pub const PLANCK: f64 = 6.626_070_15e-34;
@@ -109,7 +109,8 @@ pub fn saturation_electrons(s: &SensorConfig) -> f64 {
 }
 
 /// The exposure time for `sensor.exposure`: a fixed time, or "auto": the time at which
-/// the `auto_percentile` percentile of the noise-free signal of the pixels in `mask`
+/// the `auto_percentile` percentile (or, with `auto_statistic = "mean"`, the mean) of
+/// the noise-free signal of the pixels in `mask`
 /// (all pixels when None or when the mask selects none) is `auto_fraction` of
 /// saturation ([`saturation_electrons`]). Errors when those pixels are all dark.
 pub fn exposure_time_s(
@@ -137,11 +138,19 @@ pub fn exposure_time_s(
             if v.is_empty() {
                 v = pick(None);
             }
-            let p = percentile(&mut v, sensor.auto_percentile);
+            let (p, what) = match sensor.auto_statistic {
+                AutoStatistic::Percentile => (
+                    percentile(&mut v, sensor.auto_percentile),
+                    format!("the {} percentile", sensor.auto_percentile),
+                ),
+                AutoStatistic::Mean => (
+                    v.iter().sum::<f64>() / v.len().max(1) as f64,
+                    "the mean".to_string(),
+                ),
+            };
             if p.is_nan() || p <= 0.0 {
                 return Err(SensorError::Invalid(format!(
-                    "exposure = \"auto\": the {} percentile of the object's pixels is dark (no light reaches them); give `exposure = {{ ms = ... }}`",
-                    sensor.auto_percentile
+                    "exposure = \"auto\": {what} of the object's pixels is dark (no light reaches them); give `exposure = {{ ms = ... }}`"
                 )));
             }
             Ok(sensor.auto_fraction * saturation_electrons(sensor) / p)
@@ -471,6 +480,57 @@ mod tests {
         // All dark: a clear error.
         let e = exposure_time_s(&resp, &vec![0.0; n], Some(&mask), &s).unwrap_err();
         assert!(e.to_string().contains("ms ="), "{e}");
+    }
+
+    /// `auto_statistic = "mean"`: the object's mean noise-free signal reaches the target
+    /// (its highlights may clip); outside the mask nothing counts.
+    #[test]
+    fn mean_auto_exposure_sets_the_objects_mean() {
+        let s = SensorConfig {
+            exposure: ExposureSetting::Auto(crate::scene::config::AutoExposure),
+            auto_statistic: AutoStatistic::Mean,
+            auto_fraction: 0.3,
+            ..SensorConfig::default()
+        };
+        let (w, h) = (64u32, 32u32);
+        let n = (w * h) as usize;
+        // Object: dark surface with rare glints 100x brighter (a milled face); background
+        // a hot light outside the mask.
+        let radiance: Vec<f32> = (0..n)
+            .map(|i| match (i as u32 % w < w / 2, i % 50 == 0) {
+                (true, true) => 100.0,
+                (true, false) => 1.0,
+                (false, _) => 1000.0,
+            })
+            .collect();
+        let mask: Vec<bool> = (0..n).map(|i| (i as u32 % w) < w / 2).collect();
+        let resp = Responsivity::uniform(w, h, 1.0e6);
+        let t = exposure_time_s(&resp, &radiance, Some(&mask), &s).unwrap();
+        let e = resp.mean_electrons(&radiance, t);
+        let inside: Vec<f64> = e
+            .iter()
+            .zip(&mask)
+            .filter(|(_, m)| **m)
+            .map(|(e, _)| *e)
+            .collect();
+        let mean = inside.iter().sum::<f64>() / inside.len() as f64;
+        let target = 0.3 * saturation_electrons(&s);
+        assert!(
+            (mean / target - 1.0).abs() < 1e-9,
+            "mean {mean} e- vs {target}"
+        );
+        // The percentile rule on the same image keeps the glints unclipped instead: a
+        // much shorter exposure.
+        let p = SensorConfig {
+            auto_statistic: AutoStatistic::Percentile,
+            auto_percentile: 99.5,
+            auto_fraction: 0.9,
+            ..s.clone()
+        };
+        let tp = exposure_time_s(&resp, &radiance, Some(&mask), &p).unwrap();
+        assert!(t > 10.0 * tp, "mean rule {t} s vs percentile rule {tp} s");
+        let dark = exposure_time_s(&resp, &vec![0.0; n], Some(&mask), &s).unwrap_err();
+        assert!(dark.to_string().contains("the mean"), "{dark}");
     }
 
     #[test]

@@ -558,7 +558,8 @@ fn f_number_or_inf<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
 #[serde(try_from = "ExposureRaw")]
 pub enum ExposureSetting {
-    /// Chosen per image from the linear radiance (`auto_percentile`, `auto_fraction`).
+    /// Chosen per image from the linear radiance (`auto_statistic`, `auto_percentile`,
+    /// `auto_fraction`).
     Auto(AutoExposure),
     /// A fixed exposure time, ms.
     Fixed { ms: f64 },
@@ -592,6 +593,18 @@ impl TryFrom<ExposureRaw> for ExposureSetting {
     }
 }
 
+/// What auto exposure measures on the object's pixels (`[sensor] auto_statistic`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AutoStatistic {
+    /// The `auto_percentile` percentile (keeps highlights below saturation).
+    #[default]
+    Percentile,
+    /// The mean (a machine-vision camera's "target brightness": highlights may clip;
+    /// unbiased under Monte Carlo noise, so the exposure does not depend on the spp).
+    Mean,
+}
+
 /// Vertical blooming (CCD) or none (CMOS).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -610,8 +623,11 @@ pub struct SensorConfig {
     pub exposure: ExposureSetting,
     /// Percentile of the object's pixels auto exposure aims at, (0, 100].
     pub auto_percentile: f64,
-    /// Fraction of saturation that percentile reaches, (0, 1].
+    /// Fraction of saturation that percentile (or the mean) reaches, (0, 1].
     pub auto_fraction: f64,
+    /// "percentile" (default) or "mean": which statistic of the object's pixels auto
+    /// exposure sets to `auto_fraction` of saturation.
+    pub auto_statistic: AutoStatistic,
     /// Quantum efficiency at `wavelength_nm`, (0, 1].
     pub quantum_efficiency: f64,
     /// System gain K, DN per electron at `bit_depth`, (0, 1000].
@@ -640,6 +656,7 @@ impl Default for SensorConfig {
             exposure: ExposureSetting::Auto(AutoExposure),
             auto_percentile: 99.5,
             auto_fraction: 0.9,
+            auto_statistic: AutoStatistic::Percentile,
             quantum_efficiency: 0.6,
             gain_dn_per_electron: 0.025,
             dark_noise_electrons: 7.0,
