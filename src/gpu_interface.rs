@@ -94,7 +94,9 @@ mod tests {
         assert_eq!(std::mem::size_of::<PathPush>(), 32);
         // Push constants: 128 bytes is all Vulkan guarantees.
         assert_eq!(std::mem::size_of::<ImagePush>(), 128);
-        assert_eq!(PathTraceBinding::COUNT, 17);
+        assert_eq!(PathTraceBinding::COUNT, 18);
+        assert_eq!(PathTraceBinding::AccumSq.at(2), 19);
+        assert_eq!(std::mem::offset_of!(PathParams, accum_sq), 188);
         assert_eq!(PathTraceBinding::CurvedMaps.at(2), 15);
         assert_eq!(PathTraceBinding::Moments0.at(2), 16);
         assert_eq!(PathTraceBinding::LightGeometry.at(2), 12);
@@ -114,6 +116,7 @@ mod tests {
             "struct LightBlock",
             "#define PT_LIGHT_LIST",
             "#define PT_MOMENTS2",
+            "#define PT_ACCUM_SQ",
             "#define FILTER_LEAN 1u",
         ] {
             assert!(glsl.contains(name), "{name} missing from interface.glsl");

@@ -451,6 +451,8 @@ fn a_noise_target_picks_each_images_spp() {
             e.spp
         );
         assert!(e.stage_seconds.contains_key("render.noise_estimate"));
+        assert_eq!(e.noise_checks.last(), Some(&(e.spp, ratio)));
+        assert!(e.noise_checks.windows(2).all(|w| w[0].0 < w[1].0));
     }
     assert!(
         entries.iter().any(|e| e.spp < 256),

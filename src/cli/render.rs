@@ -151,6 +151,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     })?;
     let img = frame.radiance;
     bar.finish_and_clear();
+    for e in &frame.noise_checks {
+        eprintln!(
+            "noise check: {} spp, render noise / camera noise {:.3}",
+            e.spp, e.ratio
+        );
+    }
     if let Some(e) = &frame.noise {
         eprintln!(
             "noise target {}: stopped at {} spp, render noise {:.3} DN rms over camera noise {:.3} DN rms = {:.3} ({} object pixels)",

@@ -35,7 +35,7 @@ pub struct GpuRenderer {
     /// The timeline of the last image (CPU phases, GPU passes).
     profile: Option<Profiler>,
     /// Samples and noise estimate of the last image.
-    samples: Option<(u32, Option<NoiseEstimate>)>,
+    samples: Option<(u32, Vec<NoiseEstimate>)>,
 }
 
 impl GpuRenderer {
@@ -141,8 +141,8 @@ impl ImageRenderer for GpuRenderer {
         self.profile.as_ref()
     }
 
-    fn last_samples(&self) -> Option<(u32, Option<NoiseEstimate>)> {
-        self.samples
+    fn last_samples(&self) -> Option<(u32, Vec<NoiseEstimate>)> {
+        self.samples.clone()
     }
 
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
@@ -217,7 +217,7 @@ impl ImageRenderer for GpuRenderer {
                 .push(("render.noise_estimate".into(), secs(&["noise estimate"])));
         }
         self.profile = Some(profiler);
-        self.samples = Some((frame.spp, frame.noise));
+        self.samples = Some((frame.spp, frame.noise_checks.clone()));
         self.ctx.check_validation().map_err(|e| e.to_string())?;
         let ann = frame
             .annotation

@@ -187,9 +187,9 @@ pub trait ImageRenderer {
         None
     }
     /// Samples per pixel of the last `render` call and, when the request had a noise
-    /// target, the criterion's last estimate; None: the request's `spp` (a renderer
-    /// without the noise criterion ignores `noise`).
-    fn last_samples(&self) -> Option<(u32, Option<crate::render::noise::NoiseEstimate>)> {
+    /// target, the criterion's estimates in order (the last at those samples); None: the
+    /// request's `spp` (a renderer without the noise criterion ignores `noise`).
+    fn last_samples(&self) -> Option<(u32, Vec<crate::render::noise::NoiseEstimate>)> {
         None
     }
 }

@@ -321,6 +321,10 @@ pub struct ManifestEntry {
     /// temporal noise at `spp` (rms of each over the object's pixels; src/render/noise.rs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_ratio: Option<f64>,
+    /// With `[render] noise_target`: every check of the render, `[spp, ratio]` in order
+    /// (the last is `spp`, `noise_ratio`): the estimated error per spp.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub noise_checks: Vec<(u32, f64)>,
     pub noise_sigma: Option<f64>,
     /// The camera's intrinsics and lens at the image's resolution (OpenCV camera matrix
     /// and distortion; the pose is `viewpoint` / `pose`).
@@ -1055,8 +1059,8 @@ struct RenderedItem<'p> {
     renderer: String,
     /// Samples per pixel rendered (`[render] spp`, or fewer with `noise_target`).
     spp: u32,
-    /// The noise criterion's final ratio (with `noise_target`).
-    noise_ratio: Option<f64>,
+    /// The noise criterion's checks, (spp, ratio) in order (with `noise_target`).
+    noise_checks: Vec<(u32, f64)>,
 }
 
 /// State kept between images by the stage that makes their inputs: the current
@@ -1253,14 +1257,14 @@ fn render_stage<'p>(
     img.check(&req).map_err(fail)?;
     laps.stage("render", &mut stages);
     stages.extend(renderer.last_stages());
-    let (spp, estimate) = renderer.last_samples().unwrap_or((req.spp, None));
+    let (spp, checks) = renderer.last_samples().unwrap_or((req.spp, Vec::new()));
     Ok(RenderedItem {
         item,
         img,
         stages,
         renderer: renderer.describe(),
         spp,
-        noise_ratio: estimate.map(|e| e.ratio),
+        noise_checks: checks.iter().map(|e| (e.spp, e.ratio)).collect(),
     })
 }
 
@@ -1282,7 +1286,7 @@ fn write_stage(
         mut stages,
         renderer,
         spp,
-        noise_ratio,
+        noise_checks,
     } = rendered;
     let job = &prep.job;
     let inst: &InstancePlan = &prep.plan.instances[item.instance];
@@ -1343,7 +1347,8 @@ fn write_stage(
         spp,
         bounces: job.render.bounces as u32,
         renderer,
-        noise_ratio,
+        noise_ratio: noise_checks.last().map(|c| c.1),
+        noise_checks,
         noise_sigma,
         camera: Some(camera.clone()),
         exposure_ev: exposed.exposure_ev,

@@ -61,6 +61,8 @@ pub struct Frame {
     pub spp: u32,
     /// The noise criterion's last estimate, at `spp` (with a noise target only).
     pub noise: Option<NoiseEstimate>,
+    /// Every estimate made, in order (the last is `noise`): the error per spp.
+    pub noise_checks: Vec<NoiseEstimate>,
 }
 
 /// Renders one view of `scene`; `progress(done_spp)` after each batch (one graph each).
@@ -94,7 +96,7 @@ pub fn render_frame(
     let mut next_check = opts.noise.map(|n| n.first_check(spp));
     // (exposure mask, object mask) from the annotation of the first batch.
     let mut masks: Option<(Vec<bool>, Vec<bool>)> = None;
-    let mut estimate: Option<NoiseEstimate> = None;
+    let mut checks: Vec<NoiseEstimate> = Vec::new();
     while done < spp {
         let count = batch.min(spp - done);
         let mut g = Graph::new(tracer.context(), "path trace");
@@ -113,7 +115,7 @@ pub fn render_frame(
             let est = crate::vk::timed(opts.profiler, "noise estimate", || {
                 noise_estimate(&view, stop, done, &mut masks)
             })?;
-            estimate = Some(est);
+            checks.push(est);
             if est.ratio <= stop.target {
                 break;
             }
@@ -132,7 +134,8 @@ pub fn render_frame(
         radiance,
         annotation,
         spp: done,
-        noise: estimate,
+        noise: checks.last().copied(),
+        noise_checks: checks,
     })
 }
 
