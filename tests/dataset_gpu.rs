@@ -414,21 +414,15 @@ fn a_noise_target_picks_each_images_spp() {
     let mut r = GpuRenderer::new(AccelChoice::Software, true)
         .unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
     let target = 4.0;
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/scenes/smoke-dataset.toml"
-    ))
-    .unwrap()
-    .replace("width = 64", "width = 32")
-    .replace("height = 48", "height = 24")
-    .replace(
-        "spp = 4",
-        &format!("spp = 256\nnoise_target = {target}\nmin_spp = 8"),
-    )
-    .replace(
-        "[texture]",
-        "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\n[texture]",
-    );
+    let text = common::small_smoke_text()
+        .replace(
+            "spp = 4",
+            &format!("spp = 256\nnoise_target = {target}\nmin_spp = 8"),
+        )
+        .replace(
+            "[texture]",
+            "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\n[texture]",
+        );
     let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
     let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
     let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();

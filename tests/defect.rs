@@ -164,6 +164,26 @@ fn same_seed_same_mesh_bit_for_bit_and_other_seeds_differ() {
     assert_ne!(bits(&one), bits(&other));
 }
 
+/// Volume removed by defect `instance` below face frame `f` (projected area times mean
+/// corner depth per triangle: exact for the piecewise-linear surface).
+fn removed_volume(out: &Mesh, f: FaceFrame, instance: u16) -> f64 {
+    let n = f.normal.as_dvec3();
+    let mut removed = 0.0;
+    for t in 0..out.triangles.len() {
+        if out.labels[t].instance == instance {
+            let area = 0.5 * out.area_normal(t).as_dvec3().dot(n);
+            removed += area
+                * out
+                    .corners(t)
+                    .iter()
+                    .map(|p| depth(f, p.as_dvec3()))
+                    .sum::<f64>()
+                / 3.0;
+        }
+    }
+    removed
+}
+
 fn dents_only(text: &str) -> DefectSpec {
     DefectSpec::from_toml_str(text, "test").unwrap()
 }
@@ -366,20 +386,7 @@ fn a_round_scratch_is_a_half_tube() {
     }
     assert!(across > 100, "only {across} vertices inside the groove");
     // Volume: the half tube along the path plus a hemisphere at the two ends together.
-    let n = f.normal.as_dvec3();
-    let mut removed = 0.0;
-    for t in 0..out.triangles.len() {
-        if out.labels[t].instance == 1 {
-            let area = 0.5 * out.area_normal(t).as_dvec3().dot(n);
-            removed += area
-                * out
-                    .corners(t)
-                    .iter()
-                    .map(|p| depth(f, p.as_dvec3()))
-                    .sum::<f64>()
-                / 3.0;
-        }
-    }
+    let removed = removed_volume(&out, f, 1);
     let pi = std::f64::consts::PI;
     let analytic = pi * r * r / 2.0 * s.length_mm + 2.0 / 3.0 * pi * r.powi(3);
     // Piecewise-linear chords under a circle remove a little less (edges of w / 8).
@@ -573,20 +580,7 @@ fn a_curvy_scratch_removes_the_volume_of_its_path_length() {
         unreachable!()
     };
     let f = frame_of(&face_frames(&b), "B");
-    let n = f.normal.as_dvec3();
-    let mut removed = 0.0;
-    for t in 0..out.triangles.len() {
-        if out.labels[t].instance == 1 {
-            let area = 0.5 * out.area_normal(t).as_dvec3().dot(n);
-            removed += area
-                * out
-                    .corners(t)
-                    .iter()
-                    .map(|p| depth(f, p.as_dvec3()))
-                    .sum::<f64>()
-                / 3.0;
-        }
-    }
+    let removed = removed_volume(&out, f, 1);
     let (w, d) = (s.width_mm, s.depth_mm[0]);
     let caps = std::f64::consts::PI / 2.0 * (w / 2.0).powi(2) * d;
     let measured = (removed - caps) / (2.0 / 3.0 * w * d);

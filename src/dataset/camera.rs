@@ -143,6 +143,25 @@ pub struct Exposed {
     pub exposure_ev: Option<f64>,
 }
 
+/// The finish's exposure factor (1 when it has none) and the image's random exposure
+/// in EV stops (None when the job has no jitter), shared by the sensor step and the
+/// noise target so both expose alike.
+fn exposure_scale(job: &Job, finish: &str, image_seed: u64) -> (f64, Option<f64>) {
+    let finish_factor = job
+        .finishes
+        .iter()
+        .find(|f| f.name == finish)
+        .map_or(1.0, |f| f.exposure_factor());
+    (finish_factor, exposure_jitter_ev(job, image_seed))
+}
+
+/// The lens's working f-number, which the EMVA sensor's radiometry needs.
+fn lens_f_number(camera: &CameraRecord) -> Result<f64, String> {
+    camera.f_number.ok_or_else(|| {
+        "the [sensor] model needs camera.f_number (the lens's working f-number)".into()
+    })
+}
+
 /// The sensor step of one image: linear radiance (row-major, `camera`'s size) to 8-bit
 /// units. `finish`: the image's finish (its `exposure` factor); `faces`: the first hit's
 /// face id per pixel (auto exposure looks at faces 1..=3); `image_seed`: the image's seed
@@ -160,12 +179,7 @@ pub fn expose(
     radiance: &[f32],
     faces: &[u8],
 ) -> Result<Exposed, String> {
-    let finish_factor = job
-        .finishes
-        .iter()
-        .find(|f| f.name == finish)
-        .map_or(1.0, |f| f.exposure_factor());
-    let ev = exposure_jitter_ev(job, image_seed);
+    let (finish_factor, ev) = exposure_scale(job, finish, image_seed);
     match &job.sensor.model {
         SensorModel::Linear { exposure } => {
             let mut factor = exposure * finish_factor;
@@ -179,9 +193,7 @@ pub fn expose(
             })
         }
         SensorModel::Emva(sensor) => {
-            let n = camera
-                .f_number
-                .ok_or("the [sensor] model needs camera.f_number (the lens's working f-number)")?;
+            let n = lens_f_number(camera)?;
             let resp =
                 Responsivity::new(&camera.sensor_camera(), camera.focal_mm as f64, n, sensor);
             let mask: Vec<bool> = faces.iter().map(|&f| (1..=3).contains(&f)).collect();
@@ -224,15 +236,8 @@ pub fn noise_stop(
     let SensorModel::Emva(sensor) = &job.sensor.model else {
         return Err("render.noise_target needs the EMVA 1288 sensor".into());
     };
-    let n = camera
-        .f_number
-        .ok_or("the [sensor] model needs camera.f_number (the lens's working f-number)")?;
-    let finish_factor = job
-        .finishes
-        .iter()
-        .find(|f| f.name == finish)
-        .map_or(1.0, |f| f.exposure_factor());
-    let ev = exposure_jitter_ev(job, image_seed);
+    let n = lens_f_number(camera)?;
+    let (finish_factor, ev) = exposure_scale(job, finish, image_seed);
     Ok(Some(crate::render::noise::NoiseStop {
         camera: crate::render::noise::CameraNoise {
             resp: Responsivity::new(&camera.sensor_camera(), camera.focal_mm as f64, n, sensor),

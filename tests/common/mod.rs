@@ -53,6 +53,18 @@ pub fn run_small_smoke(
     run_small_smoke_with(renderer, out, shard, synosis::dataset::DEFAULT_IN_FLIGHT)
 }
 
+/// scenes/smoke-dataset.toml at 32 x 24 pixels (its `spp = 4` line left for the caller
+/// to replace).
+pub fn small_smoke_text() -> String {
+    std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/smoke-dataset.toml"
+    ))
+    .unwrap()
+    .replace("width = 64", "width = 32")
+    .replace("height = 48", "height = 24")
+}
+
 /// As [`run_small_smoke`], with `in_flight` images in flight (1: one after the other).
 pub fn run_small_smoke_with(
     renderer: &mut dyn synosis::dataset::ImageRenderer,
@@ -61,14 +73,7 @@ pub fn run_small_smoke_with(
     in_flight: usize,
 ) -> synosis::dataset::RunReport {
     use synosis::dataset::{self, RunOptions};
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/scenes/smoke-dataset.toml"
-    ))
-    .unwrap()
-    .replace("width = 64", "width = 32")
-    .replace("height = 48", "height = 24")
-    .replace("spp = 4", "spp = 1");
+    let text = small_smoke_text().replace("spp = 4", "spp = 1");
     let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
     let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
     let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
