@@ -107,20 +107,20 @@ struct RunArgs {
 /// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
 /// on a GPU, 1 on a CPU implementation (lavapipe), where the render uses the same cores
 /// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run").
-/// A `RunOptions::progress` callback that moves `bar` to (done, total).
-pub(super) fn bar_progress(bar: &indicatif::ProgressBar) -> impl FnMut(usize, usize) + '_ {
-    |done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    }
-}
-
 pub(super) fn in_flight(arg: Option<usize>, renderer: &GpuRenderer) -> usize {
     arg.unwrap_or(if renderer.device_is_cpu() {
         1
     } else {
         dataset::DEFAULT_IN_FLIGHT
     })
+}
+
+/// A `RunOptions::progress` callback that moves `bar` to (done, total).
+pub(super) fn bar_progress(bar: &indicatif::ProgressBar) -> impl FnMut(usize, usize) + '_ {
+    |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    }
 }
 
 fn resolve_shard(a: &RunArgs) -> Result<Shard> {

@@ -13,6 +13,7 @@ use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
 use synosis::scene::assemble::load_object_inspected;
 use synosis::scene::config::{SceneConfig, parse_view};
+use synosis::scene::mesh::is_inspected;
 use synosis::trace::{AccelChoice, resolve};
 use synosis::vk::{Context, ContextOptions, Profiler};
 
@@ -133,11 +134,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 exposure_factor: 1.0,
             },
             target: target as f64,
+            // NoiseStop::first_check keeps it within [2, spp].
             min_spp: cfg
                 .render
                 .min_spp
-                .unwrap_or(synosis::render::noise::DEFAULT_MIN_SPP)
-                .min(cfg.render.spp),
+                .unwrap_or(synosis::render::noise::DEFAULT_MIN_SPP),
         }),
         _ => None,
     };
@@ -183,7 +184,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             let mask: Option<Vec<bool>> = frame
                 .annotation
                 .as_ref()
-                .map(|a| a.face.iter().map(|&f| f != 0).collect());
+                .map(|a| a.face.iter().map(|&f| is_inspected(f)).collect());
             let t = exposure_time_s(&resp, &img.data, mask.as_deref(), s).context("[sensor]")?;
             let cap =
                 capture(&resp, &img.data, t, s, cfg.render.seed as u64).context("[sensor]")?;

@@ -16,6 +16,7 @@ use crate::render::sensor::{Responsivity, capture, exposure_time_s, max_code};
 use crate::scene::Camera;
 use crate::scene::calibration::{Distortion, Intrinsics};
 use crate::scene::config::CameraConfig;
+use crate::scene::mesh::is_inspected;
 
 /// The intrinsics and lens of an image, at the rendered resolution (the manifest's
 /// `camera`): OpenCV's camera matrix (pixel centres at integer coordinates) and
@@ -196,7 +197,7 @@ pub fn expose(
             let n = lens_f_number(camera)?;
             let resp =
                 Responsivity::new(&camera.sensor_camera(), camera.focal_mm as f64, n, sensor);
-            let mask: Vec<bool> = faces.iter().map(|&f| (1..=3).contains(&f)).collect();
+            let mask: Vec<bool> = faces.iter().map(|&f| is_inspected(f)).collect();
             let t = exposure_time_s(&resp, radiance, Some(&mask), sensor)
                 .map_err(|e| e.to_string())?
                 * finish_factor

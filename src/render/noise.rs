@@ -142,18 +142,14 @@ impl CameraNoise {
             camera += camera_variance_dn(&self.sensor, mu);
             pixels += 1;
         }
-        let (render_rms_dn, camera_rms_dn) = if pixels == 0 {
-            (0.0, 0.0)
+        let (render_rms_dn, camera_rms_dn, ratio) = if pixels == 0 {
+            (0.0, 0.0, 0.0)
         } else {
-            (
+            let (r, c) = (
                 (render / pixels as f64).sqrt(),
                 (camera / pixels as f64).sqrt(),
-            )
-        };
-        let ratio = if pixels == 0 {
-            0.0
-        } else {
-            render_rms_dn / camera_rms_dn
+            );
+            (r, c, r / c)
         };
         Ok(NoiseEstimate {
             spp: n,

@@ -13,6 +13,7 @@ use super::tracer::PathTracer;
 use super::view::View;
 use crate::graph::Graph;
 use crate::scene::assemble::ViewSetup;
+use crate::scene::mesh::is_inspected;
 use crate::trace::Backend;
 use crate::vk::{Context, Profiler, VkError};
 
@@ -153,7 +154,7 @@ fn noise_estimate(
     if masks.is_none() {
         *masks = Some(match view.read_annotation()? {
             Some(a) => (
-                a.face.iter().map(|f| (1..=3).contains(f)).collect(),
+                a.face.iter().map(|&f| is_inspected(f)).collect(),
                 a.face.iter().map(|&f| f != 0).collect(),
             ),
             None => (vec![true; sum.len()], vec![true; sum.len()]),

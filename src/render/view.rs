@@ -174,23 +174,15 @@ impl<'s> View<'s> {
             emitters: Buffer::from_slice(ctx, "light list", &blocks, storage)?,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
-            accum_sq: if variance {
-                Buffer::new(
-                    ctx,
-                    "radiance square sum",
-                    n * 4,
-                    usage,
-                    MemoryKind::Readback,
-                )?
-            } else {
-                // A binding may not be empty; never written (accum_sq = 0).
-                Buffer::new(
-                    ctx,
-                    "radiance square sum (unused)",
-                    4,
-                    usage,
-                    MemoryKind::Readback,
-                )?
+            accum_sq: {
+                // Without `variance` one float: a binding may not be empty, and the shader
+                // never writes it (accum_sq = 0).
+                let (name, bytes) = if variance {
+                    ("radiance square sum", n * 4)
+                } else {
+                    ("radiance square sum (unused)", 4)
+                };
+                Buffer::new(ctx, name, bytes, usage, MemoryKind::Readback)?
             },
             variance,
             annotation,
@@ -308,11 +300,10 @@ impl<'s> View<'s> {
     pub fn read(&self, spp: u32) -> Result<(Vec<f32>, Option<Annotation>), RenderError> {
         let sum: Vec<f32> = self.accum.read()?;
         let inv = 1.0 / spp as f32;
-        let annotation = match &self.annotation {
-            Some((targets, _)) => Some(targets.read()?),
-            None => None,
-        };
-        Ok((sum.iter().map(|v| v * inv).collect(), annotation))
+        Ok((
+            sum.iter().map(|v| v * inv).collect(),
+            self.read_annotation()?,
+        ))
     }
 }
 

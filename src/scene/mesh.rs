@@ -13,6 +13,12 @@ pub const FACE_A: FaceId = 1;
 pub const FACE_B: FaceId = 2;
 pub const FACE_C: FaceId = 3;
 
+/// Whether `face` is one of the inspected faces A, B, C (the pixels auto exposure
+/// looks at).
+pub fn is_inspected(face: FaceId) -> bool {
+    matches!(face, FACE_A | FACE_B | FACE_C)
+}
+
 /// Defect class ids, as in the masks: 0 background / no defect, 1 dent, 2 scratch.
 pub const CLASS_NONE: u8 = 0;
 pub const CLASS_DENT: u8 = 1;

@@ -21,7 +21,7 @@ use std::collections::HashMap;
 
 use glam::{DVec3, Vec3};
 
-use super::mesh::{FACE_A, FACE_B, FACE_C, FACE_OTHER, FaceId, Mesh};
+use super::mesh::{FACE_OTHER, FaceId, Mesh, is_inspected};
 use super::testbody::frame_axes;
 
 /// Coplanarity tolerances.
@@ -229,7 +229,7 @@ pub fn planar_regions(mesh: &Mesh, tol: &RegionTolerance) -> Vec<PlanarRegion> {
             };
             let face = faces
                 .iter()
-                .filter(|(f, _)| matches!(**f, FACE_A | FACE_B | FACE_C))
+                .filter(|(f, _)| is_inspected(**f))
                 .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
                 .map_or(FACE_OTHER, |(f, _)| *f);
             // Sort key: the plane, quantised to the tolerances.
