@@ -6,12 +6,15 @@
 // hits of camera rays against the same geometry the image is rendered from.
 // Under a thin lens (cam.eye.w > 0) the rays are the path tracer's first n x n primary
 // rays (same sampler, seed, pixel jitter and aperture points): the label is the label
-// word most of them hit (ties: the earliest sample), coverage the share hitting a defect.
+// word most of them hit (ties: the earliest sample), coverage the share hitting a defect
+// (common/labels.glsl; the path tracer resolves its own samples' words the same way when
+// `[render] labels` takes them from its samples, and then this pass does not run).
 #include "common/trace.glsl"
 #include "interface.glsl"
 #include "common/tile.glsl"
 #include "common/camera.glsl"
 #include "common/sampler.glsl"
+#include "common/labels.glsl"
 
 layout(local_size_x = TILE, local_size_y = TILE) in;
 
@@ -36,9 +39,8 @@ uint label_of_ray(vec3 o, vec3 d) {
 
 // Thin lens: the path tracer's first n x n primary rays of pixel i.
 void lens_labels(uint i, uint px, uint py, uint n) {
-    uint count = min(n * n, 256u);
-    uint words[256];
-    uint defect = 0u;
+    uint count = min(n * n, LABEL_MAX_SAMPLES);
+    uint words[LABEL_MAX_SAMPLES];
     for (uint s = 0u; s < count; ++s) {
         Sampler rng = sampler_init(uint(pc.cam.centre.w), i, s, pc.seed);
         vec2 jitter = sample_2d(rng);
@@ -46,19 +48,9 @@ void lens_labels(uint i, uint px, uint py, uint n) {
         vec3 o, d;
         camera_ray(pc.cam, vec2(px, py) + jitter, vec2(pc.width, pc.height), lens, o, d);
         words[s] = label_of_ray(o, d);
-        defect += ((words[s] >> LABEL_CLASS_SHIFT) & 0xffu) != 0u ? 1u : 0u;
     }
-    uint best = words[0], best_n = 0u;
-    for (uint a = 0u; a < count; ++a) {
-        uint k = 0u;
-        for (uint b = 0u; b < count; ++b) k += words[b] == words[a] ? 1u : 0u;
-        if (k > best_n) {
-            best_n = k;
-            best = words[a];
-        }
-    }
-    ids[i] = best;
-    coverage[i] = float(defect) / float(count);
+    ids[i] = label_majority(words, count);
+    coverage[i] = label_coverage(words, count);
 }
 
 void main() {
@@ -77,7 +69,7 @@ void main() {
         for (uint sx = 0u; sx < n; ++sx) {
             vec2 sub = (vec2(sx, sy) + 0.5) / float(n);
             uint l = label_at(vec2(px, py) + sub);
-            defect += ((l >> LABEL_CLASS_SHIFT) & 0xffu) != 0u ? 1u : 0u;
+            defect += label_is_defect(l) ? 1u : 0u;
         }
     }
     coverage[i] = float(defect) / float(n * n);

@@ -14,6 +14,7 @@
 #include "common/camera.glsl"
 #include "common/sampler.glsl"
 #include "common/offset_ray.glsl"
+#include "common/labels.glsl"
 
 layout(local_size_x = TILE, local_size_y = TILE) in;
 
@@ -31,6 +32,12 @@ layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
 // Per-pixel sum of squared sample radiance, written only when prm.accum_sq != 0 (the
 // variance estimate behind `[render] noise_target`; else a placeholder of one float).
 layout(std430, set = 0, binding = PT_ACCUM_SQ) buffer AccumSq { float accum_sq[]; };
+// Labels from the path tracer's own samples (pc.labels = n != 0): the per-triangle label
+// words (face | class << 8 | instance << 16, as annotate.comp reads them) and the
+// annotation targets; otherwise one-word placeholders never written.
+layout(std430, set = 0, binding = PT_LABEL_WORDS) readonly buffer LabelWords { uint label_words[]; };
+layout(std430, set = 0, binding = PT_LABEL_IDS) writeonly buffer LabelIds { uint label_ids[]; };
+layout(std430, set = 0, binding = PT_LABEL_COVERAGE) writeonly buffer LabelCoverage { float label_coverage_out[]; };
 #include "common/material.glsl"
 
 // Slope maps, one header per slot: slot 0 (table, light) never has a map, slot r + 1 is
@@ -391,7 +398,10 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
-float radiance_sample(uint pixel, uint px, uint py, uint s) {
+// `word`: the label word of the primary ray's first hit (0: nothing, or a triangle past
+// the labelled ones, the view's light), as annotate.comp's label_of_ray.
+float radiance_sample(uint pixel, uint px, uint py, uint s, out uint word) {
+    word = 0u;
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec2 jitter = sample_2d(rng);
     // Thin lens: the next two dimensions pick the aperture point (the pinhole draws none).
@@ -411,6 +421,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s) {
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
+        if (depth == 0u && h.prim != NO_HIT && h.prim < uint(label_words.length())) {
+            word = label_words[h.prim];
+        }
         if (h.prim == NO_HIT) break;   // no environment light
         Tri t = fetch_tri(h.prim);
         uint mat = mat_word(h.prim) & 0xffu;
@@ -551,11 +564,21 @@ void main() {
     uint i = py * prm.width + px;
     float sum = 0.0;
     float sq = 0.0;
+    // Labels from this dispatch's first n x n samples (the caller makes sure it starts at
+    // sample 0 and holds them): the annotation pass's thin-lens rays, traced once.
+    uint label_count = min(pc.labels * pc.labels, min(pc.sample_count, LABEL_MAX_SAMPLES));
+    uint words[LABEL_MAX_SAMPLES];
     for (uint s = 0u; s < pc.sample_count; s++) {
-        float r = radiance_sample(i, px, py, pc.sample_start + s);
+        uint word;
+        float r = radiance_sample(i, px, py, pc.sample_start + s, word);
+        if (s < label_count) words[s] = word;
         sum += r;
         sq += r * r;
     }
     accum[i] += sum;
     if (prm.accum_sq != 0u) accum_sq[i] += sq;
+    if (label_count > 0u) {
+        label_ids[i] = label_majority(words, label_count);
+        label_coverage_out[i] = label_coverage(words, label_count);
+    }
 }

@@ -94,7 +94,9 @@ mod tests {
         assert_eq!(std::mem::size_of::<PathPush>(), 32);
         // Push constants: 128 bytes is all Vulkan guarantees.
         assert_eq!(std::mem::size_of::<ImagePush>(), 128);
-        assert_eq!(PathTraceBinding::COUNT, 18);
+        assert_eq!(PathTraceBinding::COUNT, 21);
+        assert_eq!(PathTraceBinding::LabelCoverage.at(2), 22);
+        assert_eq!(std::mem::offset_of!(PathPush, labels), 8);
         assert_eq!(PathTraceBinding::AccumSq.at(2), 19);
         assert_eq!(std::mem::offset_of!(PathParams, accum_sq), 188);
         assert_eq!(PathTraceBinding::CurvedMaps.at(2), 15);

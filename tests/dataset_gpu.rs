@@ -160,6 +160,7 @@ fn face_textures_reach_the_image() {
             bounces: 2,
             seed: 3,
             noise: None,
+            labels: Default::default(),
         };
         r.render(&req).unwrap()
     };
@@ -255,6 +256,7 @@ rim_width = 0.5
             bounces: 2,
             seed: 5,
             noise: None,
+            labels: Default::default(),
         };
         let img = r.render(&req).unwrap();
         let label: Vec<u8> = img.class.clone();

@@ -161,6 +161,7 @@ impl ImageRenderer for GpuRenderer {
             req.alpha,
         )?;
         let mut cfg = cfg;
+        cfg.render.labels = req.labels;
         if !req.lights.is_empty() {
             // The job's lights replace the default ring.
             cfg.light.list = Some(req.lights.to_vec());

@@ -227,6 +227,11 @@ pub struct RenderSettings {
     /// [`DEFAULT_MIN_SPP`] (or `spp` when smaller).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_spp: Option<i64>,
+    /// Where the labels come from: "auto" (default: the path tracer's own samples under
+    /// a thin lens, the annotation pass under a pinhole), "pass" or "samples"
+    /// (docs/dataset.md, "Labels from the path tracer's samples").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub labels: Option<crate::scene::config::LabelSource>,
 }
 
 /// `[render] min_spp` when not given (`render::noise::DEFAULT_MIN_SPP`).

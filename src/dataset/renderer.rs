@@ -106,6 +106,8 @@ pub struct ImageRequest<'a> {
     /// Stop before `spp` once the render noise is below the camera's by this criterion
     /// (`[render] noise_target`; `camera::noise_stop`). None: exactly `spp`.
     pub noise: Option<&'a crate::render::noise::NoiseStop>,
+    /// Where the labels come from (`[render] labels`; default "auto").
+    pub labels: crate::scene::config::LabelSource,
 }
 
 /// What the renderer returns, every buffer row-major with row 0 at the top.

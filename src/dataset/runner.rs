@@ -1244,6 +1244,7 @@ fn render_stage<'p>(
         bounces: job.render.bounces as u32,
         seed: item.seed,
         noise: noise.as_ref(),
+        labels: job.render.labels.unwrap_or_default(),
     };
     let fail = |message: String| DatasetError::Render {
         index: item.index,

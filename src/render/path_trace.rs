@@ -54,7 +54,8 @@ pub struct FrameOptions<'a> {
 }
 
 /// A rendered image and, when asked for, its annotation from the same camera rays'
-/// first hits (the annotation pass runs in the first batch's graph).
+/// first hits (the annotation pass in the first batch's graph, or the first batch's own
+/// samples: `[render] labels`).
 pub struct Frame {
     pub radiance: Radiance,
     pub annotation: Option<Annotation>,
@@ -64,6 +65,9 @@ pub struct Frame {
     pub noise: Option<NoiseEstimate>,
     /// Every estimate made, in order (the last is `noise`): the error per spp.
     pub noise_checks: Vec<NoiseEstimate>,
+    /// The annotation came from the path tracer's own first n x n samples (`[render]
+    /// labels`), not from the annotation pass; false without an annotation.
+    pub labels_from_samples: bool,
 }
 
 /// Renders one view of `scene`; `progress(done_spp)` after each batch (one graph each).
@@ -137,6 +141,7 @@ pub fn render_frame(
         spp: done,
         noise: checks.last().copied(),
         noise_checks: checks,
+        labels_from_samples: view.labels_from_samples(),
     })
 }
 

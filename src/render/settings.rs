@@ -1,7 +1,7 @@
 //! Plain render settings: what the path tracer needs besides the scene, independent of
 //! the scene file (`scene::config` converts into these).
 
-pub use crate::scene::config::{LightSampling, SamplerKind, TextureFilter};
+pub use crate::scene::config::{LabelSource, LightSampling, SamplerKind, TextureFilter};
 use crate::scene::config::{MaterialConfig, RenderConfig, SceneConfig};
 
 /// The object's rough conductor (GGX, Kulla-Conty energy compensation optional).
@@ -41,6 +41,8 @@ pub struct RenderSettings {
     pub texture_filter: TextureFilter,
     /// Footprint multiplier of "lean" (`[render] texture_filter_scale`).
     pub texture_filter_scale: f32,
+    /// Where the labels come from when the render is annotated (`[render] labels`).
+    pub labels: LabelSource,
 }
 
 impl RenderSettings {
@@ -54,6 +56,7 @@ impl RenderSettings {
             material: material.into(),
             texture_filter: r.texture_filter,
             texture_filter_scale: r.texture_filter_scale,
+            labels: r.labels,
         }
     }
 }

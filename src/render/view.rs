@@ -89,6 +89,12 @@ pub struct View<'s> {
     accum_sq: Buffer,
     variance: bool,
     annotation: Option<(AnnotationTargets, u32)>,
+    /// The path tracer's first batch labels the pixels from its own samples
+    /// (`[render] labels`, [`LabelSource::from_samples`]) instead of the annotation pass.
+    labels_from_samples: bool,
+    /// One-word stand-ins for the path tracer's label targets when it does not label
+    /// (a binding may not be empty; the shader never writes them).
+    label_placeholders: (Buffer, Buffer),
     camera: Camera,
     tiling: Tiling,
     /// (sampler kind, seed) of the path tracer, which the thin-lens annotation follows.
@@ -165,6 +171,16 @@ impl<'s> View<'s> {
             Some(grid) => Some((AnnotationTargets::new(ctx, width, height)?, grid)),
             None => None,
         };
+        let first_batch = settings.batch_spp.max(1).min(settings.spp);
+        let labels_from_samples = annotate_grid.is_some_and(|grid| {
+            let lens = cam.lens_radius_mm > 0.0;
+            settings.labels.from_samples(grid, lens, first_batch)
+        });
+        let placeholder = |name| Buffer::new(ctx, name, 4, storage, MemoryKind::Device);
+        let label_placeholders = (
+            placeholder("label ids (unused)")?,
+            placeholder("label coverage (unused)")?,
+        );
         let usage = storage | vk::BufferUsageFlags::TRANSFER_DST;
         let n = width as u64 * height as u64;
         Ok(View {
@@ -186,14 +202,23 @@ impl<'s> View<'s> {
             },
             variance,
             annotation,
+            labels_from_samples,
+            label_placeholders,
             camera: *cam,
             tiling: Tiling::new(width, height, ctx.info.max_workgroup_count[0]),
             sampling: (settings.sampler as u32, settings.seed),
         })
     }
 
+    /// Whether the annotation comes from the path tracer's own samples (`[render]
+    /// labels`) rather than the annotation pass; false without an annotation.
+    pub fn labels_from_samples(&self) -> bool {
+        self.labels_from_samples
+    }
+
     /// Adds samples `start .. start + count` to `g`; the first batch (start 0) clears the
-    /// accumulation and runs the annotation pass.
+    /// accumulation and labels the pixels: from its own first n x n samples when the view
+    /// labels from samples and the batch holds them, else by the annotation pass.
     pub fn record_batch<'a>(
         &'a self,
         tracer: &'a PathTracer,
@@ -219,36 +244,53 @@ impl<'s> View<'s> {
         let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(&texels[k]));
         let moments = self.scene.moment_buffers();
         let [m0, m1, m2] = [0, 1, 2].map(|k| g.import(&moments[k]));
+        let labels = g.import(&self.scene.labels);
+        // n: the path tracer labels from its first n x n samples (0: it does not), into
+        // `targets`.
+        let mut label_grid = 0u32;
+        let mut targets = None;
         if start == 0 {
             g.fill("clear radiance", &mut acc, 0);
             if self.variance {
                 g.fill("clear radiance squares", &mut acc_sq, 0);
             }
-            if let Some((targets, grid)) = &self.annotation {
-                let labels = g.import(&self.scene.labels);
-                let size = (self.camera.width, self.camera.height);
-                let (mut ids, mut cov) = (g.import(&targets.ids), g.import(&targets.coverage));
-                let cam = camera_block(&self.camera);
-                let sampling = (self.sampling.0, self.sampling.1);
-                record_annotate(
-                    g,
-                    &tracer.annotate,
-                    &refs,
-                    off,
-                    &labels,
-                    (&mut ids, &mut cov),
-                    &cam,
-                    size,
-                    *grid,
-                    &self.tiling,
-                    sampling,
-                );
+            if let Some((t, grid)) = &self.annotation {
+                let n = (*grid).clamp(1, 16);
+                let (mut ids, mut cov) = (g.import(&t.ids), g.import(&t.coverage));
+                if self.labels_from_samples && count >= n * n {
+                    label_grid = n;
+                    targets = Some((ids, cov));
+                } else {
+                    let size = (self.camera.width, self.camera.height);
+                    let cam = camera_block(&self.camera);
+                    let sampling = (self.sampling.0, self.sampling.1);
+                    record_annotate(
+                        g,
+                        &tracer.annotate,
+                        &refs,
+                        off,
+                        &labels,
+                        (&mut ids, &mut cov),
+                        &cam,
+                        size,
+                        *grid,
+                        &self.tiling,
+                        sampling,
+                    );
+                }
             }
         }
+        let (mut ids, mut cov) = targets.unwrap_or_else(|| {
+            (
+                g.import(&self.label_placeholders.0),
+                g.import(&self.label_placeholders.1),
+            )
+        });
         for (tiles, groups) in self.tiling.dispatches() {
             let push = PathPush {
                 sample_start: start,
                 sample_count: count,
+                labels: label_grid,
                 tiles,
                 ..Default::default()
             };
@@ -271,6 +313,9 @@ impl<'s> View<'s> {
                 .read(B::Moments1.at(off), &m1)
                 .read(B::Moments2.at(off), &m2)
                 .read_write(B::AccumSq.at(off), &mut acc_sq)
+                .read(B::LabelWords.at(off), &labels)
+                .write(B::LabelIds.at(off), &mut ids)
+                .write(B::LabelCoverage.at(off), &mut cov)
                 .push(&push)
                 .submit();
         }

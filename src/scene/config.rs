@@ -860,6 +860,47 @@ pub struct RenderConfig {
     /// Samples before the first noise check (with `noise_target`), [2, spp]; default 64
     /// (or `spp` when smaller).
     pub min_spp: Option<u32>,
+    /// Where the labels (class, instance, face, coverage) come from: "auto" (default),
+    /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
+    /// camera samples); [`LabelSource`].
+    pub labels: LabelSource,
+}
+
+/// Where a render's labels come from (`[render] labels`; docs/scene-format.md).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LabelSource {
+    /// "samples" under a thin lens, where they are the very rays the pass traces (labels
+    /// byte-identical, one trace fewer per ray); "pass" under a pinhole, whose centre ray
+    /// and stratified grid are not the path tracer's jittered samples. Both only where
+    /// "samples" can take them (see [`LabelSource::from_samples`]).
+    #[default]
+    Auto,
+    /// The annotation pass (glsl/annotate.comp): a second trace of n x n + 1 rays per
+    /// pixel (pinhole: centre ray + stratified grid; thin lens: the path tracer's first
+    /// n x n primary rays, traced again).
+    Pass,
+    /// The path tracer's first n x n samples of each pixel: the label word of each
+    /// primary hit, resolved as the pass resolves its thin-lens rays (majority word, ties
+    /// to the earliest sample; coverage = share hitting a defect). Needs the first batch
+    /// to hold n x n samples (`min(batch_spp, spp) >= n^2`); else the pass runs.
+    Samples,
+}
+
+impl LabelSource {
+    /// Whether a render labels from its samples: `grid` n (clamped to [1, 16], as the
+    /// pass clamps it) coverage samples per pixel side, a thin lens or not, `first_batch`
+    /// samples in the first batch (min(batch_spp, spp)). "samples" and "auto" fall back
+    /// to the pass when the first batch holds fewer than n^2 samples.
+    pub fn from_samples(self, grid: u32, thin_lens: bool, first_batch: u32) -> bool {
+        let n = grid.clamp(1, 16);
+        let enough = first_batch >= n * n;
+        match self {
+            LabelSource::Pass => false,
+            LabelSource::Samples => enough,
+            LabelSource::Auto => thin_lens && enough,
+        }
+    }
 }
 
 /// How the path tracer reads slope maps (`[render] texture_filter`).
@@ -899,6 +940,7 @@ impl Default for RenderConfig {
             texture_filter_scale: 1.0,
             noise_target: None,
             min_spp: None,
+            labels: LabelSource::Auto,
         }
     }
 }
