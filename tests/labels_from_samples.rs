@@ -8,7 +8,8 @@ mod common;
 use glam::Vec3;
 use synosis::render::annotate::Annotation;
 use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{Frame, FrameOptions, RenderScene, render_scene};
+use synosis::render::path_trace::RenderScene;
+use synosis::render::{Frame, FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
 use synosis::scene::config::{LabelSource, SceneConfig};
 use synosis::scene::{Mesh, TriLabel};
 use synosis::trace::Backend;
@@ -83,18 +84,37 @@ fn config(f_number: Option<f64>, spp: u32, labels: LabelSource) -> SceneConfig {
     cfg
 }
 
-fn render(cfg: &SceneConfig, backend: Backend) -> Frame {
-    let ctx = common::gpu();
-    let scene = RenderScene::assemble(&scene_mesh(), cfg).expect("scene");
-    let tables = EnergyTables::compute();
-    let opts = FrameOptions {
-        annotate_grid: Some(4),
-        profiler: None,
-        noise: None,
-    };
-    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
-    common::assert_clean(&ctx);
-    f
+/// One device, path tracer and GPU scene per backend for every render of a test (the
+/// pipelines take most of a small render's time on lavapipe).
+struct Renderer {
+    ctx: std::sync::Arc<synosis::vk::Context>,
+    tracer: PathTracer,
+    gpu: GpuScene,
+}
+
+impl Renderer {
+    fn new(backend: Backend) -> Renderer {
+        let ctx = common::gpu();
+        let tracer = PathTracer::new(&ctx, backend, &EnergyTables::compute()).expect("tracer");
+        let scene = RenderScene::assemble(&scene_mesh(), &config(None, 16, LabelSource::Pass))
+            .expect("scene");
+        let gpu = GpuScene::new(&tracer, &scene.stage, None).expect("gpu scene");
+        Renderer { ctx, tracer, gpu }
+    }
+
+    fn render(&self, cfg: &SceneConfig) -> Frame {
+        let scene = RenderScene::assemble(&scene_mesh(), cfg).expect("scene");
+        let opts = FrameOptions {
+            annotate_grid: Some(4),
+            profiler: None,
+            noise: None,
+        };
+        let settings = RenderSettings::from(cfg);
+        let f = render_frame(&self.tracer, &self.gpu, &scene.view, &settings, opts, |_| {})
+            .expect("render");
+        common::assert_clean(&self.ctx);
+        f
+    }
 }
 
 fn pixels(a: &Annotation, instance: u16) -> usize {
@@ -106,9 +126,10 @@ fn pixels(a: &Annotation, instance: u16) -> usize {
 #[test]
 fn thin_lens_labels_from_samples_equal_the_pass_and_the_image_is_unchanged() {
     for backend in common::BACKENDS {
-        let pass = render(&config(Some(4.0), 16, LabelSource::Pass), backend);
-        let samples = render(&config(Some(4.0), 16, LabelSource::Samples), backend);
-        let auto = render(&config(Some(4.0), 16, LabelSource::Auto), backend);
+        let r = Renderer::new(backend);
+        let pass = r.render(&config(Some(4.0), 16, LabelSource::Pass));
+        let samples = r.render(&config(Some(4.0), 16, LabelSource::Samples));
+        let auto = r.render(&config(Some(4.0), 16, LabelSource::Auto));
         assert!(!pass.labels_from_samples);
         assert!(samples.labels_from_samples && auto.labels_from_samples);
         let (a, b) = (
@@ -152,8 +173,9 @@ fn thin_lens_labels_from_samples_equal_the_pass_and_the_image_is_unchanged() {
 fn pinhole_labels_from_samples_agree_with_the_pass_away_from_label_edges() {
     let (w, h) = (48usize, 40usize);
     for backend in common::BACKENDS {
-        let pass = render(&config(None, 16, LabelSource::Auto), backend);
-        let samples = render(&config(None, 16, LabelSource::Samples), backend);
+        let r = Renderer::new(backend);
+        let pass = r.render(&config(None, 16, LabelSource::Auto));
+        let samples = r.render(&config(None, 16, LabelSource::Samples));
         assert!(
             !pass.labels_from_samples,
             "auto keeps the pass under a pinhole"
@@ -202,14 +224,14 @@ fn pinhole_labels_from_samples_agree_with_the_pass_away_from_label_edges() {
 /// `labels` says (so a render of 8 spp labels as before).
 #[test]
 fn too_few_samples_fall_back_to_the_pass() {
-    let backend = Backend::Software;
-    let pass = render(&config(Some(4.0), 8, LabelSource::Pass), backend);
-    let samples = render(&config(Some(4.0), 8, LabelSource::Samples), backend);
+    let r = Renderer::new(Backend::Software);
+    let pass = r.render(&config(Some(4.0), 8, LabelSource::Pass));
+    let samples = r.render(&config(Some(4.0), 8, LabelSource::Samples));
     assert!(!samples.labels_from_samples);
     assert_eq!(pass.annotation, samples.annotation);
     let mut cfg = config(Some(4.0), 32, LabelSource::Samples);
     cfg.render.batch_spp = 8;
-    assert!(!render(&cfg, backend).labels_from_samples);
+    assert!(!r.render(&cfg).labels_from_samples);
 }
 
 /// (d): a wrong value names the field and the allowed values, in scene and job files.
