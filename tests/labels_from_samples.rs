@@ -110,8 +110,15 @@ impl Renderer {
             noise: None,
         };
         let settings = RenderSettings::from(cfg);
-        let f = render_frame(&self.tracer, &self.gpu, &scene.view, &settings, opts, |_| {})
-            .expect("render");
+        let f = render_frame(
+            &self.tracer,
+            &self.gpu,
+            &scene.view,
+            &settings,
+            opts,
+            |_| {},
+        )
+        .expect("render");
         common::assert_clean(&self.ctx);
         f
     }
