@@ -476,8 +476,14 @@ fn paper_job_uses_the_papers_roughness_and_spiral_exit_lines() {
             let d = synosis::scene::config::SensorConfig::default();
             assert_eq!(s.exposure, d.exposure, "auto");
             assert_eq!(s.blooming, synosis::scene::config::Blooming::Vertical);
+            // Exposed so that the brightest 5 % of the object's pixels saturate (issue 11,
+            // docs/benchmarks/realism.md "Sixth pass"), not the sensor's default rule.
+            assert_eq!((s.auto_percentile, s.auto_fraction), (95.0, 1.0));
+            assert_ne!((d.auto_percentile, d.auto_fraction), (95.0, 1.0));
             let s = synosis::scene::config::SensorConfig {
                 blooming: d.blooming,
+                auto_percentile: d.auto_percentile,
+                auto_fraction: d.auto_fraction,
                 ..s.clone()
             };
             assert_eq!(s, d, "the documented defaults otherwise");
