@@ -9,58 +9,31 @@ use synosis::scene::Camera;
 use synosis::scene::{Mesh, TriLabel};
 use synosis::trace::TraceScene;
 
-const CELL: f32 = 0.5;
-
 /// A 20 x 20 mm plane (face A) at z = 0 in 0.5 mm cells, with three labelled regions:
 /// dent 1 on [2,4]^2, scratch 2 on [-6,-3]^2, dent 3 on [5,8]x[-8,-5] hidden under an
 /// occluding quad at z = 5.
 fn scene() -> Mesh {
-    let mut m = Mesh::default();
-    let n = (20.0 / CELL) as u32;
-    for j in 0..=n {
-        for i in 0..=n {
-            m.positions.push(Vec3::new(
-                -10.0 + i as f32 * CELL,
-                -10.0 + j as f32 * CELL,
-                0.0,
-            ));
-        }
-    }
-    let inside =
-        |c: Vec3, x0: f32, x1: f32, y0: f32, y1: f32| c.x > x0 && c.x < x1 && c.y > y0 && c.y < y1;
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            for t in [[a, a + 1, a + n + 2], [a, a + n + 2, a + n + 1]] {
-                let c = t.iter().map(|&k| m.positions[k as usize]).sum::<Vec3>() / 3.0;
-                let (class, instance) = if inside(c, 2.0, 4.0, 2.0, 4.0) {
-                    (1, 1)
-                } else if inside(c, -6.0, -3.0, -6.0, -3.0) {
-                    (2, 2)
-                } else if inside(c, 5.0, 8.0, -8.0, -5.0) {
-                    (1, 3)
-                } else {
-                    (0, 0)
-                };
-                m.triangles.push(t);
-                m.labels.push(TriLabel {
-                    face: 1,
-                    class,
-                    instance,
-                });
-            }
-        }
-    }
-    let b = m.positions.len() as u32;
-    m.positions.extend([
-        Vec3::new(4.0, -9.0, 5.0),
-        Vec3::new(9.0, -9.0, 5.0),
-        Vec3::new(9.0, -4.0, 5.0),
-        Vec3::new(4.0, -4.0, 5.0),
-    ]);
-    m.triangles.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
-    m.labels.extend([TriLabel::default(); 2]);
-    m
+    let r = |x: [f32; 2], y: [f32; 2], class, instance| common::Region {
+        x,
+        y,
+        class,
+        instance,
+    };
+    common::labelled_plane(
+        20.0,
+        0.0,
+        &[
+            r([2.0, 4.0], [2.0, 4.0], 1, 1),
+            r([-6.0, -3.0], [-6.0, -3.0], 2, 2),
+            r([5.0, 8.0], [-8.0, -5.0], 1, 3),
+        ],
+        [
+            Vec3::new(4.0, -9.0, 5.0),
+            Vec3::new(9.0, -9.0, 5.0),
+            Vec3::new(9.0, -4.0, 5.0),
+            Vec3::new(4.0, -4.0, 5.0),
+        ],
+    )
 }
 
 fn camera() -> Camera {

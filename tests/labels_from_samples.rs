@@ -10,64 +10,36 @@ use synosis::render::annotate::Annotation;
 use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::RenderScene;
 use synosis::render::{Frame, FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
+use synosis::scene::Mesh;
 use synosis::scene::config::{LabelSource, SceneConfig};
-use synosis::scene::{Mesh, TriLabel};
 use synosis::trace::Backend;
-
-/// Side of the plane's cells, mm.
-const CELL: f32 = 0.5;
 
 /// A 30 x 30 mm plane (face A) at z = 10 in 0.5 mm cells with three labelled defects:
 /// dent 1 on [2, 4.5] x [1.5, 4], scratch 2 on [-6, -3.5] x [-5.5, -3], dent 3 on
 /// [3, 8] x [-8, -3], half hidden under an occluding quad 3 mm above the plane (its edge
 /// at x = 5.5, out of focus under the thin lens: partly covered pixels).
 fn scene_mesh() -> Mesh {
-    let mut m = Mesh::default();
-    let n = (30.0 / CELL) as u32;
-    for j in 0..=n {
-        for i in 0..=n {
-            m.positions.push(Vec3::new(
-                -15.0 + i as f32 * CELL,
-                -15.0 + j as f32 * CELL,
-                10.0,
-            ));
-        }
-    }
-    let inside =
-        |c: Vec3, x0: f32, x1: f32, y0: f32, y1: f32| c.x > x0 && c.x < x1 && c.y > y0 && c.y < y1;
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            for t in [[a, a + 1, a + n + 2], [a, a + n + 2, a + n + 1]] {
-                let c = t.iter().map(|&k| m.positions[k as usize]).sum::<Vec3>() / 3.0;
-                let (class, instance) = if inside(c, 2.0, 4.5, 1.5, 4.0) {
-                    (1, 1)
-                } else if inside(c, -6.0, -3.5, -5.5, -3.0) {
-                    (2, 2)
-                } else if inside(c, 3.0, 8.0, -8.0, -3.0) {
-                    (1, 3)
-                } else {
-                    (0, 0)
-                };
-                m.triangles.push(t);
-                m.labels.push(TriLabel {
-                    face: 1,
-                    class,
-                    instance,
-                });
-            }
-        }
-    }
-    let b = m.positions.len() as u32;
-    m.positions.extend([
-        Vec3::new(5.5, -14.0, 13.0),
-        Vec3::new(14.0, -14.0, 13.0),
-        Vec3::new(14.0, -1.0, 13.0),
-        Vec3::new(5.5, -1.0, 13.0),
-    ]);
-    m.triangles.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
-    m.labels.extend([TriLabel::default(); 2]);
-    m
+    let r = |x: [f32; 2], y: [f32; 2], class, instance| common::Region {
+        x,
+        y,
+        class,
+        instance,
+    };
+    common::labelled_plane(
+        30.0,
+        10.0,
+        &[
+            r([2.0, 4.5], [1.5, 4.0], 1, 1),
+            r([-6.0, -3.5], [-5.5, -3.0], 2, 2),
+            r([3.0, 8.0], [-8.0, -3.0], 1, 3),
+        ],
+        [
+            Vec3::new(5.5, -14.0, 13.0),
+            Vec3::new(14.0, -14.0, 13.0),
+            Vec3::new(14.0, -1.0, 13.0),
+            Vec3::new(5.5, -1.0, 13.0),
+        ],
+    )
 }
 
 /// View A0 of the plane at 48 x 40 pixels, 2 bounces; `f_number` None: pinhole.

@@ -188,3 +188,51 @@ pub fn interior(face: &[u8], w: usize, h: usize) -> Vec<usize> {
     }
     out
 }
+
+/// A labelled defect region of [`labelled_plane`]: triangles whose centroid lies strictly
+/// inside [x0, x1] x [y0, y1] (mm) get `class` and `instance`.
+pub struct Region {
+    pub x: [f32; 2],
+    pub y: [f32; 2],
+    pub class: u8,
+    pub instance: u16,
+}
+
+/// A square plane (face A) of side `side` mm centred on the z axis at height `z`, in
+/// 0.5 mm cells, with labelled `regions`, and an unlabelled occluding quad `occluder`
+/// (four corners, counter-clockwise) above it: the annotation tests' scene.
+pub fn labelled_plane(side: f32, z: f32, regions: &[Region], occluder: [Vec3; 4]) -> Mesh {
+    const CELL: f32 = 0.5;
+    let mut m = Mesh::default();
+    let n = (side / CELL) as u32;
+    let h = side / 2.0;
+    for j in 0..=n {
+        for i in 0..=n {
+            m.positions
+                .push(Vec3::new(-h + i as f32 * CELL, -h + j as f32 * CELL, z));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            for t in [[a, a + 1, a + n + 2], [a, a + n + 2, a + n + 1]] {
+                let c = t.iter().map(|&k| m.positions[k as usize]).sum::<Vec3>() / 3.0;
+                let (class, instance) = regions
+                    .iter()
+                    .find(|r| c.x > r.x[0] && c.x < r.x[1] && c.y > r.y[0] && c.y < r.y[1])
+                    .map_or((0, 0), |r| (r.class, r.instance));
+                m.triangles.push(t);
+                m.labels.push(TriLabel {
+                    face: 1,
+                    class,
+                    instance,
+                });
+            }
+        }
+    }
+    let b = m.positions.len() as u32;
+    m.positions.extend(occluder);
+    m.triangles.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+    m.labels.extend([TriLabel::default(); 2]);
+    m
+}
