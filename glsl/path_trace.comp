@@ -398,10 +398,11 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
-// `word`: the label word of the primary ray's first hit (0: nothing, or a triangle past
-// the labelled ones, the view's light), as annotate.comp's label_of_ray.
-float radiance_sample(uint pixel, uint px, uint py, uint s, out uint word) {
-    word = 0u;
+// `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
+// nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
+// label_of_ray; 0 without (no label read on samples that do not label).
+float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out uint label_word) {
+    label_word = 0u;
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec2 jitter = sample_2d(rng);
     // Thin lens: the next two dimensions pick the aperture point (the pinhole draws none).
@@ -421,8 +422,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, out uint word) {
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
-        if (depth == 0u && h.prim != NO_HIT && h.prim < uint(label_words.length())) {
-            word = label_words[h.prim];
+        if (want_label && depth == 0u && h.prim != NO_HIT
+                && h.prim < uint(label_words.length())) {
+            label_word = label_words[h.prim];
         }
         if (h.prim == NO_HIT) break;   // no environment light
         Tri t = fetch_tri(h.prim);
@@ -570,8 +572,9 @@ void main() {
     uint words[LABEL_MAX_SAMPLES];
     for (uint s = 0u; s < pc.sample_count; s++) {
         uint word;
-        float r = radiance_sample(i, px, py, pc.sample_start + s, word);
-        if (s < label_count) words[s] = word;
+        bool label = s < label_count;
+        float r = radiance_sample(i, px, py, pc.sample_start + s, label, word);
+        if (label) words[s] = word;
         sum += r;
         sq += r * r;
     }
