@@ -13,12 +13,7 @@ use synosis::trace::TraceScene;
 /// dent 1 on [2,4]^2, scratch 2 on [-6,-3]^2, dent 3 on [5,8]x[-8,-5] hidden under an
 /// occluding quad at z = 5.
 fn scene() -> Mesh {
-    let r = |x: [f32; 2], y: [f32; 2], class, instance| common::Region {
-        x,
-        y,
-        class,
-        instance,
-    };
+    use common::region as r;
     common::labelled_plane(
         20.0,
         0.0,

@@ -19,12 +19,7 @@ use synosis::trace::Backend;
 /// [3, 8] x [-8, -3], half hidden under an occluding quad 3 mm above the plane (its edge
 /// at x = 5.5, out of focus under the thin lens: partly covered pixels).
 fn scene_mesh() -> Mesh {
-    let r = |x: [f32; 2], y: [f32; 2], class, instance| common::Region {
-        x,
-        y,
-        class,
-        instance,
-    };
+    use common::region as r;
     common::labelled_plane(
         30.0,
         10.0,

@@ -198,6 +198,16 @@ pub struct Region {
     pub instance: u16,
 }
 
+/// A [`Region`] on [x0, x1] x [y0, y1] (mm) labelled `class`, `instance`.
+pub fn region(x: [f32; 2], y: [f32; 2], class: u8, instance: u16) -> Region {
+    Region {
+        x,
+        y,
+        class,
+        instance,
+    }
+}
+
 /// A square plane (face A) of side `side` mm centred on the z axis at height `z`, in
 /// 0.5 mm cells, with labelled `regions`, and an unlabelled occluding quad `occluder`
 /// (four corners, counter-clockwise) above it: the annotation tests' scene.
@@ -223,7 +233,7 @@ pub fn labelled_plane(side: f32, z: f32, regions: &[Region], occluder: [Vec3; 4]
                     .map_or((0, 0), |r| (r.class, r.instance));
                 m.triangles.push(t);
                 m.labels.push(TriLabel {
-                    face: 1,
+                    face: FACE_A,
                     class,
                     instance,
                 });
