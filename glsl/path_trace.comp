@@ -124,6 +124,7 @@ uint mat_word(uint prim) {
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 
 #include "common/lights.glsl"
+#include "common/analytic_light.glsl"
 
 // Steepest slope a map may give (85 degrees): keeps the shading normal off the tangent
 // plane so its frame stays well conditioned.
@@ -398,6 +399,40 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
+// The control variate A - G at a primary hit (T = 1 there): A the lobe's closed form
+// over every ring's contour band, G the same integrand estimated with this sample's light
+// sample (`nee_val` = w_l c D Le / p_l for emitter `nee_e` in direction `nee_dir`, or
+// none) and BSDF sample (`wi` local, `pdf`; `sampled` false: none), each times the number
+// of band quads holding its direction. The BSDF sample's MIS weight uses the light
+// triangle it would hit with occluders ignored, as the path's own weight on hitting it.
+float analytic_direct(Lobe lobe, vec3 origin, vec3 ng, bool sampled, vec3 wi, float pdf,
+                      vec3 tb, vec3 bt, vec3 ns, vec3 nee_dir, uint nee_e, float nee_val) {
+    vec3 wb = sampled && pdf > 0.0 ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
+    float w_b = -1.0;   // MIS weight of the BSDF sample, found on first need
+    float a = 0.0, g = 0.0;
+    for (uint k = 0u; k < prm.emitter_count; k++) {
+        LightBlock e = emitters[k];
+        if (e.emit.z <= 0.0) continue;
+        float m1, m2;
+        float band = ring_band(e, lobe, origin, k == nee_e ? nee_dir : vec3(0.0), wb, m1, m2);
+        a += lobe.c * e.emit.x * band;
+        if (k == nee_e) g += nee_val * m1;
+        if (m2 > 0.0) {
+            if (w_b < 0.0) {
+                float pdf_l = 0.0;
+                Hit h = trace_lights(origin, wb);
+                if (h.prim != NO_HIT) {
+                    float cos_l = -dot(normalize(tri_normal(fetch_tri(h.prim))), wb);
+                    if (cos_l > 0.0) pdf_l = h.t * h.t / cos_l * light_area_pdf(h.prim, origin, ng);
+                }
+                w_b = power_heuristic(pdf, pdf_l);
+            }
+            g += w_b * lobe.c * lobe_d(lobe, wb) * e.emit.x * m2 / pdf;
+        }
+    }
+    return a - g;
+}
+
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
 // nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
 // label_of_ray; 0 without (no label read on samples that do not label).
@@ -487,6 +522,14 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
         vec3 origin = offset_ray(p, ng);
 
+        // Analytic direct light (control variate) at the primary hit of a conductor.
+        Lobe lobe;
+        bool cv = prm.direct_light == DIRECT_ANALYTIC && depth == 0u && !surf.diffuse
+            && prm.emitter_count > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
+        vec3 cv_nee_dir = vec3(0.0);
+        uint cv_nee_e = 0xffffffffu;
+        float cv_nee_val = 0.0;
+
         // Next-event estimation: a light by power, then a point on it (a spot light is
         // a point: no MIS, it cannot be hit).
         if (prm.emitter_count > 0u) {
@@ -521,6 +564,19 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 vec3 wi_w = to / dist;
                 float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
                 vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                if (cv && e.emit.z > 0.0 && cos_l > 0.0) {
+                    // The control variate's light sample: its direction, MIS weight
+                    // and c D Le / pdf (times the band quads holding it, below).
+                    float pdf_b_cv;
+                    surface_eval(surf, wo, wi, pdf_b_cv);
+                    float pdf_l_cv = dist2 / cos_l * area_pdf;
+                    cv_nee_dir = wi_w;
+                    cv_nee_e = ei;
+                    cv_nee_val = pdf_l_cv > 0.0
+                        ? power_heuristic(pdf_l_cv, pdf_b_cv) * lobe.c * lobe_d(lobe, wi_w)
+                            * e.emit.x / pdf_l_cv
+                        : 0.0;
+                }
                 if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                     float pdf_b;
                     float f = surface_eval(surf, wo, wi, pdf_b);
@@ -542,7 +598,10 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         vec3 u = vec3(u_lobe, sample_2d(rng));
         vec3 wi;
         float weight, pdf;
-        if (!surface_sample(surf, wo, u, wi, weight, pdf)) break;
+        bool sampled = surface_sample(surf, wo, u, wi, weight, pdf);
+        if (cv) L += analytic_direct(lobe, origin, ng, sampled, wi, pdf, tb, bt, ns,
+                                     cv_nee_dir, cv_nee_e, cv_nee_val);
+        if (!sampled) break;
         T *= weight;
         if (!(T > 0.0)) break;
         if (depth >= 3u) {

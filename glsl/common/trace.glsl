@@ -39,6 +39,24 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     return h;
 }
 
+// The closest hit among the view's lights alone (the second level; instance mask 0x02,
+// src/trace/mod.rs), occluders ignored.
+Hit trace_lights(vec3 o, vec3 d) {
+    Hit h;
+    h.t = 3.0e38; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    rayQueryEXT rq;
+    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, 0x02, o, 0.0, d, 3.0e38);
+    while (rayQueryProceedEXT(rq)) {}
+    if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
+        h.t = rayQueryGetIntersectionTEXT(rq, true);
+        h.prim = uint(rayQueryGetIntersectionPrimitiveIndexEXT(rq, true))
+            + uint(rayQueryGetIntersectionInstanceCustomIndexEXT(rq, true));
+        h.bary = rayQueryGetIntersectionBarycentricsEXT(rq, true);
+        h.inst = uint(rayQueryGetIntersectionInstanceIdEXT(rq, true));
+    }
+    return h;
+}
+
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
 // Child-pair node: both children's boxes live in the parent, so one 64-byte load
@@ -115,6 +133,17 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     TraceRay tr = trace_setup(o, d);
     trace_bvh_0(o, inv_d, tr, tmin, h);
     trace_bvh_1(o, inv_d, tr, tmin, h);
+    return h;
+}
+
+// The closest hit among the view's lights alone (the second level), occluders ignored.
+Hit trace_lights(vec3 o, vec3 d) {
+    Hit h;
+    h.t = 3.0e38; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
+    vec3 inv_d = 1.0 / dd;
+    TraceRay tr = trace_setup(o, d);
+    trace_bvh_1(o, inv_d, tr, 0.0, h);
     return h;
 }
 #else

@@ -1,7 +1,9 @@
 //! Plain render settings: what the path tracer needs besides the scene, independent of
 //! the scene file (`scene::config` converts into these).
 
-pub use crate::scene::config::{LabelSource, LightSampling, SamplerKind, TextureFilter};
+pub use crate::scene::config::{
+    DirectLight, LabelSource, LightSampling, SamplerKind, TextureFilter,
+};
 use crate::scene::config::{MaterialConfig, RenderConfig, SceneConfig};
 
 /// The object's rough conductor (GGX, Kulla-Conty energy compensation optional).
@@ -43,6 +45,8 @@ pub struct RenderSettings {
     pub texture_filter_scale: f32,
     /// Where the labels come from when the render is annotated (`[render] labels`).
     pub labels: LabelSource,
+    /// The direct light's estimator (`[render] direct_light`).
+    pub direct_light: DirectLight,
 }
 
 impl RenderSettings {
@@ -57,6 +61,7 @@ impl RenderSettings {
             texture_filter: r.texture_filter,
             texture_filter_scale: r.texture_filter_scale,
             labels: r.labels,
+            direct_light: r.direct_light,
         }
     }
 }

@@ -383,6 +383,7 @@ fn path_params(
         texture_filter: s.texture_filter as u32,
         pixel_angle: pixel_angle(cam),
         filter_scale: s.texture_filter_scale,
+        direct_light: s.direct_light as u32,
         ..Default::default()
     }
 }
@@ -429,12 +430,26 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
                     axis.extend(cos_inner).into(),
                     (intensity_w_sr as f64 * MM2_PER_M2) as f32,
                 ),
-                _ => ([0.0; 4], [0.0; 4], e.radiance),
+                _ => match e.torus {
+                    // The contour band's tube: between the tessellated tube's inscribed
+                    // (r cos(pi / n)) and circumscribed (r) silhouette half-widths.
+                    Some(t) => {
+                        let n = t.segments_minor.max(3) as f32;
+                        let band_r = 0.5 * t.minor_mm * (1.0 + (std::f32::consts::PI / n).cos());
+                        (
+                            t.centre.extend(t.major_mm).into(),
+                            t.axis.extend(band_r).into(),
+                            e.radiance,
+                        )
+                    }
+                    None => ([0.0; 4], [0.0; 4], e.radiance),
+                },
             };
+            let ring = if e.torus.is_some() { 1.0 } else { 0.0 };
             LightBlock {
                 pos,
                 dir,
-                emit: [emit_x, e.area, 0.0, cdf],
+                emit: [emit_x, e.area, ring, cdf],
                 shape: [e.first_tri, e.tri_count, kind, segments],
             }
         })

@@ -15,7 +15,7 @@ use super::config::{
 use super::curved::{
     CurvedPatch, CurvedTolerance, PatchKind, curved_patches, encode_normal, smooth_corner_normals,
 };
-use super::lights::{LightShape, LightSpec};
+use super::lights::{LightMount, LightShape, LightSpec};
 use super::materials::{GltfMaterials, RegionMaterial, SurfaceMaterial};
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
 use super::regions::{RegionTolerance, planar_regions, region_per_triangle};
@@ -520,6 +520,20 @@ pub struct Emitter {
     /// Power, W (choosing among lights: `LightSpec::power_w`).
     pub power_w: f64,
     pub sampling: EmitterSampling,
+    /// A ring light's torus, for the analytic direct light's contour band; None for the
+    /// other shapes.
+    pub torus: Option<Torus>,
+}
+
+/// A ring light's smooth torus: centre, unit axis, major and tube radii (mm) and the
+/// tube's tessellation (segments around it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Torus {
+    pub centre: Vec3,
+    pub axis: Vec3,
+    pub major_mm: f32,
+    pub minor_mm: f32,
+    pub segments_minor: u32,
 }
 
 impl LightGeometry {
@@ -576,6 +590,27 @@ impl LightGeometry {
                 }
                 _ => EmitterSampling::Uniform,
             };
+            let torus = match &spec.shape {
+                LightShape::Ring(r) => {
+                    // As LightSpec::triangles places the ring (on the camera: the eye and
+                    // view direction in f32, exactly).
+                    let (centre, axis) = match spec.mount {
+                        LightMount::OnCamera => (camera.eye, camera.forward),
+                        LightMount::Free { .. } => {
+                            let f = spec.frame(camera);
+                            (f.position.as_vec3(), f.forward.as_vec3())
+                        }
+                    };
+                    Some(Torus {
+                        centre,
+                        axis: axis.normalize(),
+                        major_mm: r.major_radius_mm,
+                        minor_mm: r.minor_radius_mm,
+                        segments_minor: r.segments_minor,
+                    })
+                }
+                _ => None,
+            };
             emitters.push(Emitter {
                 first_tri,
                 tri_count: tris.len() as u32,
@@ -583,6 +618,7 @@ impl LightGeometry {
                 radiance: spec.radiance,
                 power_w: spec.power_w(area),
                 sampling,
+                torus,
             });
             positions.extend(pos);
             triangles.extend(tris.iter().map(|t| t.map(|i| i + base)));

@@ -864,6 +864,26 @@ pub struct RenderConfig {
     /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
     /// camera samples); [`LabelSource`].
     pub labels: LabelSource,
+    /// The direct light's estimator: "sampled" (default: next-event estimation and BSDF
+    /// sampling combined by MIS) or "analytic" (the same, plus the ring lights' analytic
+    /// control variate at the primary hit; [`DirectLight`]).
+    pub direct_light: DirectLight,
+}
+
+/// The direct light's estimator (`[render] direct_light`; docs/rendering.md, "Analytic
+/// direct light").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DirectLight {
+    /// Next-event estimation and BSDF sampling combined by MIS: the renderer before this
+    /// option.
+    #[default]
+    Sampled = 0,
+    /// The same estimate plus a control variate at the primary hit of a conductor: a
+    /// linearly transformed cosine fitted to the GGX lobe, integrated in closed form over
+    /// each ring light's contour band, minus the same lobe estimated with the very samples
+    /// of the light (unbiased: its expectation is the closed form).
+    Analytic = 1,
 }
 
 /// Where a render's labels come from (`[render] labels`; docs/scene-format.md).
@@ -941,6 +961,7 @@ impl Default for RenderConfig {
             noise_target: None,
             min_spp: None,
             labels: LabelSource::Auto,
+            direct_light: DirectLight::Sampled,
         }
     }
 }

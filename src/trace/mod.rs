@@ -18,6 +18,11 @@ use crate::vk::{
     BindingKind, Blas, Buffer, ComputePipeline, Context, Profiler, Tlas, VkError, timed,
 };
 
+/// Ray-query instance masks (glsl/common/trace.glsl): `trace` takes every instance,
+/// `trace_lights` only the view's lights.
+const MASK_OBJECT: u8 = 0x01;
+const MASK_LIGHTS: u8 = 0x02;
+
 /// What `--accel` asks for.
 #[derive(
     Clone,
@@ -317,10 +322,10 @@ impl TraceScene {
         let start = std::time::Instant::now();
         let tlas = match (&object.data, &second.data) {
             (Data::RayQuery(a), Data::RayQuery(b)) => {
-                let inst: Vec<(&Blas, u32)> = a
+                let inst: Vec<(&Blas, u32, u8)> = a
                     .iter()
-                    .map(|a| (a, 0))
-                    .chain(b.iter().map(|b| (b, first)))
+                    .map(|a| (a, 0, MASK_OBJECT))
+                    .chain(b.iter().map(|b| (b, first, MASK_LIGHTS)))
                     .collect();
                 Some(timed(profiler, "AS build (BLAS+TLAS)", || {
                     Tlas::build(ctx, &inst)

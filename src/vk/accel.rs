@@ -181,10 +181,12 @@ impl Blas {
 }
 
 impl Tlas {
-    /// Instances `(blas, custom index)`; the custom index is 24 bits.
-    pub fn build(ctx: &Arc<Context>, instances: &[(&Blas, u32)]) -> Result<Self, VkError> {
+    /// Instances `(blas, custom index, mask)`; the custom index is 24 bits, the mask is
+    /// what a ray query's cull mask selects (glsl/common/trace.glsl: the object 0x01, the
+    /// view's lights 0x02).
+    pub fn build(ctx: &Arc<Context>, instances: &[(&Blas, u32, u8)]) -> Result<Self, VkError> {
         let mut bytes: Vec<u8> = Vec::with_capacity(instances.len() * 64);
-        for &(blas, index) in instances {
+        for &(blas, index, mask) in instances {
             if index >= 1 << 24 {
                 return Err(VkError::Other(format!(
                     "instance custom index {index} does not fit in 24 bits"
@@ -194,7 +196,7 @@ impl Tlas {
                 transform: vk::TransformMatrixKHR {
                     matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
                 },
-                instance_custom_index_and_mask: vk::Packed24_8::new(index, 0xff),
+                instance_custom_index_and_mask: vk::Packed24_8::new(index, mask),
                 instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(
                     0,
                     vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,
