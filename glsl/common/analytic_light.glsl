@@ -8,8 +8,8 @@
 // across it (the half-vector -> reflected-direction Jacobian for small alpha), amplitude
 // c so that g(r) = f(wo, r) cos(r). D integrates in closed form over spherical polygons.
 // Each ring light (a torus) is replaced, for g only, by its contour band seen from the
-// shading point: BAND_SEGMENTS quads between the two points of each tube circle where
-// the view ray grazes the smooth tube. The control variate is
+// shading point: quads between the two points of each tube circle (at the ring's own
+// segment angles) where the view ray grazes the smooth tube. The control variate is
 //     A - G,  A = sum over bands of Le c integral(D over band)  (closed form),
 //             G = the same integrand (c D Le times the number of band quads that contain
 //                 the direction) estimated with the very light and BSDF samples of the
@@ -19,9 +19,9 @@
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
 
-// Quads of a ring's contour band (the tube's contour is sampled at this many angles
-// around the ring axis).
-const uint BAND_SEGMENTS = 48u;
+// Most quads of a ring's contour band (LightBlock emit.z: the ring's own segments up to
+// this many; src/render/view.rs).
+const uint BAND_MAX = 128u;
 
 // A linearly transformed cosine in world space: orthonormal frame (t1, t2, r), r its
 // axis, widths a1 along t1 and a2 along t2; g = c D.
@@ -99,63 +99,101 @@ float quad_cos_integral(vec3 v[4]) {
     return abs(sum) * (0.5 / PI);
 }
 
-// Whether direction w (cosine space, any length; 0: none) lies in the convex spherical
-// quad v (either winding).
-float quad_contains(vec3 v[4], vec3 w) {
-    float s0 = dot(w, cross(v[0], v[1]));
-    float s1 = dot(w, cross(v[1], v[2]));
-    float s2 = dot(w, cross(v[2], v[3]));
-    float s3 = dot(w, cross(v[3], v[0]));
-    bool pos = s0 >= 0.0 && s1 >= 0.0 && s2 >= 0.0 && s3 >= 0.0;
-    bool neg = s0 <= 0.0 && s1 <= 0.0 && s2 <= 0.0 && s3 <= 0.0;
-    return (pos || neg) && dot(w, v[0] + v[2]) > 0.0 ? 1.0 : 0.0;
-}
-
-// The two contour points of the smooth tube circle at angle phi (ring frame u, v, axis
-// ax; centre c, radii big_r, r) seen from x, as directions from x (not normalised): the
-// points p = ci + r n with n . (p - x) = 0.
-void ring_contour(vec3 c, vec3 u, vec3 v, vec3 ax, float big_r, float r, vec3 x, float phi,
+// The two contour points of the smooth tube circle in direction e (unit, in the ring's
+// plane; centre c, axis ax, radii big_r, r) seen from x, as directions from x (not
+// normalised): the points p = c + big_r e + r n, n = cos(psi) e + sin(psi) ax, with
+// n . (p - x) = 0, i.e. cos(psi - beta) = -r / rho for (rho cos beta, rho sin beta) =
+// (e . d, ax . d), d = c + big_r e - x; written without trigonometric calls.
+void ring_contour(vec3 c, vec3 e, vec3 ax, float big_r, float r, vec3 x,
                   out vec3 wp, out vec3 wm) {
-    vec3 e = cos(phi) * u + sin(phi) * v;
     vec3 d = c + big_r * e - x;
     float a = dot(e, d), b = dot(ax, d);
-    float rho = sqrt(a * a + b * b);
-    float beta = atan(b, a);
-    float delta = acos(clamp(-r / max(rho, 1e-30), -1.0, 1.0));
-    wp = d + r * (cos(beta + delta) * e + sin(beta + delta) * ax);
-    wm = d + r * (cos(beta - delta) * e + sin(beta - delta) * ax);
+    float rho = max(sqrt(a * a + b * b), 1e-30);
+    float cb = a / rho, sb = b / rho;
+    float cd = clamp(-r / rho, -1.0, 1.0);
+    float sd = sqrt(max(1.0 - cd * cd, 0.0));
+    float r_cb = r * (cb * cd), r_sb = r * (sb * sd), r_sbc = r * (sb * cd), r_cbs = r * (cb * sd);
+    wp = d + (r_cb - r_sb) * e + (r_sbc + r_cbs) * ax;
+    wm = d + (r_cb + r_sb) * e + (r_sbc - r_cbs) * ax;
 }
 
-// Ring e's contour band seen from x: the integral of the lobe's D over its quads (each
+// Ring `ring`'s contour band seen from x: the integral of the lobe's D over its quads (each
 // quad once), and for directions w1, w2 (unit, world; 0: none) how many quads contain
-// them (m1, m2).
-float ring_band(LightBlock e, Lobe l, vec3 x, vec3 w1, vec3 w2, out float m1, out float m2) {
-    vec3 c = e.pos.xyz, ax = e.dir.xyz;
-    float big_r = e.pos.w, r = e.dir.w;
-    vec3 u, v;
-    onb(ax, u, v);
+// them (m1, m2). The band has emit.z quads (src/render/view.rs: the ring's own segments,
+// at most BAND_MAX), at the angles of the ring's segments (ring_light's frame,
+// src/scene/camera.rs).
+float ring_band(LightBlock ring, Lobe l, vec3 x, vec3 w1, vec3 w2, out float m1, out float m2) {
+    vec3 c = ring.pos.xyz, ax = ring.dir.xyz;
+    float big_r = ring.pos.w, r = ring.dir.w;
+    uint n = clamp(uint(ring.emit.z), 3u, BAND_MAX);
+    vec3 u = normalize(cross(ax, abs(ax.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
     vec3 l1 = lobe_local(l, w1), l2 = lobe_local(l, w2);
+    float step = 2.0 * PI / float(n);
+    float cs = cos(step), sn = sin(step);
+    // One pass: the two contour loops' edges (when every vertex is above the cosine
+    // space's horizon and every quad is wound the same way, the rungs, shared by
+    // neighbouring quads in opposite directions, cancel: this is the band's integral),
+    // the quads' windings and the directions' membership.
     vec3 wp, wm;
-    ring_contour(c, u, v, ax, big_r, r, x, 0.0, wp, wm);
-    vec3 p0 = lobe_local(l, wp), m0 = lobe_local(l, wm);
-    vec3 pa = p0, ma = m0;
-    float sum = 0.0;
+    ring_contour(c, u, ax, big_r, r, x, wp, wm);
+    vec3 p0 = normalize(lobe_local(l, wp)), q0 = normalize(lobe_local(l, wm));
+    vec3 e = u;   // turned by `step` per quad (the same turns in both passes)
+    vec3 pa = p0, qa = q0;
+    vec3 rung = cross(qa, pa);
+    float r1 = dot(l1, rung), r2 = dot(l2, rung);
+    bool above = pa.z > 0.0 && qa.z > 0.0;
+    float sum = 0.0, wound = 0.0;
     m1 = 0.0;
     m2 = 0.0;
-    float step = 2.0 * PI / float(BAND_SEGMENTS);
-    for (uint i = 0u; i < BAND_SEGMENTS; i++) {
-        vec3 pb = p0, mb = m0;   // the last quad closes on the first pair exactly
-        if (i + 1u < BAND_SEGMENTS) {
-            ring_contour(c, u, v, ax, big_r, r, x, float(i + 1u) * step, wp, wm);
-            pb = lobe_local(l, wp);
-            mb = lobe_local(l, wm);
+    for (uint i = 0u; i < n; i++) {
+        vec3 pb = p0, qb = q0;   // the last quad closes on the first pair exactly
+        if (i + 1u < n) {
+            e = normalize(cs * e + sn * cross(ax, e));
+            ring_contour(c, e, ax, big_r, r, x, wp, wm);
+            pb = normalize(lobe_local(l, wp));
+            qb = normalize(lobe_local(l, wm));
+            above = above && pb.z > 0.0 && qb.z > 0.0;
         }
-        vec3 q[4] = vec3[4](pa, pb, mb, ma);
-        sum += quad_cos_integral(q);
-        m1 += quad_contains(q, l1);
-        m2 += quad_contains(q, l2);
+        vec3 outer = cross(pa, pb);
+        vec3 inner = cross(qb, qa);
+        vec3 rung_b = cross(qb, pb);
+        wound += dot(outer, qa) > 0.0 ? 1.0 : -1.0;
+        float so = length(outer), si = length(inner);
+        sum += (so > 0.0 ? atan(so, dot(pa, pb)) * outer.z / so : 0.0)
+             + (si > 0.0 ? atan(si, dot(qb, qa)) * inner.z / si : 0.0);
+        // Quad (pa, pb, qb, qa): edge planes outer, -rung_b, inner, rung.
+        float r1b = dot(l1, rung_b), r2b = dot(l2, rung_b);
+        float a0 = dot(l1, outer), a2 = dot(l1, inner);
+        bool in1 = (a0 >= 0.0 && r1b <= 0.0 && a2 >= 0.0 && r1 >= 0.0)
+                || (a0 <= 0.0 && r1b >= 0.0 && a2 <= 0.0 && r1 <= 0.0);
+        m1 += in1 && dot(l1, pa + qb) > 0.0 ? 1.0 : 0.0;
+        float b0 = dot(l2, outer), b2 = dot(l2, inner);
+        bool in2 = (b0 >= 0.0 && r2b <= 0.0 && b2 >= 0.0 && r2 >= 0.0)
+                || (b0 <= 0.0 && r2b >= 0.0 && b2 <= 0.0 && r2 <= 0.0);
+        m2 += in2 && dot(l2, pa + qb) > 0.0 ? 1.0 : 0.0;
+        r1 = r1b;
+        r2 = r2b;
         pa = pb;
-        ma = mb;
+        qa = qb;
+    }
+    if (above && abs(wound) == float(n)) return abs(sum) * (0.5 / PI);
+    // Otherwise each quad on its own, clipped to the horizon (a second pass).
+    sum = 0.0;
+    pa = p0;
+    qa = q0;
+    e = u;
+    for (uint i = 0u; i < n; i++) {
+        vec3 pb = p0, qb = q0;
+        if (i + 1u < n) {
+            e = normalize(cs * e + sn * cross(ax, e));
+            ring_contour(c, e, ax, big_r, r, x, wp, wm);
+            pb = normalize(lobe_local(l, wp));
+            qb = normalize(lobe_local(l, wm));
+        }
+        vec3 q[4] = vec3[4](pa, pb, qb, qa);
+        sum += quad_cos_integral(q);
+        pa = pb;
+        qa = qb;
     }
     return sum;
 }

@@ -525,14 +525,15 @@ pub struct Emitter {
     pub torus: Option<Torus>,
 }
 
-/// A ring light's smooth torus: centre, unit axis, major and tube radii (mm) and the
-/// tube's tessellation (segments around it).
+/// A ring light's smooth torus: centre, unit axis, major and tube radii (mm) and its
+/// tessellation (segments around the ring and around the tube).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Torus {
     pub centre: Vec3,
     pub axis: Vec3,
     pub major_mm: f32,
     pub minor_mm: f32,
+    pub segments_major: u32,
     pub segments_minor: u32,
 }
 
@@ -606,6 +607,7 @@ impl LightGeometry {
                         axis: axis.normalize(),
                         major_mm: r.major_radius_mm,
                         minor_mm: r.minor_radius_mm,
+                        segments_major: r.segments_major,
                         segments_minor: r.segments_minor,
                     })
                 }
