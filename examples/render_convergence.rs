@@ -15,7 +15,7 @@ use anyhow::Context as _;
 use clap::Parser;
 use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::{MAT_LIGHT, MAT_TABLE, RenderScene, load_object, path_trace};
-use synosis::scene::config::{LightSampling, SamplerKind, SceneConfig};
+use synosis::scene::config::{DirectLight, LightSampling, SamplerKind, SceneConfig};
 use synosis::trace::Backend;
 use synosis::vk::{Context, ContextOptions};
 
@@ -35,7 +35,8 @@ struct Args {
     /// Reference spp (Sobol, facing light sampling, ray query, seed + 1000).
     #[arg(long, default_value_t = 4096)]
     ref_spp: u32,
-    /// Configurations to time, each backend:sampler:light, comma-separated, e.g.
+    /// Configurations to time, each backend:sampler:light[:direct] (direct: "sampled",
+    /// the default, or "analytic"), comma-separated, e.g.
     /// "ray-query:sobol:facing,software:sobol:facing,ray-query:independent:uniform".
     #[arg(
         long,
@@ -45,6 +46,10 @@ struct Args {
     /// Turn Kulla-Conty compensation off (Mitsuba's roughconductor has none).
     #[arg(long)]
     no_compensation: bool,
+    /// Reuse this reference (an earlier run's `<name>-reference.exr` of the same scene
+    /// and size) instead of rendering one.
+    #[arg(long)]
+    reference: Option<PathBuf>,
     /// Output directory for the table (.md), the plot (.svg) and the reference (.exr).
     #[arg(long, default_value = "target/convergence")]
     out: PathBuf,
@@ -113,7 +118,22 @@ fn main() -> anyhow::Result<()> {
     rc.render.seed = cfg.render.seed.wrapping_add(1000);
     rc.render.sampler = SamplerKind::Sobol;
     rc.light.sampling = LightSampling::Facing;
-    let (reference, ref_secs, _) = render(&rc, Backend::RayQuery)?;
+    let (reference, ref_secs, _) = match &a.reference {
+        // A reference written by an earlier run of the same scene and size.
+        Some(path) => {
+            let (w, h, data) = synosis::image_io::read_exr_f32(path)
+                .with_context(|| format!("--reference {}", path.display()))?;
+            anyhow::ensure!(
+                (w, h) == (a.width as usize, a.height as usize),
+                "--reference {}: {w} x {h}, the run is {} x {}",
+                path.display(),
+                a.width,
+                a.height
+            );
+            (data, 0.0, 0.0)
+        }
+        None => render(&rc, Backend::RayQuery)?,
+    };
     let ref_mean = reference.iter().map(|&v| v as f64).sum::<f64>() / reference.len() as f64;
     synosis::image_io::write_exr_f32(
         &a.out.join(format!("{}-reference.exr", a.name)),
@@ -131,8 +151,8 @@ fn main() -> anyhow::Result<()> {
     for c in a.configs.split(',') {
         let parts: Vec<&str> = c.trim().split(':').collect();
         anyhow::ensure!(
-            parts.len() == 3,
-            "--configs: {c:?} is not backend:sampler:light"
+            parts.len() == 3 || parts.len() == 4,
+            "--configs: {c:?} is not backend:sampler:light[:direct]"
         );
         let backend = match parts[0] {
             "ray-query" => Backend::RayQuery,
@@ -149,6 +169,11 @@ fn main() -> anyhow::Result<()> {
             "facing" => LightSampling::Facing,
             "uniform" => LightSampling::Uniform,
             o => anyhow::bail!("light sampling {o:?}"),
+        };
+        cc.render.direct_light = match parts.get(3).copied() {
+            None | Some("sampled") => DirectLight::Sampled,
+            Some("analytic") => DirectLight::Analytic,
+            Some(o) => anyhow::bail!("direct light {o:?}"),
         };
         for &spp in &spps {
             cc.render.spp = spp;

@@ -161,6 +161,7 @@ fn face_textures_reach_the_image() {
             seed: 3,
             noise: None,
             labels: Default::default(),
+            direct_light: Default::default(),
         };
         r.render(&req).unwrap()
     };
@@ -257,6 +258,7 @@ rim_width = 0.5
             seed: 5,
             noise: None,
             labels: Default::default(),
+            direct_light: Default::default(),
         };
         let img = r.render(&req).unwrap();
         let label: Vec<u8> = img.class.clone();

@@ -232,6 +232,10 @@ pub struct RenderSettings {
     /// (docs/dataset.md, "Labels from the path tracer's samples").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub labels: Option<crate::scene::config::LabelSource>,
+    /// The direct light's estimator: "sampled" (default) or "analytic" (the ring lights'
+    /// control variate at the primary hit; docs/rendering.md, "Analytic direct light").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direct_light: Option<crate::scene::config::DirectLight>,
 }
 
 /// `[render] min_spp` when not given (`render::noise::DEFAULT_MIN_SPP`).

@@ -108,6 +108,8 @@ pub struct ImageRequest<'a> {
     pub noise: Option<&'a crate::render::noise::NoiseStop>,
     /// Where the labels come from (`[render] labels`; default "auto").
     pub labels: crate::scene::config::LabelSource,
+    /// The direct light's estimator (`[render] direct_light`; default "sampled").
+    pub direct_light: crate::scene::config::DirectLight,
 }
 
 /// What the renderer returns, every buffer row-major with row 0 at the top.

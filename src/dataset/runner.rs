@@ -1245,6 +1245,7 @@ fn render_stage<'p>(
         seed: item.seed,
         noise: noise.as_ref(),
         labels: job.render.labels.unwrap_or_default(),
+        direct_light: job.render.direct_light.unwrap_or_default(),
     };
     let fail = |message: String| DatasetError::Render {
         index: item.index,
