@@ -183,4 +183,16 @@ fn direct_light_parses_and_names_its_values() {
         e.contains("direct_light") && e.contains("sampled") && e.contains("analytic"),
         "{e}"
     );
+    // Jobs: the same field and values in `[render]`.
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let job = |text: &str| {
+        common::small_smoke_text().replace("[render]\n", &format!("[render]\n{text}\n"))
+    };
+    let j = synosis::dataset::Job::parse(&job("direct_light = \"analytic\""), "job", scenes)
+        .expect("job");
+    assert_eq!(j.render.direct_light, Some(DirectLight::Analytic));
+    let e = synosis::dataset::Job::parse(&job("direct_light = \"exact\""), "job", scenes)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("direct_light") && e.contains("analytic"), "{e}");
 }
