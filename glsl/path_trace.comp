@@ -399,17 +399,20 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
-// The control variate A - G at a primary hit (T = 1 there): A the lobe's closed form
-// over every ring's contour band, G the same integrand estimated with this sample's light
-// sample (`nee_val` = w_l c D Le / p_l for emitter `nee_e` in direction `nee_dir`, or
-// none) and BSDF sample (`wi` local, `pdf`; `sampled` false: none), each times the number
-// of band quads holding its direction. The BSDF sample's MIS weight uses the light
-// triangle it would hit with occluders ignored, as the path's own weight on hitting it.
-float analytic_direct(Lobe lobe, vec3 origin, vec3 ng, bool sampled, vec3 wi, float pdf,
-                      vec3 tb, vec3 bt, vec3 ns, vec3 nee_dir, uint nee_e, float nee_val) {
+// The control variate at a primary hit (T = 1 there): returns A - G_light, A the lobe's
+// closed form over every ring's contour band, G_light the same integrand estimated with
+// this sample's light sample (`nee_val` = w_l c D Le / p_l for emitter `nee_e` in
+// direction `nee_dir`, or none); `pending`: the same integrand for the BSDF sample (`wi`
+// local, `pdf`; `sampled` false: none), c D Le / pdf, still to be weighted by its MIS
+// weight, which needs the light triangle the sample would reach with occluders ignored
+// (resolve_pending, once the path's next trace has told). Each term counts the band
+// quads holding its direction.
+float analytic_direct(Lobe lobe, vec3 origin, bool sampled, vec3 wi, float pdf, vec3 tb,
+                      vec3 bt, vec3 ns, vec3 nee_dir, uint nee_e, float nee_val,
+                      out float pending) {
     vec3 wb = sampled && pdf > 0.0 ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
-    float w_b = -1.0;   // MIS weight of the BSDF sample, found on first need
     float a = 0.0, g = 0.0;
+    pending = 0.0;
     for (uint k = 0u; k < prm.emitter_count; k++) {
         LightBlock e = emitters[k];
         if (e.emit.z <= 0.0) continue;
@@ -417,20 +420,25 @@ float analytic_direct(Lobe lobe, vec3 origin, vec3 ng, bool sampled, vec3 wi, fl
         float band = ring_band(e, lobe, origin, k == nee_e ? nee_dir : vec3(0.0), wb, m1, m2);
         a += lobe.c * e.emit.x * band;
         if (k == nee_e) g += nee_val * m1;
-        if (m2 > 0.0) {
-            if (w_b < 0.0) {
-                float pdf_l = 0.0;
-                Hit h = trace_lights(origin, wb);
-                if (h.prim != NO_HIT) {
-                    float cos_l = -dot(normalize(tri_normal(fetch_tri(h.prim))), wb);
-                    if (cos_l > 0.0) pdf_l = h.t * h.t / cos_l * light_area_pdf(h.prim, origin, ng);
-                }
-                w_b = power_heuristic(pdf, pdf_l);
-            }
-            g += w_b * lobe.c * lobe_d(lobe, wb) * e.emit.x * m2 / pdf;
-        }
+        if (m2 > 0.0) pending += lobe.c * lobe_d(lobe, wb) * e.emit.x * m2 / pdf;
     }
     return a - g;
+}
+
+// The MIS weight of the primary BSDF sample (ray o, d; pdf, shading point's geometric
+// normal n) in the control variate: as the path's own weight on reaching a light
+// triangle, from the light triangle the ray reaches with occluders ignored. `h`: the
+// path's trace of that ray, or a miss when not traced (then the lights alone are).
+float pending_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit h, bool traced) {
+    if (!traced || (h.prim != NO_HIT && (mat_word(h.prim) & 0xffu) != MAT_LIGHT)) {
+        h = trace_lights(o, d);
+    }
+    float pdf_l = 0.0;
+    if (h.prim != NO_HIT) {
+        float cos_l = -dot(normalize(tri_normal(fetch_tri(h.prim))), d);
+        if (cos_l > 0.0) pdf_l = h.t * h.t / cos_l * light_area_pdf(h.prim, o, n);
+    }
+    return power_heuristic(pdf, pdf_l);
 }
 
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
@@ -453,10 +461,15 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
 
     float L = 0.0;
     float T = 1.0;
+    float cv_pending = 0.0;  // analytic_direct's BSDF term awaiting its MIS weight
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
+        if (cv_pending != 0.0) {
+            L -= pending_weight(o, d, prev_pdf, prev_n, h, true) * cv_pending;
+            cv_pending = 0.0;
+        }
         if (want_label && depth == 0u && h.prim != NO_HIT
                 && h.prim < uint(label_words.length())) {
             label_word = label_words[h.prim];
@@ -599,11 +612,20 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         vec3 wi;
         float weight, pdf;
         bool sampled = surface_sample(surf, wo, u, wi, weight, pdf);
-        if (cv) L += analytic_direct(lobe, origin, ng, sampled, wi, pdf, tb, bt, ns,
-                                     cv_nee_dir, cv_nee_e, cv_nee_val);
+        if (cv) L += analytic_direct(lobe, origin, sampled, wi, pdf, tb, bt, ns, cv_nee_dir,
+                                     cv_nee_e, cv_nee_val, cv_pending);
         if (!sampled) break;
         T *= weight;
-        if (!(T > 0.0)) break;
+        if (!(T > 0.0)) {
+            if (cv_pending != 0.0) {
+                vec3 wb = normalize(wi.x * tb + wi.y * bt + wi.z * ns);
+                Hit none;
+                none.prim = NO_HIT;
+                L -= pending_weight(origin, wb, pdf, ng, none, false) * cv_pending;
+                cv_pending = 0.0;
+            }
+            break;
+        }
         if (depth >= 3u) {
             float q = min(T, 0.95);
             if (sample_1d(rng) >= q) break;
@@ -614,6 +636,12 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         o = origin;
         d = normalize(wi.x * tb + wi.y * bt + wi.z * ns);
         if (dot(d, ng) <= 0.0) break;   // reflected into the surface by a shading normal
+    }
+    // A primary BSDF sample whose path stopped before its next trace.
+    if (cv_pending != 0.0) {
+        Hit none;
+        none.prim = NO_HIT;
+        L -= pending_weight(o, d, prev_pdf, prev_n, none, false) * cv_pending;
     }
     return L;
 }
