@@ -87,7 +87,7 @@ pub const ALONG_MAX_RATIO: f64 = 32.0;
 /// Where the path turns by an angle phi, the rows (interpolated offsets) bend off their
 /// true offset by about `edge * phi / 4`; the edge is limited so that this stays below
 /// this fraction of the row spacing.
-pub const ROW_TOLERANCE: f64 = 0.25;
+pub const ROW_TOLERANCE: f64 = 0.5;
 /// Where the depth's slope along the path changes by `ds`, a linear piece of length
 /// `edge` misses the depth by up to `edge * ds / 4`; the edge is limited so that this
 /// stays below this fraction of the local depth.
@@ -184,8 +184,10 @@ impl Along {
     }
 }
 
-/// Segments of the polyline that come within `dist` of a segment more than `arc` away
-/// along the path (bucketed on a grid, so long paths stay cheap).
+/// Segments of the polyline that come within `dist` of another part of the path whose
+/// nearest point lies more than `arc` away along the path (a hairpin or a loop, not a
+/// bend: around a bend of up to 120 degrees, points within `dist` of each other are less
+/// than `dist` apart along the path). Bucketed on a grid, so long paths stay cheap.
 fn self_approach(pts: &[DVec2], dist: f64, arc: f64) -> Vec<bool> {
     let nseg = pts.len().saturating_sub(1);
     let mut fine = vec![false; nseg];
@@ -196,6 +198,21 @@ fn self_approach(pts: &[DVec2], dist: f64, arc: f64) -> Vec<bool> {
     for i in 1..pts.len() {
         cum[i] = cum[i - 1] + (pts[i] - pts[i - 1]).length();
     }
+    // Distance from `p` to segment k, and the arc length of the nearest point.
+    let on = |p: DVec2, k: usize| -> (f64, f64) {
+        let (a, b) = (pts[k], pts[k + 1]);
+        let e = b - a;
+        let l2 = e.length_squared();
+        let t = if l2 > 0.0 {
+            ((p - a).dot(e) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (
+            (p - (a + e * t)).length(),
+            cum[k] + t * (cum[k + 1] - cum[k]),
+        )
+    };
     let longest = pts
         .windows(2)
         .map(|w| (w[1] - w[0]).length())
@@ -215,20 +232,41 @@ fn self_approach(pts: &[DVec2], dist: f64, arc: f64) -> Vec<bool> {
         }
     }
     for i in 0..nseg {
-        let c = key(0.5 * (pts[i] + pts[i + 1]));
-        let Some(cands) = grid.get(&c) else { continue };
-        for &j in cands {
-            if j == i {
+        let (lo, hi) = (key(pts[i].min(pts[i + 1])), key(pts[i].max(pts[i + 1])));
+        let mut cands: Vec<usize> = Vec::new();
+        for x in lo.0..=hi.0 {
+            for y in lo.1..=hi.1 {
+                cands.extend(grid.get(&(x, y)).into_iter().flatten());
+            }
+        }
+        cands.sort_unstable();
+        cands.dedup();
+        for j in cands {
+            if j <= i + 1
+                || segment_segment_distance(pts[i], pts[i + 1], pts[j], pts[j + 1]) >= dist
+            {
                 continue;
             }
-            // Arc distance between the two segments (0 if they touch along the path).
-            let gap = if j > i {
-                cum[j] - cum[i + 1]
-            } else {
-                cum[i] - cum[j + 1]
-            };
-            if gap > arc && segment_segment_distance(pts[i], pts[i + 1], pts[j], pts[j + 1]) < dist
-            {
+            // Some point of one segment within `dist` of the other, and how far apart
+            // along the path the two nearest points are (the smallest such separation
+            // over the segments' ends; crossing segments are far apart along the path).
+            let mut gap = f64::INFINITY;
+            for (p, arc_p, k) in [
+                (pts[i], cum[i], j),
+                (pts[i + 1], cum[i + 1], j),
+                (pts[j], cum[j], i),
+                (pts[j + 1], cum[j + 1], i),
+            ] {
+                let (d, arc_q) = on(p, k);
+                if d < dist {
+                    gap = gap.min((arc_p - arc_q).abs());
+                }
+            }
+            if gap == f64::INFINITY {
+                // They cross (or approach) between their ends.
+                gap = cum[j] - cum[i + 1];
+            }
+            if gap > arc {
                 fine[i] = true;
                 fine[j] = true;
             }
