@@ -13,6 +13,7 @@ use super::DefectError;
 use super::refine::Refiner;
 use super::region::Region;
 use super::sample::{Defect, DefectSet, Shape};
+use super::slice::{Pieces, slice_scratch};
 use super::tool::{DefectTool, combined_height};
 use crate::scene::Mesh;
 use crate::scene::mesh::{CLASS_DENT, CLASS_SCRATCH, FaceId, TriLabel};
@@ -28,6 +29,24 @@ pub struct ImprintStats {
     pub triangles_out: usize,
     pub vertices_displaced: usize,
     pub triangles_labelled: usize,
+}
+
+/// How a scratch is meshed (docs/defects.md, "Imprint").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ScratchMesh {
+    /// Long triangles along the path, rows of vertices at fixed offsets across it: the
+    /// resolution across as with `Isotropic`, far fewer triangles.
+    #[default]
+    Anisotropic,
+    /// Every triangle near the scratch bisected until its longest edge is at most
+    /// `width / resolution` (the meshes before issue 15; kept for comparison).
+    Isotropic,
+}
+
+/// Options of [`imprint_with_options`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ImprintOptions {
+    pub scratch_mesh: ScratchMesh,
 }
 
 /// A set may come from a user's JSON file: check what the tools index or divide by.
@@ -98,18 +117,28 @@ pub fn imprint_with_stats(
     mesh: &Mesh,
     set: &DefectSet,
 ) -> Result<(Mesh, ImprintStats), DefectError> {
-    imprint_inner(mesh, set).map(|(m, s, _)| (m, s))
+    imprint_with_options(mesh, set, ImprintOptions::default())
+}
+
+/// As [`imprint_with_stats`], with a choice of how scratches are meshed.
+pub fn imprint_with_options(
+    mesh: &Mesh,
+    set: &DefectSet,
+    options: ImprintOptions,
+) -> Result<(Mesh, ImprintStats), DefectError> {
+    imprint_inner(mesh, set, options).map(|(m, s, _)| (m, s))
 }
 
 /// As [`imprint`], with the input triangle each output triangle is a piece of (so
 /// per-triangle data of the input, e.g. glTF materials, can follow the refinement).
 pub fn imprint_traced(mesh: &Mesh, set: &DefectSet) -> Result<(Mesh, Vec<u32>), DefectError> {
-    imprint_inner(mesh, set).map(|(m, _, o)| (m, o))
+    imprint_inner(mesh, set, ImprintOptions::default()).map(|(m, _, o)| (m, o))
 }
 
 fn imprint_inner(
     mesh: &Mesh,
     set: &DefectSet,
+    options: ImprintOptions,
 ) -> Result<(Mesh, ImprintStats, Vec<u32>), DefectError> {
     if !(set.resolution.is_finite() && (2.0..=64.0).contains(&set.resolution)) {
         return Err(DefectError::BadSet(format!(
@@ -171,7 +200,9 @@ fn imprint_inner(
     )?;
 
     // Refine every triangle of a defected face that comes near a footprint until its
-    // longest edge is at most that defect's target edge.
+    // longest edge is at most that defect's target edge (for anisotropic scratches the
+    // edge along the path there; the rows cut below give the resolution across).
+    let anisotropic = options.scratch_mesh == ScratchMesh::Anisotropic;
     let needs = |r: &Refiner, t: u32| -> bool {
         let Some((region, idx)) = tools_of(r.labels[t as usize].face) else {
             return false;
@@ -183,7 +214,8 @@ fn imprint_inner(
         let c = region.to_uv(c3);
         idx.iter().any(|&k| {
             let tool = &tools[k];
-            l2 > tool.edge_mm * tool.edge_mm && tool.near(c, reach + 0.5 * tool.edge_mm)
+            tool.edge_near(c, reach + 0.5 * tool.edge_mm, anisotropic)
+                .is_some_and(|h| l2 > h * h)
         })
     };
     let mut work: Vec<u32> = (0..r.tris.len() as u32)
@@ -193,6 +225,20 @@ fn imprint_inner(
         if needs(&r, t) {
             r.refine(t)?;
             work.append(&mut r.touched);
+        }
+    }
+
+    if anisotropic {
+        for (ri, idx) in &face_tools {
+            for &k in idx {
+                let pieces = Pieces {
+                    positions: &mut r.positions,
+                    tris: &mut r.tris,
+                    labels: &mut r.labels,
+                    origin: &mut r.origin,
+                };
+                slice_scratch(pieces, &regions[*ri], &tools[k], TRIANGLE_LIMIT)?;
+            }
         }
     }
 

@@ -11,11 +11,15 @@ mod imprint;
 mod refine;
 mod region;
 mod sample;
+mod slice;
 mod spec;
 mod tool;
 
 pub use check::check_closed_manifold;
-pub use imprint::{ImprintStats, imprint, imprint_traced, imprint_with_stats};
+pub use imprint::{
+    ImprintOptions, ImprintStats, ScratchMesh, imprint, imprint_traced, imprint_with_options,
+    imprint_with_stats,
+};
 pub use sample::{Defect, DefectSet, Dent, Scratch, Shape, sample_defects};
 pub use spec::{DefectSpec, DentSpec, Range, ScratchProfile, ScratchSpec};
 pub use tool::DefectTool;

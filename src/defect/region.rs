@@ -143,7 +143,7 @@ pub(crate) fn point_segment_distance(p: DVec2, a: DVec2, b: DVec2) -> f64 {
     (p - (a + d * t)).length()
 }
 
-fn segment_segment_distance(p: DVec2, q: DVec2, a: DVec2, b: DVec2) -> f64 {
+pub(crate) fn segment_segment_distance(p: DVec2, q: DVec2, a: DVec2, b: DVec2) -> f64 {
     let o = |x: DVec2, y: DVec2, z: DVec2| (y - x).perp_dot(z - x);
     let (d1, d2) = (o(a, b, p), o(a, b, q));
     let (d3, d4) = (o(p, q, a), o(p, q, b));
