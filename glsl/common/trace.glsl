@@ -23,11 +23,12 @@ struct Hit {
 #define TRACE_BINDING_COUNT 1
 layout(set = 0, binding = 0) uniform accelerationStructureEXT trace_tlas;
 
-Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
+// The closest hit among the instances whose mask meets `mask`.
+Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask) {
     Hit h;
     h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
     rayQueryEXT rq;
-    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, 0xff, o, tmin, d, tmax);
+    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, mask, o, tmin, d, tmax);
     while (rayQueryProceedEXT(rq)) {}
     if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
         h.t = rayQueryGetIntersectionTEXT(rq, true);
@@ -39,23 +40,11 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     return h;
 }
 
+Hit trace(vec3 o, vec3 d, float tmin, float tmax) { return trace_masked(o, d, tmin, tmax, 0xffu); }
+
 // The closest hit among the view's lights alone (the second level; instance mask 0x02,
 // src/trace/mod.rs), occluders ignored.
-Hit trace_lights(vec3 o, vec3 d) {
-    Hit h;
-    h.t = 3.0e38; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
-    rayQueryEXT rq;
-    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, 0x02, o, 0.0, d, 3.0e38);
-    while (rayQueryProceedEXT(rq)) {}
-    if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
-        h.t = rayQueryGetIntersectionTEXT(rq, true);
-        h.prim = uint(rayQueryGetIntersectionPrimitiveIndexEXT(rq, true))
-            + uint(rayQueryGetIntersectionInstanceCustomIndexEXT(rq, true));
-        h.bary = rayQueryGetIntersectionBarycentricsEXT(rq, true);
-        h.inst = uint(rayQueryGetIntersectionInstanceIdEXT(rq, true));
-    }
-    return h;
-}
+Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u); }
 
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
@@ -124,13 +113,20 @@ TraceRay trace_setup(vec3 o, vec3 d) {
 #define TRACE_INST 1u
 #include "trace_bvh.glsl"
 
+// The traversal's view of ray (o, d): reciprocal direction for the slab tests (zero
+// components nudged: 0 * inf would give NaN) and the watertight test's shear.
+void trace_prepare(vec3 o, vec3 d, out vec3 inv_d, out TraceRay tr) {
+    vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
+    inv_d = 1.0 / dd;
+    tr = trace_setup(o, d);
+}
+
 Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     Hit h;
     h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
-    // Zero direction components would give 0 * inf = NaN in the slab test.
-    vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
-    vec3 inv_d = 1.0 / dd;
-    TraceRay tr = trace_setup(o, d);
+    vec3 inv_d;
+    TraceRay tr;
+    trace_prepare(o, d, inv_d, tr);
     trace_bvh_0(o, inv_d, tr, tmin, h);
     trace_bvh_1(o, inv_d, tr, tmin, h);
     return h;
@@ -140,9 +136,9 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
 Hit trace_lights(vec3 o, vec3 d) {
     Hit h;
     h.t = 3.0e38; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
-    vec3 dd = mix(d, sign(d) * 1e-30 + vec3(equal(d, vec3(0.0))) * 1e-30, lessThan(abs(d), vec3(1e-30)));
-    vec3 inv_d = 1.0 / dd;
-    TraceRay tr = trace_setup(o, d);
+    vec3 inv_d;
+    TraceRay tr;
+    trace_prepare(o, d, inv_d, tr);
     trace_bvh_1(o, inv_d, tr, 0.0, h);
     return h;
 }

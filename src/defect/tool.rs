@@ -7,6 +7,19 @@ use super::region::{Region, point_segment_distance, segment_segment_distance};
 use super::sample::{Defect, Shape};
 use super::spec::ScratchProfile;
 
+/// The point of segment [a, b] nearest to p: its parameter t in [0, 1] along the segment
+/// and its squared distance to p.
+fn nearest_on_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
+    let e = b - a;
+    let l2 = e.length_squared();
+    let t = if l2 > 0.0 {
+        ((p - a).dot(e) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (t, (p - (a + e * t)).length_squared())
+}
+
 /// How far below the face a scratch of `profile`, centre depth `dep` and half-width `r`
 /// reaches at squared distance `dist2 < r^2` from its path.
 fn scratch_depth_at(profile: ScratchProfile, dep: f64, r: f64, dist2: f64) -> f64 {
@@ -200,18 +213,8 @@ fn self_approach(pts: &[DVec2], dist: f64, arc: f64) -> Vec<bool> {
     }
     // Distance from `p` to segment k, and the arc length of the nearest point.
     let on = |p: DVec2, k: usize| -> (f64, f64) {
-        let (a, b) = (pts[k], pts[k + 1]);
-        let e = b - a;
-        let l2 = e.length_squared();
-        let t = if l2 > 0.0 {
-            ((p - a).dot(e) / l2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        (
-            (p - (a + e * t)).length(),
-            cum[k] + t * (cum[k + 1] - cum[k]),
-        )
+        let (t, d2) = nearest_on_segment(p, pts[k], pts[k + 1]);
+        (d2.sqrt(), cum[k] + t * (cum[k + 1] - cum[k]))
     };
     let longest = pts
         .windows(2)
@@ -392,14 +395,7 @@ impl DefectTool {
                     {
                         continue;
                     }
-                    let e = b - a;
-                    let l2 = e.length_squared();
-                    let t = if l2 > 0.0 {
-                        ((p - a).dot(e) / l2).clamp(0.0, 1.0)
-                    } else {
-                        0.0
-                    };
-                    let dist2 = (p - (a + e * t)).length_squared();
+                    let (t, dist2) = nearest_on_segment(p, a, b);
                     if dist2 < r * r {
                         let dep = depth[i] + (depth[i + 1] - depth[i]) * t;
                         h = h.min(-scratch_depth_at(*profile, dep, r, dist2));
@@ -516,15 +512,7 @@ impl DefectTool {
         };
         let mut best = (f64::INFINITY, 0usize, 0.0f64);
         for (i, w) in pts.windows(2).enumerate() {
-            let (a, b) = (w[0], w[1]);
-            let e = b - a;
-            let l2 = e.length_squared();
-            let t = if l2 > 0.0 {
-                ((p - a).dot(e) / l2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let d2 = (p - (a + e * t)).length_squared();
+            let (t, d2) = nearest_on_segment(p, w[0], w[1]);
             if d2 < best.0 {
                 best = (d2, i, t);
             }
