@@ -7,9 +7,6 @@
 mod common;
 
 use glam::Vec3;
-use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::RenderScene;
-use synosis::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
 use synosis::scene::Mesh;
 use synosis::scene::config::{DirectLight, SceneConfig};
 use synosis::trace::Backend;
@@ -47,39 +44,17 @@ fn config(alpha: f32, direct: DirectLight, seed: u32, spp: u32) -> SceneConfig {
     cfg
 }
 
-struct Renderer {
-    ctx: std::sync::Arc<synosis::vk::Context>,
-    tracer: PathTracer,
-    gpu: GpuScene,
-}
+/// One device, path tracer and GPU scene per backend for every render of the test.
+struct Renderer(common::SceneRenderer);
 
 impl Renderer {
     fn new(backend: Backend) -> Renderer {
-        let ctx = common::gpu();
-        let tracer = PathTracer::new(&ctx, backend, &EnergyTables::compute()).expect("tracer");
-        let scene = RenderScene::assemble(&scene_mesh(), &config(0.15, DirectLight::Sampled, 0, 4))
-            .expect("scene");
-        let gpu = GpuScene::new(&tracer, &scene.stage, None).expect("gpu scene");
-        Renderer { ctx, tracer, gpu }
+        let cfg = config(0.15, DirectLight::Sampled, 0, 4);
+        Renderer(common::SceneRenderer::new(backend, scene_mesh(), &cfg))
     }
 
     fn radiance(&self, cfg: &SceneConfig) -> Vec<f64> {
-        let scene = RenderScene::assemble(&scene_mesh(), cfg).expect("scene");
-        let opts = FrameOptions {
-            annotate_grid: None,
-            profiler: None,
-            noise: None,
-        };
-        let f = render_frame(
-            &self.tracer,
-            &self.gpu,
-            &scene.view,
-            &RenderSettings::from(cfg),
-            opts,
-            |_| {},
-        )
-        .expect("render");
-        common::assert_clean(&self.ctx);
+        let f = self.0.render(cfg, false);
         f.radiance.data.iter().map(|&v| v as f64).collect()
     }
 }

@@ -6,10 +6,8 @@
 mod common;
 
 use glam::Vec3;
+use synosis::render::Frame;
 use synosis::render::annotate::Annotation;
-use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::RenderScene;
-use synosis::render::{Frame, FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
 use synosis::scene::Mesh;
 use synosis::scene::config::{LabelSource, SceneConfig};
 use synosis::trace::Backend;
@@ -51,43 +49,17 @@ fn config(f_number: Option<f64>, spp: u32, labels: LabelSource) -> SceneConfig {
     cfg
 }
 
-/// One device, path tracer and GPU scene per backend for every render of a test (the
-/// pipelines take most of a small render's time on lavapipe).
-struct Renderer {
-    ctx: std::sync::Arc<synosis::vk::Context>,
-    tracer: PathTracer,
-    gpu: GpuScene,
-}
+/// One device, path tracer and GPU scene per backend for every render of a test.
+struct Renderer(common::SceneRenderer);
 
 impl Renderer {
     fn new(backend: Backend) -> Renderer {
-        let ctx = common::gpu();
-        let tracer = PathTracer::new(&ctx, backend, &EnergyTables::compute()).expect("tracer");
-        let scene = RenderScene::assemble(&scene_mesh(), &config(None, 16, LabelSource::Pass))
-            .expect("scene");
-        let gpu = GpuScene::new(&tracer, &scene.stage, None).expect("gpu scene");
-        Renderer { ctx, tracer, gpu }
+        let cfg = config(None, 16, LabelSource::Pass);
+        Renderer(common::SceneRenderer::new(backend, scene_mesh(), &cfg))
     }
 
     fn render(&self, cfg: &SceneConfig) -> Frame {
-        let scene = RenderScene::assemble(&scene_mesh(), cfg).expect("scene");
-        let opts = FrameOptions {
-            annotate_grid: Some(4),
-            profiler: None,
-            noise: None,
-        };
-        let settings = RenderSettings::from(cfg);
-        let f = render_frame(
-            &self.tracer,
-            &self.gpu,
-            &scene.view,
-            &settings,
-            opts,
-            |_| {},
-        )
-        .expect("render");
-        common::assert_clean(&self.ctx);
-        f
+        self.0.render(cfg, true)
     }
 }
 

@@ -246,3 +246,52 @@ pub fn labelled_plane(side: f32, z: f32, regions: &[Region], occluder: [Vec3; 4]
     m.labels.extend([TriLabel::default(); 2]);
     m
 }
+
+/// One device, path tracer and GPU scene for every render of one mesh in a test (the
+/// pipelines take most of a small render's time on lavapipe); each render assembles the
+/// scene from its own config (view, lights, settings) over the same stage.
+pub struct SceneRenderer {
+    pub ctx: Arc<Context>,
+    tracer: synosis::render::PathTracer,
+    gpu: synosis::render::GpuScene,
+    mesh: Mesh,
+}
+
+impl SceneRenderer {
+    /// `cfg`: any config of the test (the stage does not depend on the view).
+    pub fn new(backend: Backend, mesh: Mesh, cfg: &SceneConfig) -> SceneRenderer {
+        let ctx = gpu();
+        let tracer = synosis::render::PathTracer::new(&ctx, backend, &EnergyTables::compute())
+            .expect("tracer");
+        let scene = RenderScene::assemble(&mesh, cfg).expect("scene");
+        let gpu = synosis::render::GpuScene::new(&tracer, &scene.stage, None).expect("gpu scene");
+        SceneRenderer {
+            ctx,
+            tracer,
+            gpu,
+            mesh,
+        }
+    }
+
+    /// Renders `cfg` (annotated with a 4 x 4 coverage grid when `annotate`); fails the
+    /// test on any validation error.
+    pub fn render(&self, cfg: &SceneConfig, annotate: bool) -> synosis::render::Frame {
+        let scene = RenderScene::assemble(&self.mesh, cfg).expect("scene");
+        let opts = FrameOptions {
+            annotate_grid: annotate.then_some(4),
+            profiler: None,
+            noise: None,
+        };
+        let f = synosis::render::render_frame(
+            &self.tracer,
+            &self.gpu,
+            &scene.view,
+            &synosis::render::RenderSettings::from(cfg),
+            opts,
+            |_| {},
+        )
+        .expect("render");
+        assert_clean(&self.ctx);
+        f
+    }
+}
