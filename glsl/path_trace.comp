@@ -402,15 +402,13 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
 // The control variate at a primary hit (T = 1 there): returns A - G_light, A the lobe's
 // closed form over every ring's contour band, G_light the same integrand estimated with
 // this sample's light sample (`nee_val` = w_l c D Le / p_l for emitter `nee_e` in
-// direction `nee_dir`, or none); `pending`: the same integrand for the BSDF sample (`wi`
-// local, `pdf`; `sampled` false: none), c D Le / pdf, still to be weighted by its MIS
+// direction `nee_dir`, or none); `pending`: the same integrand for the BSDF sample
+// (direction `wb`, 0 for none; `pdf`), c D Le / pdf, still to be weighted by its MIS
 // weight, which needs the light triangle the sample would reach with occluders ignored
-// (resolve_pending, once the path's next trace has told). Each term counts the band
-// quads holding its direction.
-float analytic_direct(Lobe lobe, vec3 origin, bool sampled, vec3 wi, float pdf, vec3 tb,
-                      vec3 bt, vec3 ns, vec3 nee_dir, uint nee_e, float nee_val,
-                      out float pending) {
-    vec3 wb = sampled && pdf > 0.0 ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
+// (pending_weight, once the path's next trace has told). Each term counts the band quads
+// holding its direction.
+float analytic_direct(Lobe lobe, vec3 origin, vec3 wb, float pdf, vec3 nee_dir, uint nee_e,
+                      float nee_val, out float pending) {
     float a = 0.0, g = 0.0;
     pending = 0.0;
     for (uint k = 0u; k < prm.emitter_count; k++) {
@@ -426,17 +424,14 @@ float analytic_direct(Lobe lobe, vec3 origin, bool sampled, vec3 wi, float pdf, 
 }
 
 // The MIS weight of the primary BSDF sample (ray o, d; pdf, shading point's geometric
-// normal n) in the control variate: as the path's own weight on reaching a light
-// triangle, from the light triangle the ray reaches with occluders ignored. `h`: the
-// path's trace of that ray, or a miss when not traced (then the lights alone are).
-float pending_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit h, bool traced) {
-    if (!traced || (h.prim != NO_HIT && (mat_word(h.prim) & 0xffu) != MAT_LIGHT)) {
-        h = trace_lights(o, d);
-    }
+// normal n) in the control variate, as the path's own weight on reaching a light
+// triangle; `light`: the first light triangle on the ray with occluders ignored (or a
+// miss).
+float pending_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light) {
     float pdf_l = 0.0;
-    if (h.prim != NO_HIT) {
-        float cos_l = -dot(normalize(tri_normal(fetch_tri(h.prim))), d);
-        if (cos_l > 0.0) pdf_l = h.t * h.t / cos_l * light_area_pdf(h.prim, o, n);
+    if (light.prim != NO_HIT) {
+        float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
+        if (cos_l > 0.0) pdf_l = light.t * light.t / cos_l * light_area_pdf(light.prim, o, n);
     }
     return power_heuristic(pdf, pdf_l);
 }
@@ -467,7 +462,11 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
         if (cv_pending != 0.0) {
-            L -= pending_weight(o, d, prev_pdf, prev_n, h, true) * cv_pending;
+            // The first light on the ray with occluders ignored: the hit itself unless
+            // something else is in front.
+            bool at_light = h.prim == NO_HIT || (mat_word(h.prim) & 0xffu) == MAT_LIGHT;
+            L -= pending_weight(o, d, prev_pdf, prev_n, at_light ? h : trace_lights(o, d))
+                * cv_pending;
             cv_pending = 0.0;
         }
         if (want_label && depth == 0u && h.prim != NO_HIT
@@ -577,30 +576,28 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 vec3 wi_w = to / dist;
                 float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
                 vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
-                if (cv && e.emit.z > 0.0 && cos_l > 0.0) {
+                bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
+                // The control variate also takes light samples below the surface.
+                bool cv_light = cv && e.emit.z > 0.0 && cos_l > 0.0;
+                float pdf_b = 0.0;
+                float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
+                float pdf_light = dist2 / cos_l * area_pdf;
+                if (cv_light) {
                     // The control variate's light sample: its direction, MIS weight
                     // and c D Le / pdf (times the band quads holding it, below).
-                    float pdf_b_cv;
-                    surface_eval(surf, wo, wi, pdf_b_cv);
-                    float pdf_l_cv = dist2 / cos_l * area_pdf;
                     cv_nee_dir = wi_w;
                     cv_nee_e = ei;
-                    cv_nee_val = pdf_l_cv > 0.0
-                        ? power_heuristic(pdf_l_cv, pdf_b_cv) * lobe.c * lobe_d(lobe, wi_w)
-                            * e.emit.x / pdf_l_cv
+                    cv_nee_val = pdf_light > 0.0
+                        ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
+                            * e.emit.x / pdf_light
                         : 0.0;
                 }
-                if (cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
-                    float pdf_b;
-                    float f = surface_eval(surf, wo, wi, pdf_b);
-                    if (f > 0.0) {
-                        Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
-                        bool visible = s.prim == NO_HIT
-                            || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
-                        if (visible) {
-                            float pdf_light = dist2 / cos_l * area_pdf;
-                            L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
-                        }
+                if (lit && f > 0.0) {
+                    Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
+                    bool visible = s.prim == NO_HIT
+                        || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
+                    if (visible) {
+                        L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
                     }
                 }
             }
@@ -612,36 +609,28 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         vec3 wi;
         float weight, pdf;
         bool sampled = surface_sample(surf, wo, u, wi, weight, pdf);
-        if (cv) L += analytic_direct(lobe, origin, sampled, wi, pdf, tb, bt, ns, cv_nee_dir,
-                                     cv_nee_e, cv_nee_val, cv_pending);
+        vec3 d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
+        if (cv) L += analytic_direct(lobe, origin, d_next, pdf, cv_nee_dir, cv_nee_e,
+                                     cv_nee_val, cv_pending);
         if (!sampled) break;
+        // The next ray (also where a pending control-variate term is resolved when the
+        // path stops here).
+        prev_pdf = pdf;
+        prev_n = ng;
+        o = origin;
+        d = d_next;
         T *= weight;
-        if (!(T > 0.0)) {
-            if (cv_pending != 0.0) {
-                vec3 wb = normalize(wi.x * tb + wi.y * bt + wi.z * ns);
-                Hit none;
-                none.prim = NO_HIT;
-                L -= pending_weight(origin, wb, pdf, ng, none, false) * cv_pending;
-                cv_pending = 0.0;
-            }
-            break;
-        }
+        if (!(T > 0.0)) break;
         if (depth >= 3u) {
             float q = min(T, 0.95);
             if (sample_1d(rng) >= q) break;
             T /= q;
         }
-        prev_pdf = pdf;
-        prev_n = ng;
-        o = origin;
-        d = normalize(wi.x * tb + wi.y * bt + wi.z * ns);
         if (dot(d, ng) <= 0.0) break;   // reflected into the surface by a shading normal
     }
     // A primary BSDF sample whose path stopped before its next trace.
     if (cv_pending != 0.0) {
-        Hit none;
-        none.prim = NO_HIT;
-        L -= pending_weight(o, d, prev_pdf, prev_n, none, false) * cv_pending;
+        L -= pending_weight(o, d, prev_pdf, prev_n, trace_lights(o, d)) * cv_pending;
     }
     return L;
 }

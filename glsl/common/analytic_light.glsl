@@ -19,10 +19,6 @@
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
 
-// Most quads of a ring's contour band (LightBlock emit.z: the ring's own segments up to
-// this many; src/render/view.rs).
-const uint BAND_MAX = 128u;
-
 // A linearly transformed cosine in world space: orthonormal frame (t1, t2, r), r its
 // axis, widths a1 along t1 and a2 along t2; g = c D.
 struct Lobe {
@@ -120,12 +116,12 @@ void ring_contour(vec3 c, vec3 e, vec3 ax, float big_r, float r, vec3 x,
 // Ring `ring`'s contour band seen from x: the integral of the lobe's D over its quads (each
 // quad once), and for directions w1, w2 (unit, world; 0: none) how many quads contain
 // them (m1, m2). The band has emit.z quads (src/render/view.rs: the ring's own segments,
-// at most BAND_MAX), at the angles of the ring's segments (ring_light's frame,
+// at most RING_BAND_MAX), at the angles of the ring's segments (ring_light's frame,
 // src/scene/camera.rs).
 float ring_band(LightBlock ring, Lobe l, vec3 x, vec3 w1, vec3 w2, out float m1, out float m2) {
     vec3 c = ring.pos.xyz, ax = ring.dir.xyz;
     float big_r = ring.pos.w, r = ring.dir.w;
-    uint n = clamp(uint(ring.emit.z), 3u, BAND_MAX);
+    uint n = clamp(uint(ring.emit.z), 3u, RING_BAND_MAX);
     vec3 u = normalize(cross(ax, abs(ax.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
     vec3 l1 = lobe_local(l, w1), l2 = lobe_local(l, w2);
     float step = 2.0 * PI / float(n);

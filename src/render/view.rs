@@ -11,7 +11,7 @@ use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
     LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, PathParams, PathPush,
-    PathTraceBinding as B, TILE, TileBlock,
+    PathTraceBinding as B, RING_BAND_MAX, TILE, TileBlock,
 };
 use crate::graph::Graph;
 use crate::scene::Camera;
@@ -394,9 +394,6 @@ pub fn pixel_angle(cam: &Camera) -> f32 {
     (4.0 * cam.tan_half_w * cam.tan_half_h / (cam.width as f32 * cam.height as f32)).sqrt()
 }
 
-/// Most quads of a ring light's contour band (glsl/common/analytic_light.glsl BAND_MAX).
-const BAND_MAX: u32 = 128;
-
 /// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,
 /// `View::new` turns next-event estimation off (as it always was for zero radiance).
 fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
@@ -448,11 +445,11 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
                     None => ([0.0; 4], [0.0; 4], e.radiance),
                 },
             };
-            // The contour band's quads: the ring's own segments, at most BAND_MAX (128,
-            // glsl/common/analytic_light.glsl); 0: no band.
+            // The contour band's quads: the ring's own segments, at most RING_BAND_MAX;
+            // 0: no band.
             let ring = e
                 .torus
-                .map_or(0.0, |t| t.segments_major.min(BAND_MAX) as f32);
+                .map_or(0.0, |t| t.segments_major.min(RING_BAND_MAX) as f32);
             LightBlock {
                 pos,
                 dir,

@@ -15,7 +15,7 @@ use super::config::{
 use super::curved::{
     CurvedPatch, CurvedTolerance, PatchKind, curved_patches, encode_normal, smooth_corner_normals,
 };
-use super::lights::{LightMount, LightShape, LightSpec};
+use super::lights::{LightShape, LightSpec};
 use super::materials::{GltfMaterials, RegionMaterial, SurfaceMaterial};
 use super::mesh::{FACE_OTHER, FaceId, TriLabel, face_name};
 use super::regions::{RegionTolerance, planar_regions, region_per_triangle};
@@ -593,15 +593,8 @@ impl LightGeometry {
             };
             let torus = match &spec.shape {
                 LightShape::Ring(r) => {
-                    // As LightSpec::triangles places the ring (on the camera: the eye and
-                    // view direction in f32, exactly).
-                    let (centre, axis) = match spec.mount {
-                        LightMount::OnCamera => (camera.eye, camera.forward),
-                        LightMount::Free { .. } => {
-                            let f = spec.frame(camera);
-                            (f.position.as_vec3(), f.forward.as_vec3())
-                        }
-                    };
+                    // Where its triangles are (LightSpec::triangles).
+                    let (centre, axis) = spec.ring_centre_axis(camera);
                     Some(Torus {
                         centre,
                         axis: axis.normalize(),

@@ -612,19 +612,28 @@ impl LightSpec {
         }
     }
 
+    /// Where a ring is placed for `camera`: its centre and axis (on the camera, exactly
+    /// the old ring's: the eye and view direction in f32).
+    pub fn ring_centre_axis(&self, camera: &Camera) -> (Vec3, Vec3) {
+        match self.mount {
+            LightMount::OnCamera => (camera.eye, camera.forward),
+            LightMount::Free { .. } => {
+                let f = self.frame(camera);
+                (f.position.as_vec3(), f.forward.as_vec3())
+            }
+        }
+    }
+
     /// Emissive triangles of an area light (positions, then triangles wound so that
     /// the geometric normal cross(b - a, c - a) points to the emitting side); none for
     /// the spot.
     pub fn triangles(&self, camera: &Camera) -> (Vec<Vec3>, Vec<[u32; 3]>) {
         let f = self.frame(camera);
         match &self.shape {
-            LightShape::Ring(ring) => match self.mount {
-                // Exactly the old ring: centre and axis in f32 from the camera.
-                LightMount::OnCamera => ring_light(camera.eye, camera.forward, ring),
-                LightMount::Free { .. } => {
-                    ring_light(f.position.as_vec3(), f.forward.as_vec3(), ring)
-                }
-            },
+            LightShape::Ring(ring) => {
+                let (centre, axis) = self.ring_centre_axis(camera);
+                ring_light(centre, axis, ring)
+            }
             LightShape::Bar { size_mm } => {
                 let h = [size_mm[0], size_mm[1], size_mm[2]].map(|s| 0.5 * s as f64);
                 let axes = [f.right * h[0], f.up * h[1], f.forward * h[2]];
