@@ -399,41 +399,19 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
-// The control variate at a primary hit (T = 1 there): returns A - G_light, A the lobe's
-// closed form over every ring's contour band, G_light the same integrand estimated with
-// this sample's light sample (`nee_val` = w_l c D Le / p_l for emitter `nee_e` in
-// direction `nee_dir`, or none); `pending`: the same integrand for the BSDF sample
-// (direction `wb`, 0 for none; `pdf`), c D Le / pdf, still to be weighted by its MIS
-// weight, which needs the light triangle the sample would reach with occluders ignored
-// (pending_weight, once the path's next trace has told). Each term counts the band quads
-// holding its direction.
-float analytic_direct(Lobe lobe, vec3 origin, vec3 wb, float pdf, vec3 nee_dir, uint nee_e,
-                      float nee_val, out float pending) {
-    float a = 0.0, g = 0.0;
-    pending = 0.0;
-    for (uint k = 0u; k < prm.emitter_count; k++) {
-        LightBlock e = emitters[k];
-        if (e.emit.z <= 0.0) continue;
-        float m1, m2;
-        float band = ring_band(e, lobe, origin, k == nee_e ? nee_dir : vec3(0.0), wb, m1, m2);
-        a += lobe.c * e.emit.x * band;
-        if (k == nee_e) g += nee_val * m1;
-        if (m2 > 0.0) pending += lobe.c * lobe_d(lobe, wb) * e.emit.x * m2 / pdf;
-    }
-    return a - g;
-}
-
-// The MIS weight of the primary BSDF sample (ray o, d; pdf, shading point's geometric
-// normal n) in the control variate, as the path's own weight on reaching a light
-// triangle; `light`: the first light triangle on the ray with occluders ignored (or a
-// miss).
-float pending_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light) {
-    float pdf_l = 0.0;
-    if (light.prim != NO_HIT) {
-        float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
-        if (cos_l > 0.0) pdf_l = light.t * light.t / cos_l * light_area_pdf(light.prim, o, n);
-    }
-    return power_heuristic(pdf, pdf_l);
+// The control variate's BSDF-sample term at the primary hit, once the path's next trace
+// has told `light`, the first light triangle on the ray o, d with occluders ignored (or
+// a miss): its radiance times its MIS weight as E's own (BSDF pdf `pdf`, shading
+// point's geometric normal n) where that triangle faces o and belongs to a ring of
+// `mask`, else 0.
+float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
+    if (light.prim == NO_HIT) return 0.0;
+    uint k = emitter_of(light.prim);
+    if (k >= 32u || (mask & (1u << k)) == 0u) return 0.0;
+    float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
+    if (!(cos_l > 0.0)) return 0.0;
+    float pdf_l = light.t * light.t / cos_l * light_area_pdf(light.prim, o, n);
+    return emitters[k].emit.x * power_heuristic(pdf, pdf_l);
 }
 
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
@@ -456,7 +434,10 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
 
     float L = 0.0;
     float T = 1.0;
-    float cv_pending = 0.0;  // analytic_direct's BSDF term awaiting its MIS weight
+    // The control variate (primary hit): its rings (analytic_rings) and its BSDF-sample
+    // term c D / pdf, awaiting the light the next trace meets (cv_bsdf_weight).
+    uint cv_mask = 0u;
+    float cv_pending = 0.0;
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
@@ -465,8 +446,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             // The first light on the ray with occluders ignored: the hit itself unless
             // something else is in front.
             bool at_light = h.prim == NO_HIT || (mat_word(h.prim) & 0xffu) == MAT_LIGHT;
-            L -= pending_weight(o, d, prev_pdf, prev_n, at_light ? h : trace_lights(o, d))
-                * cv_pending;
+            L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, at_light ? h : trace_lights(o, d),
+                                cv_mask) * cv_pending;
             cv_pending = 0.0;
         }
         if (want_label && depth == 0u && h.prim != NO_HIT
@@ -538,8 +519,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         Lobe lobe;
         bool cv = prm.direct_light == DIRECT_ANALYTIC && depth == 0u && !surf.diffuse
             && prm.emitter_count > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
-        vec3 cv_nee_dir = vec3(0.0);
-        uint cv_nee_e = 0xffffffffu;
+        // A (closed form, over the rings of cv_rings) and G's light-sample term.
+        uint cv_rings = 0u;
+        float cv_a = cv ? analytic_rings(lobe, origin, cv_rings) : 0.0;
         float cv_nee_val = 0.0;
 
         // Next-event estimation: a light by power, then a point on it (a spot light is
@@ -578,15 +560,12 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
                 bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
                 // The control variate also takes light samples below the surface.
-                bool cv_light = cv && e.emit.z > 0.0 && cos_l > 0.0;
+                bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0;
                 float pdf_b = 0.0;
                 float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
                 float pdf_light = dist2 / cos_l * area_pdf;
                 if (cv_light) {
-                    // The control variate's light sample: its direction, MIS weight
-                    // and c D Le / pdf (times the band quads holding it, below).
-                    cv_nee_dir = wi_w;
-                    cv_nee_e = ei;
+                    // The control variate's light sample: MIS weight times c D Le / pdf.
                     cv_nee_val = pdf_light > 0.0
                         ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
                             * e.emit.x / pdf_light
@@ -610,8 +589,11 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         float weight, pdf;
         bool sampled = surface_sample(surf, wo, u, wi, weight, pdf);
         vec3 d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
-        if (cv) L += analytic_direct(lobe, origin, d_next, pdf, cv_nee_dir, cv_nee_e,
-                                     cv_nee_val, cv_pending);
+        if (cv_rings != 0u) {
+            cv_mask = cv_rings;
+            L += cv_a - cv_nee_val;
+            cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
+        }
         if (!sampled) break;
         // The next ray (also where a pending control-variate term is resolved when the
         // path stops here).
@@ -630,7 +612,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     }
     // A primary BSDF sample whose path stopped before its next trace.
     if (cv_pending != 0.0) {
-        L -= pending_weight(o, d, prev_pdf, prev_n, trace_lights(o, d)) * cv_pending;
+        L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, trace_lights(o, d), cv_mask) * cv_pending;
     }
     return L;
 }

@@ -7,15 +7,18 @@
 // mirror direction r, widths 2 alpha in the plane of incidence and 2 alpha cos(theta_o)
 // across it (the half-vector -> reflected-direction Jacobian for small alpha), amplitude
 // c so that g(r) = f(wo, r) cos(r). D integrates in closed form over spherical polygons.
-// Each ring light (a torus) is replaced, for g only, by its contour band seen from the
-// shading point: quads between the two points of each tube circle (at the ring's own
-// segment angles) where the view ray grazes the smooth tube. The control variate is
-//     A - G,  A = sum over bands of Le c integral(D over band)  (closed form),
-//             G = the same integrand (c D Le times the number of band quads that contain
-//                 the direction) estimated with the very light and BSDF samples of the
-//                 path tracer's next-event estimation, with the same MIS weights,
-// so E[G] = A exactly whatever the lobe's fit and the band's match with the tessellated
-// ring: the estimate stays unbiased, and its variance falls where f V ~ g over the ring.
+// D integrates in closed form over each ring light's tessellated torus as seen from the
+// shading point: over the quads facing it, as edge terms along their boundary
+// (ring_integral). The control variate is
+//     A - G,  A = sum over rings of Le c integral(D over the ring)  (closed form),
+//             G = the same integrand c D Le estimated with the very light and BSDF
+//                 samples of the path tracer's next-event estimation, with the same MIS
+//                 weights (the BSDF sample counts where the light triangle it meets first,
+//                 occluders ignored, is the ring's),
+// so E[G] = A exactly whatever the lobe's fit, at every shading point where each ray
+// meets the ring at most once and no other light stands in front of it (ring_cv_valid;
+// elsewhere the ring is left to the sampled estimator alone): the estimate stays
+// unbiased, and its variance falls where f V ~ g over the ring.
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
 
@@ -68,129 +71,221 @@ float edge_z(vec3 a, vec3 b) {
     return s > 0.0 ? atan(s, dot(a, b)) * c.z / s : 0.0;
 }
 
-// Integral of D_o = max(z, 0) / pi over the spherical polygon of the four directions v
-// (cosine space, any length), clipped to z >= 0; either winding.
-float quad_cos_integral(vec3 v[4]) {
-    vec3 p[8];
-    uint n = 0u;
-    for (uint k = 0u; k < 4u; k++) {
-        vec3 a = v[k], b = v[(k + 1u) & 3u];
-        if (a.z >= 0.0) p[n++] = a;
-        if ((a.z >= 0.0) != (b.z >= 0.0)) {
-            vec3 m = mix(a, b, a.z / (a.z - b.z));
-            m.z = 0.0;
-            p[n++] = m;
-        }
-    }
-    if (n < 3u) return 0.0;
-    vec3 first = normalize(p[0]);
-    vec3 prev = first;
-    float sum = 0.0;
-    for (uint k = 1u; k < n; k++) {
-        vec3 cur = normalize(p[k]);
-        sum += edge_z(prev, cur);
-        prev = cur;
-    }
-    sum += edge_z(prev, first);
-    return abs(sum) * (0.5 / PI);
+// A closed loop of directions (cosine space, any length) whose edges are summed as
+// edge_z: `sum` / (2 pi) is the clamped-cosine integral over the region it bounds when
+// every vertex is above the horizon (`above`).
+struct Loop {
+    vec3 first;
+    vec3 prev;
+    float sum;
+    bool above;
+};
+
+void loop_start(out Loop lp, vec3 w) {
+    lp.first = w;
+    lp.prev = w;
+    lp.sum = 0.0;
+    lp.above = w.z > 0.0;
 }
 
-// The two contour points of the smooth tube circle in direction e (unit, in the ring's
-// plane; centre c, axis ax, radii big_r, r) seen from x, as directions from x (not
-// normalised): the points p = c + big_r e + r n, n = cos(psi) e + sin(psi) ax, with
-// n . (p - x) = 0, i.e. cos(psi - beta) = -r / rho for (rho cos beta, rho sin beta) =
-// (e . d, ax . d), d = c + big_r e - x; written without trigonometric calls.
-void ring_contour(vec3 c, vec3 e, vec3 ax, float big_r, float r, vec3 x,
-                  out vec3 wp, out vec3 wm) {
-    vec3 d = c + big_r * e - x;
-    float a = dot(e, d), b = dot(ax, d);
-    float rho = max(sqrt(a * a + b * b), 1e-30);
-    float cb = a / rho, sb = b / rho;
-    float cd = clamp(-r / rho, -1.0, 1.0);
-    float sd = sqrt(max(1.0 - cd * cd, 0.0));
-    float r_cb = r * (cb * cd), r_sb = r * (sb * sd), r_sbc = r * (sb * cd), r_cbs = r * (cb * sd);
-    wp = d + (r_cb - r_sb) * e + (r_sbc + r_cbs) * ax;
-    wm = d + (r_cb + r_sb) * e + (r_sbc - r_cbs) * ax;
+void loop_add(inout Loop lp, vec3 w) {
+    lp.sum += edge_z(lp.prev, w);
+    lp.prev = w;
+    lp.above = lp.above && w.z > 0.0;
 }
 
-// Ring `ring`'s contour band seen from x: the integral of the lobe's D over its quads (each
-// quad once), and for directions w1, w2 (unit, world; 0: none) how many quads contain
-// them (m1, m2). The band has emit.z quads (src/render/view.rs: the ring's own segments,
-// at most RING_BAND_MAX), at the angles of the ring's segments (ring_light's frame,
-// src/scene/camera.rs).
-float ring_band(LightBlock ring, Lobe l, vec3 x, vec3 w1, vec3 w2, out float m1, out float m2) {
-    vec3 c = ring.pos.xyz, ax = ring.dir.xyz;
-    float big_r = ring.pos.w, r = ring.dir.w;
-    uint n = clamp(uint(ring.emit.z), 3u, RING_BAND_MAX);
-    vec3 u = normalize(cross(ax, abs(ax.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
-    vec3 l1 = lobe_local(l, w1), l2 = lobe_local(l, w2);
-    float step = 2.0 * PI / float(n);
-    float cs = cos(step), sn = sin(step);
-    // One pass: the two contour loops' edges (when every vertex is above the cosine
-    // space's horizon and every quad is wound the same way, the rungs, shared by
-    // neighbouring quads in opposite directions, cancel: this is the band's integral),
-    // the quads' windings and the directions' membership.
-    vec3 wp, wm;
-    ring_contour(c, u, ax, big_r, r, x, wp, wm);
-    vec3 p0 = normalize(lobe_local(l, wp)), q0 = normalize(lobe_local(l, wm));
-    vec3 e = u;   // turned by `step` per quad (the same turns in both passes)
-    vec3 pa = p0, qa = q0;
-    vec3 rung = cross(qa, pa);
-    float r1 = dot(l1, rung), r2 = dot(l2, rung);
-    bool above = pa.z > 0.0 && qa.z > 0.0;
-    float sum = 0.0, wound = 0.0;
-    m1 = 0.0;
-    m2 = 0.0;
-    for (uint i = 0u; i < n; i++) {
-        vec3 pb = p0, qb = q0;   // the last quad closes on the first pair exactly
-        if (i + 1u < n) {
-            e = normalize(cs * e + sn * cross(ax, e));
-            ring_contour(c, e, ax, big_r, r, x, wp, wm);
-            pb = normalize(lobe_local(l, wp));
-            qb = normalize(lobe_local(l, wm));
-            above = above && pb.z > 0.0 && qb.z > 0.0;
+// One ring (a tessellated torus, as src/scene/camera.rs `ring_light` makes it) as the
+// walk over its segments sees it from x, with the segment being walked.
+struct Ring {
+    vec3 d0;     // centre - x
+    vec3 ax;     // unit axis
+    float big_r; // major radius
+    float r;     // tube radius
+    int m;       // segments around the tube
+    vec2 step;   // cos, sin of 2 pi / m
+    vec2 half_step; // of pi / m
+    float a, b, k;  // the segment's facing test (ring_integral)
+};
+
+vec2 rot(vec2 v, vec2 cs) { return vec2(v.x * cs.x - v.y * cs.y, v.y * cs.x + v.x * cs.y); }
+vec2 rot_back(vec2 v, vec2 cs) { return vec2(v.x * cs.x + v.y * cs.y, v.y * cs.x - v.x * cs.y); }
+
+// Whether the quad whose first tube vertex has angle cos, sin `v` (the quad's normal at
+// v turned by half a step) faces x, in the segment of g.a, g.b, g.k.
+bool ring_faces(Ring g, vec2 v) {
+    vec2 f = rot(v, g.half_step);
+    return f.x * g.a + f.y * g.b > g.k;
+}
+
+// The tube vertex at angle cos, sin `v` of the section whose radial direction is `rad`
+// (at that angle from `rad` towards the axis, as ring_light places it), as a direction
+// from x in the lobe's cosine space.
+vec3 ring_point(Ring g, Lobe l, vec3 rad, vec2 v) {
+    return lobe_local(l, g.d0 + rad * (g.big_r + g.r * v.x) + g.ax * (g.r * v.y));
+}
+
+// One side of the facing run: its boundary loop and its tube vertex (cos, sin of its
+// angle): `lo` the first facing quad's first vertex, else the vertex after the last
+// facing quad.
+struct Side {
+    Loop lp;
+    vec2 v;
+};
+
+// Moves side `s` to the current segment's run boundary, one tube vertex at a time (the
+// boundary's edges along the section at `rad`, added to the loop when `add`); false if
+// it takes more than m steps (no quad of the segment faces x, or every one does).
+bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
+    // lo: the quad after the vertex faces x, the one before does not; hi: the reverse.
+    bool after = ring_faces(g, s.v);
+    bool up = lo ? !after : after;
+    for (int q = 0; q <= g.m; q++) {
+        if (up) {
+            if (q > 0 && (lo ? after : !after)) return true;
+            s.v = rot(s.v, g.step);
+            after = ring_faces(g, s.v);
+        } else {
+            bool before = ring_faces(g, rot_back(s.v, g.step));
+            if (lo ? !before : before) return true;
+            s.v = rot_back(s.v, g.step);
         }
-        vec3 outer = cross(pa, pb);
-        vec3 inner = cross(qb, qa);
-        vec3 rung_b = cross(qb, pb);
-        wound += dot(outer, qa) > 0.0 ? 1.0 : -1.0;
-        float so = length(outer), si = length(inner);
-        sum += (so > 0.0 ? atan(so, dot(pa, pb)) * outer.z / so : 0.0)
-             + (si > 0.0 ? atan(si, dot(qb, qa)) * inner.z / si : 0.0);
-        // Quad (pa, pb, qb, qa): edge planes outer, -rung_b, inner, rung.
-        float r1b = dot(l1, rung_b), r2b = dot(l2, rung_b);
-        float a0 = dot(l1, outer), a2 = dot(l1, inner);
-        bool in1 = (a0 >= 0.0 && r1b <= 0.0 && a2 >= 0.0 && r1 >= 0.0)
-                || (a0 <= 0.0 && r1b >= 0.0 && a2 <= 0.0 && r1 <= 0.0);
-        m1 += in1 && dot(l1, pa + qb) > 0.0 ? 1.0 : 0.0;
-        float b0 = dot(l2, outer), b2 = dot(l2, inner);
-        bool in2 = (b0 >= 0.0 && r2b <= 0.0 && b2 >= 0.0 && r2 >= 0.0)
-                || (b0 <= 0.0 && r2b >= 0.0 && b2 <= 0.0 && r2 <= 0.0);
-        m2 += in2 && dot(l2, pa + qb) > 0.0 ? 1.0 : 0.0;
-        r1 = r1b;
-        r2 = r2b;
-        pa = pb;
-        qa = qb;
+        if (add) loop_add(s.lp, ring_point(g, l, rad, s.v));
     }
-    if (above && abs(wound) == float(n)) return abs(sum) * (0.5 / PI);
-    // Otherwise each quad on its own, clipped to the horizon (a second pass).
-    sum = 0.0;
-    pa = p0;
-    qa = q0;
-    e = u;
+    return false;
+}
+
+// The integral of the lobe's D over the directions from x that meet ring light e (its
+// tessellated torus): the sum of D over the quads facing x, written (Stokes) as edge
+// terms along the boundary of the facing set, the contour generator. Within a ring
+// segment (between sections i and i + 1) the quad of tube angles theta_j, theta_j+1
+// faces x when
+//     cos(theta) (X_r - R cn) + sin(theta) cn X_a > r cn cos(pi / m),
+// theta = theta_j + pi / m its normal's tube angle, X_r and X_a x - centre along the
+// segment's middle radial direction and along the axis, cn = cos(pi / n): one run of
+// tube indices per segment. The boundary is two loops: per segment the ring-direction
+// edge at the run's first vertex (its last), and along the next section from one
+// segment's run boundary to the next one's (ring_side walks there; the first segment's
+// boundary is solved in closed form). Each facing quad is counted once where no ray from
+// x meets the tube twice (ring_cv_valid). False (`ok`) where a segment has no facing
+// quad or every one, or a loop vertex lies at or below the cosine space's horizon.
+float ring_integral(LightBlock e, Lobe l, vec3 x, out bool ok) {
+    ok = false;
+    uint n = uint(e.emit.z);
+    Ring g;
+    g.d0 = e.pos.xyz - x;
+    g.ax = e.dir.xyz;
+    g.big_r = e.pos.w;
+    g.r = e.dir.w;
+    g.m = n >= 3u ? int(e.shape.y / (2u * n)) : 0;
+    if (g.m < 3) return 0.0;
+    float dth = 2.0 * PI / float(g.m), dphi = 2.0 * PI / float(n);
+    g.step = vec2(cos(dth), sin(dth));
+    g.half_step = vec2(cos(0.5 * dth), sin(0.5 * dth));
+    vec2 ring_step = vec2(cos(dphi), sin(dphi));
+    float cn = cos(0.5 * dphi);
+    g.k = g.r * cn * g.half_step.x;
+    g.b = -cn * dot(g.ax, g.d0);
+    // The same first radial direction as ring_light (src/scene/camera.rs).
+    vec3 e1 = normalize(cross(g.ax, abs(g.ax.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 e2 = cross(g.ax, e1);
+    // X_r - R cn of a segment from its two radial directions (their sum is 2 cn long).
+    float d0_1 = dot(g.d0, e1), d0_2 = dot(g.d0, e2);
+    // Segment 0's run in closed form: quads with cos(theta - beta) > k / rho.
+    float a0 = -d0_1 * (1.0 + ring_step.x) / (2.0 * cn) - d0_2 * ring_step.y / (2.0 * cn)
+        - g.big_r * cn;
+    g.a = a0;
+    float rho = length(vec2(g.a, g.b));
+    if (!(rho > g.k)) return 0.0;
+    float beta = atan(g.b, g.a), delta = acos(g.k / rho);
+    float th_lo = ceil((beta - delta) / dth - 0.5) * dth;
+    float th_hi = (floor((beta + delta) / dth - 0.5) + 1.0) * dth;
+    Side lo, hi;
+    lo.v = vec2(cos(th_lo), sin(th_lo));
+    hi.v = vec2(cos(th_hi), sin(th_hi));
+    // (Rounding may leave the closed form a vertex off: the walk settles it.)
+    if (!ring_side(lo, g, l, e1, true, false) || !ring_side(hi, g, l, e1, false, false)) return 0.0;
+    loop_start(lo.lp, ring_point(g, l, e1, lo.v));
+    loop_start(hi.lp, ring_point(g, l, e1, hi.v));
+    vec2 phi = vec2(1.0, 0.0);   // cos, sin of section i's angle
+    vec3 rad = e1;
     for (uint i = 0u; i < n; i++) {
-        vec3 pb = p0, qb = q0;
-        if (i + 1u < n) {
-            e = normalize(cs * e + sn * cross(ax, e));
-            ring_contour(c, e, ax, big_r, r, x, wp, wm);
-            pb = normalize(lobe_local(l, wp));
-            qb = normalize(lobe_local(l, wm));
+        vec2 phi_next = normalize(rot(phi, ring_step));
+        vec3 rad_next = i + 1u == n ? e1 : e1 * phi_next.x + e2 * phi_next.y;
+        if (i > 0u) {
+            g.a = -(d0_1 * (phi.x + phi_next.x) + d0_2 * (phi.y + phi_next.y)) / (2.0 * cn)
+                - g.big_r * cn;
+            if (!ring_side(lo, g, l, rad, true, true) || !ring_side(hi, g, l, rad, false, true)) {
+                return 0.0;
+            }
         }
-        vec3 q[4] = vec3[4](pa, pb, qb, qa);
-        sum += quad_cos_integral(q);
-        pa = pb;
-        qa = qb;
+        loop_add(lo.lp, ring_point(g, l, rad_next, lo.v));
+        loop_add(hi.lp, ring_point(g, l, rad_next, hi.v));
+        phi = phi_next;
+        rad = rad_next;
     }
-    return sum;
+    // Back at section 0: along it to segment 0's run boundary, and closed.
+    g.a = a0;
+    if (!ring_side(lo, g, l, e1, true, true) || !ring_side(hi, g, l, e1, false, true)) return 0.0;
+    loop_add(lo.lp, lo.lp.first);
+    loop_add(hi.lp, hi.lp.first);
+    ok = lo.lp.above && hi.lp.above;
+    return abs(lo.lp.sum - hi.lp.sum) * (0.5 / PI);
+}
+
+// Whether the control variate may use ring k at x: no ray from x can meet its tube twice
+// (a ray's path through the torus bends, in the tube's section plane, at most by
+// 1 / ((R - r) tan^2 e), e its elevation over the ring's plane: it cannot leave and
+// re-enter a tube of radius r while tan^2 e >= r / (R - r), checked for the lowest ray
+// from x to the ring), the ring lies within 53 degrees of its centre's direction (its
+// facing set's image is then on the near side of any great circle its loops keep above),
+// and no other light can stand in front of it seen from x (their `reach` shells against
+// the ring's bounding cone and farthest distance): where these hold, the light triangle
+// a ray meets first with occluders ignored is the ring's where the ray meets the ring.
+bool ring_cv_valid(uint k, vec3 x) {
+    LightBlock e = emitters[k];
+    vec3 d = e.pos.xyz - x;
+    float big_r = e.pos.w, r = e.dir.w;
+    float h = abs(dot(e.dir.xyz, d));
+    float dist = length(d);
+    float rho = sqrt(max(dist * dist - h * h, 0.0));
+    float t = (h - r) / (rho + big_r + r);
+    if (!(h > r) || t * t * (big_r - r) < r) return false;
+    float sin_k = (big_r + r) / dist;
+    if (!(sin_k < 0.8)) return false;
+    float far_k = dist + big_r + r;
+    float cone_k = asin(sin_k);
+    for (uint j = 0u; j < prm.emitter_count; j++) {
+        LightBlock o = emitters[j];
+        if (j == k || o.reach.y < 0.0) continue;   // itself, or a spot (nothing to hit)
+        vec3 dj = o.pos.xyz - x;
+        float lj = length(dj);
+        if (lj < o.reach.x) {
+            // x inside the light's inner shell (a dome): all of it beyond the ring?
+            if (o.reach.x - lj > far_k) continue;
+            return false;
+        }
+        if (lj <= o.reach.y || lj - o.reach.y <= far_k
+                && acos(clamp(dot(dj, d) / (lj * dist), -1.0, 1.0)) <= cone_k + asin(o.reach.y / lj)) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// The control variate's closed form at x: the sum over the rings it may use (bit k of
+// `mask`, rings among the first 32 lights) of c Le times the integral of D over the ring.
+float analytic_rings(Lobe l, vec3 x, out uint mask) {
+    mask = 0u;
+    float a = 0.0;
+    for (uint k = 0u; k < min(prm.emitter_count, 32u); k++) {
+        LightBlock e = emitters[k];
+        if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
+        bool ok;
+        float integral = ring_integral(e, l, x, ok);
+        if (!ok) continue;
+        a += l.c * e.emit.x * integral;
+        mask |= 1u << k;
+    }
+    return a;
 }
 #endif

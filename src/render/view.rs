@@ -11,7 +11,7 @@ use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
     LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, PathParams, PathPush,
-    PathTraceBinding as B, RING_BAND_MAX, TILE, TileBlock,
+    PathTraceBinding as B, TILE, TileBlock,
 };
 use crate::graph::Graph;
 use crate::scene::Camera;
@@ -430,31 +430,28 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
                     axis.extend(cos_inner).into(),
                     (intensity_w_sr as f64 * MM2_PER_M2) as f32,
                 ),
-                _ => match e.torus {
-                    // The contour band's tube: between the tessellated tube's inscribed
-                    // (r cos(pi / n)) and circumscribed (r) silhouette half-widths.
-                    Some(t) => {
-                        let n = t.segments_minor.max(3) as f32;
-                        let band_r = 0.5 * t.minor_mm * (1.0 + (std::f32::consts::PI / n).cos());
-                        (
-                            t.centre.extend(t.major_mm).into(),
-                            t.axis.extend(band_r).into(),
-                            e.radiance,
-                        )
-                    }
-                    None => ([0.0; 4], [0.0; 4], e.radiance),
+                _ => match (e.torus, e.reach) {
+                    // A ring: its torus (analytic_light.glsl).
+                    (Some(t), _) => (
+                        t.centre.extend(t.major_mm).into(),
+                        t.axis.extend(t.minor_mm).into(),
+                        e.radiance,
+                    ),
+                    (None, Some(r)) => (r.centre.extend(0.0).into(), [0.0; 4], e.radiance),
+                    (None, None) => ([0.0; 4], [0.0; 4], e.radiance),
                 },
             };
-            // The contour band's quads: the ring's own segments, at most RING_BAND_MAX;
-            // 0: no band.
-            let ring = e
-                .torus
-                .map_or(0.0, |t| t.segments_major.min(RING_BAND_MAX) as f32);
+            // A ring's segments around the ring (0: not a ring).
+            let ring = e.torus.map_or(0.0, |t| t.segments_major as f32);
+            let reach = e
+                .reach
+                .map_or([0.0, -1.0, 0.0, 0.0], |r| [r.inner, r.outer, 0.0, 0.0]);
             LightBlock {
                 pos,
                 dir,
                 emit: [emit_x, e.area, ring, cdf],
                 shape: [e.first_tri, e.tri_count, kind, segments],
+                reach,
             }
         })
         .collect()

@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use super::camera::Camera;
 use super::config::{
@@ -520,9 +520,53 @@ pub struct Emitter {
     /// Power, W (choosing among lights: `LightSpec::power_w`).
     pub power_w: f64,
     pub sampling: EmitterSampling,
-    /// A ring light's torus, for the analytic direct light's contour band; None for the
-    /// other shapes.
+    /// A ring light's torus, for the analytic direct light; None for the other shapes.
     pub torus: Option<Torus>,
+    /// Where its triangles lie (None: a spot, nothing to hit).
+    pub reach: Option<Reach>,
+}
+
+/// A shell holding a light's surface: every point of its triangles lies between `inner`
+/// and `outer` mm from `centre` (the centre of a ring's torus or of a dome's sphere,
+/// else the mean of the vertices). The analytic direct light uses it to tell whether a light can stand in
+/// front of a ring seen from a shading point (docs/rendering.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reach {
+    pub centre: Vec3,
+    pub inner: f32,
+    pub outer: f32,
+}
+
+impl Reach {
+    /// The shell of triangles `tris` over `pos` about `centre` (or the mean vertex): the
+    /// outer radius the farthest vertex, the inner one the nearest triangle plane (a
+    /// lower bound of every point's distance), each widened by a part in 10^5 for the
+    /// rounding to f32; None without triangles.
+    fn of(pos: &[DVec3], tris: &[[u32; 3]], centre: Option<DVec3>) -> Option<Reach> {
+        if tris.is_empty() {
+            return None;
+        }
+        let c = centre.unwrap_or_else(|| pos.iter().sum::<DVec3>() / pos.len() as f64);
+        let outer = pos.iter().map(|p| (*p - c).length()).fold(0.0, f64::max);
+        let inner = tris
+            .iter()
+            .map(|t| {
+                let [a, b, cc] = t.map(|i| pos[i as usize]);
+                let n = (b - a).cross(cc - a);
+                let l = n.length();
+                if l > 0.0 {
+                    (n.dot(a - c) / l).abs()
+                } else {
+                    (a - c).length()
+                }
+            })
+            .fold(f64::INFINITY, f64::min);
+        Some(Reach {
+            centre: c.as_vec3(),
+            inner: (inner * (1.0 - 1e-5)) as f32,
+            outer: (outer * (1.0 + 1e-5)) as f32,
+        })
+    }
 }
 
 /// A ring light's smooth torus: centre, unit axis, major and tube radii (mm) and its
@@ -606,6 +650,16 @@ impl LightGeometry {
                 }
                 _ => None,
             };
+            // About the torus's or the dome's own centre, else the mean vertex.
+            let centre = match &spec.shape {
+                LightShape::Dome { centre_mm, .. } => Some(*centre_mm),
+                _ => torus.map(|t| t.centre.as_dvec3()),
+            };
+            let reach = Reach::of(
+                &pos.iter().map(|p| p.as_dvec3()).collect::<Vec<_>>(),
+                &tris,
+                centre,
+            );
             emitters.push(Emitter {
                 first_tri,
                 tri_count: tris.len() as u32,
@@ -614,6 +668,7 @@ impl LightGeometry {
                 power_w: spec.power_w(area),
                 sampling,
                 torus,
+                reach,
             });
             positions.extend(pos);
             triangles.extend(tris.iter().map(|t| t.map(|i| i + base)));
