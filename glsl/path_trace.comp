@@ -521,7 +521,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             && prm.emitter_count > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
         // A (closed form, over the rings of cv_rings) and G's light-sample term.
         uint cv_rings = 0u;
-        float cv_a = cv ? analytic_rings(lobe, origin, cv_rings) : 0.0;
+        float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, cv_rings) : 0.0;
         float cv_nee_val = 0.0;
 
         // Next-event estimation: a light by power, then a point on it (a spot light is

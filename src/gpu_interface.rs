@@ -103,7 +103,7 @@ mod tests {
         assert_eq!(PathTraceBinding::Moments0.at(2), 16);
         assert_eq!(PathTraceBinding::LightGeometry.at(2), 12);
         assert_eq!(PathTraceBinding::LightList.at(2), 13);
-        assert_eq!(std::mem::size_of::<LightBlock>(), 64);
+        assert_eq!(std::mem::size_of::<LightBlock>(), 80);
         assert_eq!(PathTraceBinding::Surfaces.at(2), 14);
         assert_eq!(std::mem::size_of::<SurfaceBlock>(), 32);
     }

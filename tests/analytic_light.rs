@@ -193,11 +193,11 @@ fn the_analytic_direct_light_is_unbiased_and_lowers_the_variance() {
 
 #[test]
 fn direct_light_parses_and_names_its_values() {
-    let c = SceneConfig::parse("[render]\ndirect_light = \"analytic\"\n").expect("parse");
-    assert_eq!(c.render.direct_light, DirectLight::Analytic);
+    let c = SceneConfig::parse("[render]\ndirect_light = \"sampled\"\n").expect("parse");
+    assert_eq!(c.render.direct_light, DirectLight::Sampled);
     assert_eq!(
         SceneConfig::default().render.direct_light,
-        DirectLight::Sampled
+        DirectLight::Analytic
     );
     let e = SceneConfig::parse("[render]\ndirect_light = \"ltc\"\n")
         .unwrap_err()
@@ -211,9 +211,9 @@ fn direct_light_parses_and_names_its_values() {
     let job = |text: &str| {
         common::small_smoke_text().replace("[render]\n", &format!("[render]\n{text}\n"))
     };
-    let j = synosis::dataset::Job::parse(&job("direct_light = \"analytic\""), "job", scenes)
+    let j = synosis::dataset::Job::parse(&job("direct_light = \"sampled\""), "job", scenes)
         .expect("job");
-    assert_eq!(j.render.direct_light, Some(DirectLight::Analytic));
+    assert_eq!(j.render.direct_light, Some(DirectLight::Sampled));
     let e = synosis::dataset::Job::parse(&job("direct_light = \"exact\""), "job", scenes)
         .unwrap_err()
         .to_string();

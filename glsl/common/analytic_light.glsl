@@ -105,6 +105,7 @@ struct Ring {
     vec2 step;   // cos, sin of 2 pi / m
     vec2 half_step; // of pi / m
     float a, b, k;  // the segment's facing test (ring_integral)
+    vec3 ns, ng;    // the shading point's shading and geometric normals
 };
 
 vec2 rot(vec2 v, vec2 cs) { return vec2(v.x * cs.x - v.y * cs.y, v.y * cs.x + v.x * cs.y); }
@@ -119,9 +120,12 @@ bool ring_faces(Ring g, vec2 v) {
 
 // The tube vertex at angle cos, sin `v` of the section whose radial direction is `rad`
 // (at that angle from `rad` towards the axis, as ring_light places it), as a direction
-// from x in the lobe's cosine space.
+// from x in the lobe's cosine space; below its horizon (z < 0, failing the loop's
+// `above`) where it is below the shading point's shading or geometric horizon, where E
+// takes no light (its light sample needs both; G would count what E cannot).
 vec3 ring_point(Ring g, Lobe l, vec3 rad, vec2 v) {
-    return lobe_local(l, g.d0 + rad * (g.big_r + g.r * v.x) + g.ax * (g.r * v.y));
+    vec3 w = g.d0 + rad * (g.big_r + g.r * v.x) + g.ax * (g.r * v.y);
+    return dot(w, g.ns) > 0.0 && dot(w, g.ng) > 0.0 ? lobe_local(l, w) : vec3(0.0, 0.0, -1.0);
 }
 
 // One side of the facing run: its boundary loop and its tube vertex (cos, sin of its
@@ -167,11 +171,15 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
 // segment's run boundary to the next one's (ring_side walks there; the first segment's
 // boundary is solved in closed form). Each facing quad is counted once where no ray from
 // x meets the tube twice (ring_cv_valid). False (`ok`) where a segment has no facing
-// quad or every one, or a loop vertex lies at or below the cosine space's horizon.
-float ring_integral(LightBlock e, Lobe l, vec3 x, out bool ok) {
+// quad or every one, or a loop vertex lies at or below the cosine space's horizon or
+// below the shading point's shading (ns) or geometric (ng) horizon: the ring's image is
+// then within all three (each a hemisphere, the image within 53 degrees).
+float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, out bool ok) {
     ok = false;
     uint n = uint(e.emit.z);
     Ring g;
+    g.ns = ns;
+    g.ng = ng;
     g.d0 = e.pos.xyz - x;
     g.ax = e.dir.xyz;
     g.big_r = e.pos.w;
@@ -272,16 +280,17 @@ bool ring_cv_valid(uint k, vec3 x) {
     return true;
 }
 
-// The control variate's closed form at x: the sum over the rings it may use (bit k of
-// `mask`, rings among the first 32 lights) of c Le times the integral of D over the ring.
-float analytic_rings(Lobe l, vec3 x, out uint mask) {
+// The control variate's closed form at x (shading and geometric normals ns, ng): the
+// sum over the rings it may use (bit k of `mask`, rings among the first 32 lights) of
+// c Le times the integral of D over the ring.
+float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, out uint mask) {
     mask = 0u;
     float a = 0.0;
     for (uint k = 0u; k < min(prm.emitter_count, 32u); k++) {
         LightBlock e = emitters[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;
-        float integral = ring_integral(e, l, x, ok);
+        float integral = ring_integral(e, l, x, ns, ng, ok);
         if (!ok) continue;
         a += l.c * e.emit.x * integral;
         mask |= 1u << k;

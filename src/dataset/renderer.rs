@@ -108,7 +108,7 @@ pub struct ImageRequest<'a> {
     pub noise: Option<&'a crate::render::noise::NoiseStop>,
     /// Where the labels come from (`[render] labels`; default "auto").
     pub labels: crate::scene::config::LabelSource,
-    /// The direct light's estimator (`[render] direct_light`; default "sampled").
+    /// The direct light's estimator (`[render] direct_light`; default "analytic").
     pub direct_light: crate::scene::config::DirectLight,
 }
 
@@ -155,11 +155,10 @@ impl RenderedImage {
                 return Err(format!("{name} has {len} values for {n} pixels"));
             }
         }
-        if let Some(p) = self
-            .radiance
-            .iter()
-            .position(|v| !v.is_finite() || *v < 0.0)
-        {
+        // Finite; a pixel may be below zero: the analytic direct light's control variate
+        // is unbiased, not positive (a shadowed highlight at low spp; the sensor and the
+        // 8-bit image clamp it; docs/rendering.md, "Analytic direct light").
+        if let Some(p) = self.radiance.iter().position(|v| !v.is_finite()) {
             return Err(format!("radiance at pixel {p} is {}", self.radiance[p]));
         }
         if let Some(p) = self.class.iter().position(|&c| c > 2) {

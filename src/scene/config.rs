@@ -875,14 +875,14 @@ pub struct RenderConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DirectLight {
-    /// Next-event estimation and BSDF sampling combined by MIS: the renderer before this
-    /// option.
-    #[default]
+    /// Next-event estimation and BSDF sampling combined by MIS: the renderer before issue
+    /// 15's control variate (the default until then).
     Sampled = 0,
     /// The same estimate plus a control variate at the primary hit of a conductor: a
-    /// linearly transformed cosine fitted to the GGX lobe, integrated in closed form over
-    /// each ring light's contour band, minus the same lobe estimated with the very samples
-    /// of the light (unbiased: its expectation is the closed form).
+    /// linearly transformed cosine shaped after the GGX lobe, integrated in closed form
+    /// over each ring light's tessellated torus, minus the same lobe estimated with the
+    /// very samples of the light (unbiased: its expectation is the closed form).
+    #[default]
     Analytic = 1,
 }
 
@@ -961,7 +961,7 @@ impl Default for RenderConfig {
             noise_target: None,
             min_spp: None,
             labels: LabelSource::Auto,
-            direct_light: DirectLight::Sampled,
+            direct_light: DirectLight::Analytic,
         }
     }
 }
