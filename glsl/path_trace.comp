@@ -559,7 +559,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
                 vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
                 bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
-                // The control variate also takes light samples below the surface.
+                // The control variate's light sample: on a ring it uses (cv_rings; such a
+                // ring lies above both horizons, so the sample is also lit, up to rounding).
                 bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0;
                 float pdf_b = 0.0;
                 float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;

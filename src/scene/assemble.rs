@@ -569,8 +569,9 @@ impl Reach {
     }
 }
 
-/// A ring light's smooth torus: centre, unit axis, major and tube radii (mm) and its
-/// tessellation (segments around the ring and around the tube).
+/// A ring light's torus: centre, unit axis, major and tube radii (mm) and its segments
+/// around the ring (those around the tube follow from its triangle count:
+/// glsl/common/analytic_light.glsl).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Torus {
     pub centre: Vec3,
@@ -578,7 +579,6 @@ pub struct Torus {
     pub major_mm: f32,
     pub minor_mm: f32,
     pub segments_major: u32,
-    pub segments_minor: u32,
 }
 
 impl LightGeometry {
@@ -645,7 +645,6 @@ impl LightGeometry {
                         major_mm: r.major_radius_mm,
                         minor_mm: r.minor_radius_mm,
                         segments_major: r.segments_major,
-                        segments_minor: r.segments_minor,
                     })
                 }
                 _ => None,
