@@ -399,6 +399,83 @@ vec3 bend_towards_viewer(vec3 ns, vec3 ng, vec3 wo) {
     return normalize(perp * (sqrt(max(1.0 - target * target, 0.0)) / pl) + target * wo);
 }
 
+// The shading normal at hit h of the ray along d (point p, geometric normal ng facing
+// -d, material word `word`, at path depth `depth`): the slope-mapped normal (object
+// material with a map; entries with finish = "none" have slot 0), bent towards the viewer
+// if needed, else ng. With LEAN at the primary hit the map's slope variance also widens
+// surf's lobe. Side and visibility tests use ng: directions below the geometric surface
+// are never lit nor continued (no light leaks).
+vec3 surface_normal(Hit h, vec3 d, vec3 p, vec3 ng, uint word, uint depth, inout Surface surf) {
+    uint mat = word & 0xffu;
+    uint slot = (word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK;
+    if (mat == MAT_TABLE || slot == 0u || ((word & MAT_LABELLED) == 0u
+            && (map_headers[slot].dims.w & MAP_LABELLED_ONLY) != 0u)) {
+        return ng;
+    }
+    // LEAN at the primary hit: footprint = the pixel cone's width at the hit (its angle
+    // shrinks off axis as cos^1.5), over |cos| on the surface, in texels; secondary hits
+    // read level 0, and so do curved (revolved and triplanar) patches (LEAN there is not
+    // done: lean_level uses the planar projection).
+    float lambda = 0.0;
+    if (prm.texture_filter == FILTER_LEAN && depth == 0u
+            && (map_headers[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
+        float c = max(dot(d, prm.cam.forward.xyz), 0.1);
+        float width = prm.pixel_angle * c * sqrt(c) * h.t / max(abs(dot(ng, d)), LEAN_MIN_COS);
+        lambda = log2(width * map_headers[slot].origin.w * prm.filter_scale);
+    }
+    if (lambda > 0.0) {
+        float var;
+        vec3 ns = bend_towards_viewer(shading_normal_lean(slot, p, ng, lambda, var), ng, -d);
+        // The slope variance widens the lobe (isotropic LEAN: alpha^2 + var).
+        if (var > 0.0 && !surf.diffuse) {
+            surf.c.alpha = min(sqrt(surf.c.alpha * surf.c.alpha + var), 1.0);
+        }
+        return ns;
+    }
+    return bend_towards_viewer(shading_normal(slot, p, ng, h.prim, h.bary), ng, -d);
+}
+
+// The conductor the path tracer shades the object with (PathParams' material).
+Conductor path_conductor() {
+    Conductor cond;
+    cond.alpha = clamp(prm.alpha, 1e-4, 1.0);
+    cond.n = prm.ior_n;
+    cond.k = prm.ior_k;
+    cond.comp = prm.comp != 0u;
+    cond.f_avg = prm.f_avg;
+    return cond;
+}
+
+// The control variate's closed form A (analytic_rings) at the primary hit of a camera
+// ray through pixel (px, py) whose jitter and aperture point come from `rng`, exactly as
+// radiance_sample computes it at its own primary hit; 0 where that hit has none (no hit,
+// a light, a diffuse surface, no ring the control variate may use).
+float primary_analytic(uint px, uint py, inout Sampler rng) {
+    vec2 jitter = sample_2d(rng);
+    vec2 lens = prm.cam.eye.w > 0.0 ? sample_2d(rng) : vec2(0.0);
+    vec3 o, d;
+    camera_ray(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height), lens, o, d);
+    Hit h = trace(o, d, 0.0, 3.0e38);
+    if (h.prim == NO_HIT) return 0.0;
+    uint word = mat_word(h.prim);
+    uint mat = word & 0xffu;
+    if (mat == MAT_LIGHT) return 0.0;
+    Surface surf = surface_of(mat, path_conductor());
+    if (surf.diffuse) return 0.0;
+    Tri t = fetch_tri(h.prim);
+    vec3 ng = normalize(tri_normal(t));
+    vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
+    if (dot(ng, d) > 0.0) ng = -ng;
+    vec3 ns = surface_normal(h, d, p, ng, word, 0u, surf);
+    vec3 tb, bt;
+    onb(ns, tb, bt);
+    vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
+    Lobe lobe;
+    if (!conductor_lobe(surf.c, wo, tb, bt, ns, lobe)) return 0.0;
+    uint mask;
+    return analytic_rings(lobe, offset_ray(p, ng), ns, ng, mask);
+}
+
 // The control variate's BSDF-sample term at the primary hit, once the path's next trace
 // has told `light`, the first light triangle on the ray o, d with occluders ignored (or
 // a miss): its radiance times its MIS weight as E's own (BSDF pdf `pdf`, shading
@@ -425,12 +502,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     vec2 lens = prm.cam.eye.w > 0.0 ? sample_2d(rng) : vec2(0.0);
     vec3 o, d;
     camera_ray(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height), lens, o, d);
-    Conductor cond;
-    cond.alpha = clamp(prm.alpha, 1e-4, 1.0);
-    cond.n = prm.ior_n;
-    cond.k = prm.ior_k;
-    cond.comp = prm.comp != 0u;
-    cond.f_avg = prm.f_avg;
+    Conductor cond = path_conductor();
 
     float L = 0.0;
     float T = 1.0;
@@ -438,6 +510,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // term c D / pdf, awaiting the light the next trace meets (cv_bsdf_weight).
     uint cv_mask = 0u;
     float cv_pending = 0.0;
+    float cv_a0 = 0.0;      // A at this sample's primary hit (0: none)
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
@@ -458,7 +531,6 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         Tri t = fetch_tri(h.prim);
         uint mat = mat_word(h.prim) & 0xffu;
         uint word = mat_word(h.prim);
-        uint slot = (word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK;
         vec3 ng_raw = tri_normal(t);
         vec3 ng = normalize(ng_raw);
         if (mat == MAT_LIGHT) {
@@ -479,37 +551,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         // unlike o + t d whose error grows with the distance travelled.
         vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
         if (dot(ng, d) > 0.0) ng = -ng;
-        // Shading frame: the slope-mapped normal (object material with a map; entries
-        // with finish = "none" have slot 0), bent
-        // towards the viewer if needed. Side and visibility tests use ng: directions below
-        // the geometric surface are never lit nor continued (no light leaks).
-        vec3 ns = ng;
-        if (mat != MAT_TABLE && slot != 0u && ((word & MAT_LABELLED) != 0u
-                || (map_headers[slot].dims.w & MAP_LABELLED_ONLY) == 0u)) {
-            // LEAN at the primary hit: footprint = the pixel cone's width at the hit
-            // (its angle shrinks off axis as cos^1.5), over |cos| on the surface, in
-            // texels; secondary hits read level 0, and so do curved (revolved and
-            // triplanar) patches (LEAN there is not done: lean_level uses the planar
-            // projection).
-            float lambda = 0.0;
-            if (prm.texture_filter == FILTER_LEAN && depth == 0u
-                    && (map_headers[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
-                float c = max(dot(d, prm.cam.forward.xyz), 0.1);
-                float width = prm.pixel_angle * c * sqrt(c) * h.t
-                    / max(abs(dot(ng, d)), LEAN_MIN_COS);
-                lambda = log2(width * map_headers[slot].origin.w * prm.filter_scale);
-            }
-            if (lambda > 0.0) {
-                float var;
-                ns = bend_towards_viewer(shading_normal_lean(slot, p, ng, lambda, var), ng, -d);
-                // The slope variance widens the lobe (isotropic LEAN: alpha^2 + var).
-                if (var > 0.0 && !surf.diffuse) {
-                    surf.c.alpha = min(sqrt(surf.c.alpha * surf.c.alpha + var), 1.0);
-                }
-            } else {
-                ns = bend_towards_viewer(shading_normal(slot, p, ng, h.prim, h.bary), ng, -d);
-            }
-        }
+        // Shading frame (surface_normal).
+        vec3 ns = surface_normal(h, d, p, ng, word, depth, surf);
         vec3 tb, bt;
         onb(ns, tb, bt);
         vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
@@ -592,6 +635,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         vec3 d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
         if (cv_rings != 0u) {
             cv_mask = cv_rings;
+            cv_a0 = cv_a;
             L += cv_a - cv_nee_val;
             cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
         }
@@ -614,6 +658,19 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // A primary BSDF sample whose path stopped before its next trace.
     if (cv_pending != 0.0) {
         L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, trace_lights(o, d), cv_mask) * cv_pending;
+    }
+    // More camera rays for A alone (`[render] analytic_rays` = M + 1): the pixel's mean
+    // of A(u) over its camera rays u estimated from this sample's ray and M more (their
+    // own stratified sequence: sample index s M + j under another seed), L - A(u_0) from
+    // this one: L + (sum_j A(u_j) - M A(u_0)) / (M + 1). Unbiased for any M.
+    uint extra = prm.direct_light == DIRECT_ANALYTIC ? prm.cv_extra_rays : 0u;
+    if (extra > 0u) {
+        float sum_a = 0.0;
+        for (uint j = 0u; j < extra; j++) {
+            Sampler r = sampler_init(prm.sample_gen, pixel, s * extra + j, prm.seed ^ 0x5ca1ab1eu);
+            sum_a += primary_analytic(px, py, r);
+        }
+        L += (sum_a - float(extra) * cv_a0) / float(extra + 1u);
     }
     return L;
 }

@@ -218,4 +218,96 @@ fn direct_light_parses_and_names_its_values() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("direct_light") && e.contains("analytic"), "{e}");
+    // analytic_rays: [1, 16] in scene files and jobs, named with its range when outside.
+    assert_eq!(SceneConfig::default().render.analytic_rays, 1);
+    for bad in ["0", "17"] {
+        let e = SceneConfig::parse(&format!("[render]\nanalytic_rays = {bad}\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("render.analytic_rays") && e.contains("[1, 16]"),
+            "{e}"
+        );
+        let e =
+            synosis::dataset::Job::parse(&job(&format!("analytic_rays = {bad}")), "job", scenes)
+                .unwrap_err()
+                .to_string();
+        assert!(
+            e.contains("render.analytic_rays") && e.contains("16"),
+            "{e}"
+        );
+    }
+    let j = synosis::dataset::Job::parse(&job("analytic_rays = 4"), "job", scenes).expect("job");
+    assert_eq!(j.render.analytic_rays, Some(4));
+}
+
+/// More camera rays for the control variate's closed form (`[render] analytic_rays`)
+/// keep the mean and average a texture that varies under the pixel: the test body's face
+/// A with fine grooves (20 µm texels, 0.2 mm period: about two periods under each of the
+/// 64 x 48 pixels), glossy. Over seeds, the mean over face A's inner pixels with 4 rays
+/// equals the sampled estimator's and the 1-ray control variate's within statistical
+/// error, and the pixel variance falls below the 1-ray one's.
+#[test]
+fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
+    const SEEDS: u32 = 8;
+    let cfg = |direct: &str, rays: u32, seed: u32| {
+        let text = format!(
+            "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
+             [render]\nspp = 8\nbatch_spp = 8\nmax_bounces = 3\nseed = {seed}\n\
+             direct_light = \"{direct}\"\nanalytic_rays = {rays}\n\
+             [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
+             groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+        );
+        let mut cfg = SceneConfig::parse(&text).expect("test scene");
+        cfg.set_resolution(64, 48).expect("size");
+        cfg
+    };
+    let run = |direct: &str, rays: u32| -> (Vec<f64>, Vec<Vec<f64>>) {
+        let mut means = Vec::new();
+        let mut images = Vec::new();
+        for s in 0..SEEDS {
+            let (img, face) = common::render_faces(&cfg(direct, rays, 500 + s), Backend::Software);
+            let inner = common::interior(&face, 64, 48);
+            assert!(inner.len() > 400, "{} pixels of face A", inner.len());
+            let px: Vec<f64> = inner.iter().map(|&i| img.data[i] as f64).collect();
+            means.push(px.iter().sum::<f64>() / px.len() as f64);
+            images.push(px);
+        }
+        (means, images)
+    };
+    let pixel_variance = |images: &[Vec<f64>]| {
+        let n = images.len() as f64;
+        (0..images[0].len())
+            .map(|i| {
+                let m = images.iter().map(|img| img[i]).sum::<f64>() / n;
+                images.iter().map(|img| (img[i] - m).powi(2)).sum::<f64>() / (n - 1.0)
+            })
+            .sum::<f64>()
+            / images[0].len() as f64
+    };
+    let (ms, _) = run("sampled", 1);
+    let (m1, i1) = run("analytic", 1);
+    let (m4, i4) = run("analytic", 4);
+    let (a, b) = (mean_se(&m4), mean_se(&ms));
+    for (name, (mo, eo)) in [("sampled", b), ("analytic, 1 ray", mean_se(&m1))] {
+        let z = (a.0 - mo) / (a.1 * a.1 + eo * eo).sqrt();
+        eprintln!(
+            "4 rays {:.6} +- {:.1e}, {name} {mo:.6} +- {eo:.1e}, z {z:+.2}",
+            a.0, a.1
+        );
+        assert!(a.0 > 0.0, "a dark face tests nothing");
+        assert!(
+            z.abs() < 4.0,
+            "4 rays against {name}: the means differ by {z:.1} standard errors"
+        );
+    }
+    let (v1, v4) = (pixel_variance(&i1), pixel_variance(&i4));
+    eprintln!(
+        "pixel variance: 1 ray {v1:.3e}, 4 rays {v4:.3e} ({:.2}x)",
+        v1 / v4
+    );
+    assert!(
+        v4 * 1.5 <= v1,
+        "4 rays must average the texture: {v1:.3e} -> {v4:.3e}"
+    );
 }

@@ -369,6 +369,51 @@ fn shards_merged_equal_the_unsharded_run_and_single_images_remake() {
 }
 
 #[test]
+fn an_image_remade_with_another_seed_keeps_its_scene_and_changes_its_noise() {
+    let f = fixture(1, 1);
+    let (a, b) = (f.root.join("a"), f.root.join("b"));
+    let k = 3;
+    let mut textures = FlatTexturesTestDouble { made: 0 };
+    let ea = dataset::render_one(
+        &f.prep,
+        k,
+        &a,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut textures,
+    )
+    .unwrap();
+    let eb = dataset::render_one_seeded(
+        &f.prep,
+        k,
+        Some(12345),
+        &b,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut textures,
+    )
+    .unwrap();
+    assert_eq!(eb.seed, 12345);
+    assert_ne!(ea.seed, eb.seed);
+    // The same instance, defects, textures and view: labels and placement equal.
+    assert_eq!((&ea.instance, &ea.viewpoint), (&eb.instance, &eb.viewpoint));
+    assert_eq!(ea.face_textures, eb.face_textures);
+    let id = format!("{k:06}");
+    let read = |d: &PathBuf, n: &str| std::fs::read(d.join("images").join(&id).join(n)).unwrap();
+    for name in [
+        "object.png",
+        "faces.png",
+        "raw_mask.png",
+        "raw_instances.png",
+    ] {
+        assert!(
+            read(&a, name) == read(&b, name),
+            "{name} differs under another image seed"
+        );
+    }
+    // Other random numbers: the radiance differs.
+    assert!(read(&a, "radiance.exr") != read(&b, "radiance.exr"));
+}
+
+#[test]
 fn splits_keep_instances_together_with_ratios_and_label_balance() {
     // The paper's job: 10 finishes x (30 + 30) instances x 9 views.
     let job = Job::load(Path::new(concat!(

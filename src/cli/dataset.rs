@@ -42,6 +42,11 @@ enum Cmd {
         /// Folder to write images/<K>/ and one-<K>.json into (created if missing).
         #[arg(long)]
         out: PathBuf,
+        /// Replace the image's seed (path-tracer samples, sensor noise, post-processing
+        /// noise) by this one; the scene (instance, defects, textures, view) stays: an
+        /// independent render of the same image, for error measurements.
+        #[arg(long)]
+        image_seed: Option<u64>,
     },
     /// Validate a job (meshes, defect sets included) and print its size; renders nothing.
     Check {
@@ -169,14 +174,20 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             println!("{}: {n} images post-processed", dir.display());
             Ok(())
         }
-        Cmd::RenderOne { job, index, out } => {
+        Cmd::RenderOne {
+            job,
+            index,
+            out,
+            image_seed,
+        } => {
             synosis::util::check_writable_dir(&out)
                 .with_context(|| format!("--out {}", out.display()))?;
             let prep = dataset::prepare(&job).with_context(|| format!("job {}", job.display()))?;
             let mut renderer = gpu_renderer()?;
-            let e = dataset::render_one(
+            let e = dataset::render_one_seeded(
                 &prep,
                 index,
+                image_seed,
                 &out,
                 &mut renderer,
                 &mut ModuleTextures::default(),

@@ -232,10 +232,15 @@ pub struct RenderSettings {
     /// (docs/dataset.md, "Labels from the path tracer's samples").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub labels: Option<crate::scene::config::LabelSource>,
-    /// The direct light's estimator: "sampled" (default) or "analytic" (the ring lights'
-    /// control variate at the primary hit; docs/rendering.md, "Analytic direct light").
+    /// The direct light's estimator: "analytic" (default: the ring lights' control
+    /// variate at the primary hit; docs/rendering.md, "Analytic direct light") or
+    /// "sampled".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub direct_light: Option<crate::scene::config::DirectLight>,
+    /// Camera rays per sample for the control variate's closed form, [1, 16] (scene
+    /// files' `[render] analytic_rays`); default 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analytic_rays: Option<i64>,
 }
 
 /// `[render] min_spp` when not given (`render::noise::DEFAULT_MIN_SPP`).
@@ -910,6 +915,9 @@ impl Job {
                 ));
             }
             self.int("render.min_spp", m, 2, r.spp.max(2))?;
+        }
+        if let Some(n) = r.analytic_rays {
+            self.int("render.analytic_rays", n, 1, 16)?;
         }
         self.check_viewpoints()?;
         crate::scene::lights::resolve_all(&self.lights).map_err(|e| DatasetError::Parse {

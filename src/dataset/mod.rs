@@ -28,6 +28,6 @@ pub use post::{Frame, PostStep};
 pub use renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 pub use runner::{
     DEFAULT_IN_FLIGHT, ManifestEntry, Prepared, RunOptions, RunReport, Shard, finish, merge,
-    postprocess_dir, prepare, prepare_text, read_manifest, render_one, run,
+    postprocess_dir, prepare, prepare_text, read_manifest, render_one, render_one_seeded, run,
 };
 pub use textures::{TextureCache, TextureSource};

@@ -110,6 +110,9 @@ pub struct ImageRequest<'a> {
     pub labels: crate::scene::config::LabelSource,
     /// The direct light's estimator (`[render] direct_light`; default "analytic").
     pub direct_light: crate::scene::config::DirectLight,
+    /// Camera rays per sample for the control variate's closed form
+    /// (`[render] analytic_rays`; default 1).
+    pub analytic_rays: u32,
 }
 
 /// What the renderer returns, every buffer row-major with row 0 at the top.

@@ -976,7 +976,24 @@ pub fn render_one(
     renderer: &mut dyn ImageRenderer,
     textures: &mut dyn TextureSource,
 ) -> Result<ManifestEntry> {
-    let item = prep
+    render_one_seeded(prep, index, None, out, renderer, textures)
+}
+
+/// [`render_one`] with the image's seed replaced by `image_seed` when given: the same
+/// scene (object instance, defects, textures and their placement, view: all drawn from
+/// the instance's seed) under other random numbers for the path tracer's samples, the
+/// sensor's noise and the post-processing. For error measurements against an
+/// independent reference (`synosis dataset render-one --image-seed`); the manifest entry
+/// records the seed used.
+pub fn render_one_seeded(
+    prep: &Prepared,
+    index: usize,
+    image_seed: Option<u64>,
+    out: &Path,
+    renderer: &mut dyn ImageRenderer,
+    textures: &mut dyn TextureSource,
+) -> Result<ManifestEntry> {
+    let mut item = prep
         .plan
         .items
         .get(index)
@@ -985,10 +1002,14 @@ pub fn render_one(
             field: "--index".into(),
             value: index.to_string(),
             allowed: format!("the job has images 0..{}", prep.plan.items.len()),
-        })?;
+        })?
+        .clone();
+    if let Some(s) = image_seed {
+        item.seed = s;
+    }
     std::fs::create_dir_all(out).map_err(|e| DatasetError::io(out, e))?;
     let mut ctx = Ctx::new(prep, None)?;
-    let entry = ctx.render_item(item, out, renderer, textures)?;
+    let entry = ctx.render_item(&item, out, renderer, textures)?;
     let v = serde_json::to_value(&entry)
         .map_err(|e| DatasetError::io(out, std::io::Error::other(e)))?;
     files::write_json(&out.join(format!("one-{}.json", item.id())), &v)?;
@@ -1246,6 +1267,7 @@ fn render_stage<'p>(
         noise: noise.as_ref(),
         labels: job.render.labels.unwrap_or_default(),
         direct_light: job.render.direct_light.unwrap_or_default(),
+        analytic_rays: job.render.analytic_rays.unwrap_or(1) as u32,
     };
     let fail = |message: String| DatasetError::Render {
         index: item.index,

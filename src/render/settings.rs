@@ -47,6 +47,9 @@ pub struct RenderSettings {
     pub labels: LabelSource,
     /// The direct light's estimator (`[render] direct_light`).
     pub direct_light: DirectLight,
+    /// Camera rays per sample for the control variate's closed form
+    /// (`[render] analytic_rays`).
+    pub analytic_rays: u32,
 }
 
 impl RenderSettings {
@@ -62,6 +65,7 @@ impl RenderSettings {
             texture_filter_scale: r.texture_filter_scale,
             labels: r.labels,
             direct_light: r.direct_light,
+            analytic_rays: r.analytic_rays,
         }
     }
 }

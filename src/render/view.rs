@@ -384,6 +384,7 @@ fn path_params(
         pixel_angle: pixel_angle(cam),
         filter_scale: s.texture_filter_scale,
         direct_light: s.direct_light as u32,
+        cv_extra_rays: s.analytic_rays.max(1) - 1,
         ..Default::default()
     }
 }

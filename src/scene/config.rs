@@ -864,10 +864,15 @@ pub struct RenderConfig {
     /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
     /// camera samples); [`LabelSource`].
     pub labels: LabelSource,
-    /// The direct light's estimator: "sampled" (default: next-event estimation and BSDF
-    /// sampling combined by MIS) or "analytic" (the same, plus the ring lights' analytic
-    /// control variate at the primary hit; [`DirectLight`]).
+    /// The direct light's estimator: "analytic" (default: next-event estimation and BSDF
+    /// sampling combined by MIS, plus the ring lights' analytic control variate at the
+    /// primary hit) or "sampled" (without it; [`DirectLight`]).
     pub direct_light: DirectLight,
+    /// With "analytic": camera rays per sample whose primary hit adds the control
+    /// variate's closed form (the sample's own and `analytic_rays - 1` more, which trace
+    /// no further), [1, 16]; more of them average the sub-pixel texture's variation of the
+    /// direct light (docs/rendering.md, "Analytic direct light").
+    pub analytic_rays: u32,
 }
 
 /// The direct light's estimator (`[render] direct_light`; docs/rendering.md, "Analytic
@@ -962,6 +967,7 @@ impl Default for RenderConfig {
             min_spp: None,
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
+            analytic_rays: 1,
         }
     }
 }
@@ -1404,6 +1410,7 @@ impl SceneConfig {
                 });
             }
         }
+        range_u("render.analytic_rays", r.analytic_rays, 1, 16, "[1, 16]")?;
         if let Some(m) = r.min_spp {
             if r.noise_target.is_none() {
                 return Err(ConfigError::Invalid {
