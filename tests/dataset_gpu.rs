@@ -162,6 +162,7 @@ fn face_textures_reach_the_image() {
             noise: None,
             labels: Default::default(),
             direct_light: Default::default(),
+            analytic_rays: 1,
         };
         r.render(&req).unwrap()
     };
@@ -259,6 +260,7 @@ rim_width = 0.5
             noise: None,
             labels: Default::default(),
             direct_light: Default::default(),
+            analytic_rays: 1,
         };
         let img = r.render(&req).unwrap();
         let label: Vec<u8> = img.class.clone();
