@@ -446,15 +446,28 @@ Conductor path_conductor() {
     return cond;
 }
 
+// The camera ray o, d through pixel (px, py): its jitter from the sampler's next two
+// dimensions, then under a thin lens the aperture point from the next two (the pinhole
+// draws none).
+void pixel_ray(uint px, uint py, inout Sampler rng, out vec3 o, out vec3 d) {
+    vec2 jitter = sample_2d(rng);
+    vec2 lens = prm.cam.eye.w > 0.0 ? sample_2d(rng) : vec2(0.0);
+    camera_ray(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height), lens, o, d);
+}
+
+// The point of triangle t at barycentrics `bary`: as exact as the triangle itself,
+// unlike o + t d whose error grows with the distance travelled.
+vec3 hit_point(Tri t, vec2 bary) {
+    return t.a.xyz * (1.0 - bary.x - bary.y) + t.b.xyz * bary.x + t.c.xyz * bary.y;
+}
+
 // The control variate's closed form A (analytic_rings) at the primary hit of a camera
 // ray through pixel (px, py) whose jitter and aperture point come from `rng`, exactly as
 // radiance_sample computes it at its own primary hit; 0 where that hit has none (no hit,
 // a light, a diffuse surface, no ring the control variate may use).
 float primary_analytic(uint px, uint py, inout Sampler rng) {
-    vec2 jitter = sample_2d(rng);
-    vec2 lens = prm.cam.eye.w > 0.0 ? sample_2d(rng) : vec2(0.0);
     vec3 o, d;
-    camera_ray(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height), lens, o, d);
+    pixel_ray(px, py, rng, o, d);
     Hit h = trace(o, d, 0.0, 3.0e38);
     if (h.prim == NO_HIT) return 0.0;
     uint word = mat_word(h.prim);
@@ -464,7 +477,7 @@ float primary_analytic(uint px, uint py, inout Sampler rng) {
     if (surf.diffuse) return 0.0;
     Tri t = fetch_tri(h.prim);
     vec3 ng = normalize(tri_normal(t));
-    vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
+    vec3 p = hit_point(t, h.bary);
     if (dot(ng, d) > 0.0) ng = -ng;
     vec3 ns = surface_normal(h, d, p, ng, word, 0u, surf);
     vec3 tb, bt;
@@ -497,11 +510,8 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
 float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out uint label_word) {
     label_word = 0u;
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
-    vec2 jitter = sample_2d(rng);
-    // Thin lens: the next two dimensions pick the aperture point (the pinhole draws none).
-    vec2 lens = prm.cam.eye.w > 0.0 ? sample_2d(rng) : vec2(0.0);
     vec3 o, d;
-    camera_ray(prm.cam, vec2(px, py) + jitter, vec2(prm.width, prm.height), lens, o, d);
+    pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
 
     float L = 0.0;
@@ -547,9 +557,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         }
         if (depth == prm.max_bounces) break;
         Surface surf = surface_of(mat, cond);
-        // The hit point from the barycentrics is as exact as the triangle itself,
-        // unlike o + t d whose error grows with the distance travelled.
-        vec3 p = t.a.xyz * (1.0 - h.bary.x - h.bary.y) + t.b.xyz * h.bary.x + t.c.xyz * h.bary.y;
+        vec3 p = hit_point(t, h.bary);
         if (dot(ng, d) > 0.0) ng = -ng;
         // Shading frame (surface_normal).
         vec3 ns = surface_normal(h, d, p, ng, word, depth, surf);

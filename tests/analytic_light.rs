@@ -120,16 +120,20 @@ fn statistics(images: &[Vec<f64>]) -> (Vec<Vec<f64>>, f64) {
             areas[k].push(sums[k] / counts[k]);
         }
     }
+    (areas, pixel_variance(images))
+}
+
+/// The mean over pixels of each pixel's variance across `images` (one per seed).
+fn pixel_variance(images: &[Vec<f64>]) -> f64 {
     let n = images.len() as f64;
     let px = images[0].len();
-    let var = (0..px)
+    (0..px)
         .map(|i| {
             let m = images.iter().map(|img| img[i]).sum::<f64>() / n;
             images.iter().map(|img| (img[i] - m).powi(2)).sum::<f64>() / (n - 1.0)
         })
         .sum::<f64>()
-        / px as f64;
-    (areas, var)
+        / px as f64
 }
 
 #[test]
@@ -274,16 +278,6 @@ fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
             images.push(px);
         }
         (means, images)
-    };
-    let pixel_variance = |images: &[Vec<f64>]| {
-        let n = images.len() as f64;
-        (0..images[0].len())
-            .map(|i| {
-                let m = images.iter().map(|img| img[i]).sum::<f64>() / n;
-                images.iter().map(|img| (img[i] - m).powi(2)).sum::<f64>() / (n - 1.0)
-            })
-            .sum::<f64>()
-            / images[0].len() as f64
     };
     let (ms, _) = run("sampled", 1);
     let (m1, i1) = run("analytic", 1);

@@ -1267,7 +1267,10 @@ fn render_stage<'p>(
         noise: noise.as_ref(),
         labels: job.render.labels.unwrap_or_default(),
         direct_light: job.render.direct_light.unwrap_or_default(),
-        analytic_rays: job.render.analytic_rays.unwrap_or(1) as u32,
+        analytic_rays: job
+            .render
+            .analytic_rays
+            .map_or(crate::scene::config::DEFAULT_ANALYTIC_RAYS, |n| n as u32),
     };
     let fail = |message: String| DatasetError::Render {
         index: item.index,

@@ -875,6 +875,9 @@ pub struct RenderConfig {
     pub analytic_rays: u32,
 }
 
+/// `[render] analytic_rays` when not given (scene files and jobs): the sample's own ray.
+pub const DEFAULT_ANALYTIC_RAYS: u32 = 1;
+
 /// The direct light's estimator (`[render] direct_light`; docs/rendering.md, "Analytic
 /// direct light").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
@@ -967,7 +970,7 @@ impl Default for RenderConfig {
             min_spp: None,
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
-            analytic_rays: 1,
+            analytic_rays: DEFAULT_ANALYTIC_RAYS,
         }
     }
 }
