@@ -29,9 +29,13 @@ layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 ligh
 layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams prm; };
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
-// Per-pixel sum of squared sample radiance, written only when prm.accum_sq != 0 (the
-// variance estimate behind `[render] noise_target`; else a placeholder of one float).
-layout(std430, set = 0, binding = PT_ACCUM_SQ) buffer AccumSq { float accum_sq[]; };
+// The per-pixel sums behind `[render] noise_target`'s variance estimate
+// (src/render/noise.rs), by prm.noise_sums: NOISE_SQUARES, the sum of each sample's
+// squared radiance (one float a pixel); NOISE_HALVES, the radiance of sample indices
+// [2^(L-1), 2^L) (level L >= 1; level 0: index 0) summed into float L & 1 of the pixel's
+// two, each cleared at its level's first sample, so they hold the last two levels;
+// NOISE_OFF: a placeholder of one float, never written.
+layout(std430, set = 0, binding = PT_NOISE_SUMS) buffer NoiseSums { float noise_sums[]; };
 // Labels from the path tracer's own samples (pc.labels = n != 0): the per-triangle label
 // words (face | class << 8 | instance << 16, as annotate.comp reads them) and the
 // annotation targets; otherwise one-word placeholders never written.
@@ -690,6 +694,8 @@ void main() {
     uint i = py * prm.width + px;
     float sum = 0.0;
     float sq = 0.0;
+    vec2 halves = prm.noise_sums == NOISE_HALVES
+        ? vec2(noise_sums[2u * i], noise_sums[2u * i + 1u]) : vec2(0.0);
     // Labels from this dispatch's first n x n samples (the caller makes sure it starts at
     // sample 0 and holds them): the annotation pass's thin-lens rays, traced once.
     uint label_count = min(pc.labels * pc.labels, min(pc.sample_count, LABEL_MAX_SAMPLES));
@@ -701,9 +707,22 @@ void main() {
         if (label) words[s] = word;
         sum += r;
         sq += r * r;
+        uint j = pc.sample_start + s;
+        uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
+        bool level_starts = (j & (j - 1u)) == 0u;   // j = 0 or a power of two
+        if ((level & 1u) == 0u) {
+            halves.x = (level_starts ? 0.0 : halves.x) + r;
+        } else {
+            halves.y = (level_starts ? 0.0 : halves.y) + r;
+        }
     }
     accum[i] += sum;
-    if (prm.accum_sq != 0u) accum_sq[i] += sq;
+    if (prm.noise_sums == NOISE_SQUARES) {
+        noise_sums[i] += sq;
+    } else if (prm.noise_sums == NOISE_HALVES) {
+        noise_sums[2u * i] = halves.x;
+        noise_sums[2u * i + 1u] = halves.y;
+    }
     if (label_count > 0u) {
         label_ids[i] = label_majority(words, label_count);
         label_coverage_out[i] = label_coverage(words, label_count);

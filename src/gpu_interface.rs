@@ -97,8 +97,8 @@ mod tests {
         assert_eq!(PathTraceBinding::COUNT, 21);
         assert_eq!(PathTraceBinding::LabelCoverage.at(2), 22);
         assert_eq!(std::mem::offset_of!(PathPush, labels), 8);
-        assert_eq!(PathTraceBinding::AccumSq.at(2), 19);
-        assert_eq!(std::mem::offset_of!(PathParams, accum_sq), 188);
+        assert_eq!(PathTraceBinding::NoiseSums.at(2), 19);
+        assert_eq!(std::mem::offset_of!(PathParams, noise_sums), 188);
         assert_eq!(PathTraceBinding::CurvedMaps.at(2), 15);
         assert_eq!(PathTraceBinding::Moments0.at(2), 16);
         assert_eq!(PathTraceBinding::LightGeometry.at(2), 12);
@@ -118,7 +118,7 @@ mod tests {
             "struct LightBlock",
             "#define PT_LIGHT_LIST",
             "#define PT_MOMENTS2",
-            "#define PT_ACCUM_SQ",
+            "#define PT_NOISE_SUMS",
             "#define FILTER_LEAN 1u",
         ] {
             assert!(glsl.contains(name), "{name} missing from interface.glsl");

@@ -1632,6 +1632,15 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         .job;
     assert_eq!(job.render.noise_target, Some(1.0));
     assert_eq!(job.render.first_check_spp(), 16);
+    assert_eq!(job.render.noise_estimate, None, "the default: halves");
+    let samples = target.replace("min_spp = 16", "min_spp = 16\nnoise_estimate = \"samples\"");
+    let job = dataset::prepare_text(&samples, "job", tmp.path())
+        .unwrap()
+        .job;
+    assert_eq!(
+        job.render.noise_estimate,
+        Some(synosis::scene::config::NoiseEstimator::Samples)
+    );
     let cases: Vec<(String, &str)> = vec![
         (
             with("[sensor]\nexposure = 1.0\nbit_depth = 12"),
@@ -1666,6 +1675,17 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         (
             emva.replace("spp = 1", "spp = 64\nmin_spp = 16"),
             "render.min_spp",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nnoise_estimate = \"halves\""),
+            "render.noise_estimate",
+        ),
+        (
+            emva.replace(
+                "spp = 1",
+                "spp = 64\nnoise_target = 1.0\nnoise_estimate = \"thirds\"",
+            ),
+            "unknown variant `thirds`",
         ),
         (with("[camera]\nf_number = 0.1"), "camera.f_number"),
         (with("[camera]\nview = \"A0\""), "camera.view"),

@@ -139,6 +139,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 .render
                 .min_spp
                 .unwrap_or(synosis::render::noise::DEFAULT_MIN_SPP),
+            estimator: cfg.render.noise_estimate.unwrap_or_default(),
         }),
         _ => None,
     };

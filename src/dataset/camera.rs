@@ -247,5 +247,6 @@ pub fn noise_stop(
         },
         target,
         min_spp: job.render.first_check_spp(),
+        estimator: job.render.noise_estimate.unwrap_or_default(),
     }))
 }

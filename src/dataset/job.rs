@@ -227,6 +227,10 @@ pub struct RenderSettings {
     /// [`DEFAULT_MIN_SPP`] (or `spp` when smaller).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_spp: Option<i64>,
+    /// How the noise check estimates the render noise (with `noise_target`): "halves"
+    /// (default) or "samples" (docs/dataset.md, "Samples chosen from a noise target").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_estimate: Option<crate::scene::config::NoiseEstimator>,
     /// Where the labels come from: "auto" (default: the path tracer's own samples under
     /// a thin lens, the annotation pass under a pinhole), "pass" or "samples"
     /// (docs/dataset.md, "Labels from the path tracer's samples").
@@ -915,6 +919,15 @@ impl Job {
                 ));
             }
             self.int("render.min_spp", m, 2, r.spp.max(2))?;
+        }
+        if let Some(e) = r.noise_estimate
+            && r.noise_target.is_none()
+        {
+            return Err(self.field(
+                "render.noise_estimate",
+                format!("{e:?}").to_lowercase(),
+                "is how `render.noise_target` estimates the noise: give that too, or remove it",
+            ));
         }
         if let Some(n) = r.analytic_rays {
             self.int("render.analytic_rays", n, 1, 16)?;

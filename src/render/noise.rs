@@ -1,13 +1,27 @@
 //! The render's own noise against the camera's: the criterion behind `[render]
 //! noise_target` (docs/dataset.md, "Samples chosen from a noise target").
 //!
-//! The path tracer can add each sample's squared radiance into a second per-pixel sum
-//! (`PathParams::accum_sq`). With the radiance sum S and the square sum Q of n samples,
-//! the sample variance is s^2 = (Q - S^2 / n) / (n - 1) and the variance of the pixel's
-//! mean s^2 / n. *Approximation (independent samples)*: this treats a pixel's samples as
-//! independent; with the Sobol sampler the mean's true error is lower, so the estimate is
-//! conservative (on textured faces the Sobol gain measured in issue 15 is nil, so it is
-//! close there).
+//! Besides the radiance sum S the path tracer keeps per-pixel sums for the variance of
+//! the pixel's mean after n samples (`PathParams::noise_sums`), by the estimator
+//! (`[render] noise_estimate`, [`NoiseEstimator`]):
+//!
+//! - **"halves"** (default): the radiance of the last two *levels* of sample indices,
+//!   level L >= 1 being [2^(L-1), 2^L). With P the largest power of two <= n and
+//!   h = P / 2, the blocks [0, h) and [h, 2h) are the two halves of an aligned block of
+//!   2h samples; with their means m1, m2 the variance of an h-sample mean is estimated as
+//!   (m1 - m2)^2 / 2 (one degree of freedom a pixel; the criterion sums it over
+//!   thousands), and that of the n-sample mean as that times h / n.
+//!   *Approximation (independent halves, 1/n beyond them)*: with the Sobol sampler each
+//!   aligned block of 2^m indices is a stratified set of its own (Burley's index
+//!   shuffle maps aligned blocks to aligned blocks of the Owen-scrambled sequence), so
+//!   the halves' spread includes the stratification within h samples; two halves of one
+//!   block are negatively correlated (together they are a finer set) and n samples are
+//!   stratified at least as well as h, so the estimate errs on the safe side, by the
+//!   stratification between h and n at most. With independent samples it is unbiased.
+//! - **"samples"** (the estimate before 2026-11-24): each sample's squared radiance Q;
+//!   s^2 = (Q - S^2 / n) / (n - 1), the mean's variance s^2 / n. *Approximation
+//!   (independent samples)*: conservative under Sobol by all of its stratification (on the
+//!   paper job's crops 1.3 to 2.7x the measured error, issue 15).
 //!
 //! The render noise is brought into the sensor's codes exactly as the sensor step will
 //! expose the image ([`exposure_time_s`] on the current mean image, times the caller's
@@ -17,6 +31,7 @@
 //! `noise_target` bounds.
 
 use super::sensor::{Responsivity, SensorError, exposure_time_s, saturation_electrons};
+pub use crate::scene::config::NoiseEstimator;
 use crate::scene::config::SensorConfig;
 
 /// The camera the noise is measured against: its responsivity, its sensor and the factor
@@ -37,6 +52,8 @@ pub struct NoiseStop {
     pub camera: CameraNoise,
     pub target: f64,
     pub min_spp: u32,
+    /// How a pixel's variance is estimated (`[render] noise_estimate`).
+    pub estimator: NoiseEstimator,
 }
 
 /// Samples before the first check when `min_spp` is not given (`[render] min_spp` of
@@ -94,29 +111,74 @@ pub fn mean_variance(sum: f64, sum_sq: f64, n: u32) -> f64 {
     s2 / n
 }
 
+/// Variance of a pixel's mean radiance after `n` samples from the "halves" sums: `sum`
+/// of radiance and `levels` = the radiance of sample-index levels of even and odd L
+/// (level L >= 1: indices [2^(L-1), 2^L); level 0: index 0), each holding its latest
+/// level. P = the largest power of two <= n, h = P / 2: the halves [0, h) and [h, 2h)
+/// (S(2h) = sum less the unfinished level [P, n)); (m1 - m2)^2 / 2 * h / n. Infinite for
+/// n < 2.
+pub fn halves_mean_variance(sum: f64, levels: [f64; 2], n: u32) -> f64 {
+    if n < 2 {
+        return f64::INFINITY;
+    }
+    let p = 1u32 << (31 - n.leading_zeros());
+    let h = p / 2;
+    // The level of indices [x, 2x) is log2(x) + 1.
+    let level_sum = |x: u32| levels[((x.trailing_zeros() + 1) & 1) as usize];
+    let first_2h = if p < n { sum - level_sum(p) } else { sum };
+    let second = level_sum(h);
+    let first = first_2h - second;
+    let hf = h as f64;
+    let d = (first - second) / hf;
+    d * d / 2.0 * hf / n as f64
+}
+
+/// The variance of each pixel's mean after `n` samples from the path tracer's sums:
+/// `sum` of radiance and `noise` as [`NoiseEstimator`] fills it (squares: one value a
+/// pixel; halves: two).
+fn pixel_variance(estimator: NoiseEstimator, sum: &[f32], noise: &[f32], n: u32, i: usize) -> f64 {
+    match estimator {
+        NoiseEstimator::Samples => mean_variance(sum[i] as f64, noise[i] as f64, n),
+        NoiseEstimator::Halves => halves_mean_variance(
+            sum[i] as f64,
+            [noise[2 * i] as f64, noise[2 * i + 1] as f64],
+            n,
+        ),
+    }
+}
+
+/// Floats a pixel the path tracer keeps for `estimator` (its `NoiseSums` binding).
+pub fn noise_floats_per_pixel(estimator: NoiseEstimator) -> usize {
+    match estimator {
+        NoiseEstimator::Samples => 1,
+        NoiseEstimator::Halves => 2,
+    }
+}
+
 impl CameraNoise {
-    /// The criterion after `n` samples. `sum`, `sum_sq`: the path tracer's per-pixel sums;
-    /// `exposure_mask`: the pixels auto exposure looks at (the inspected faces, as the
+    /// The criterion after `n` samples. `sum`, `noise`: the path tracer's per-pixel sums
+    /// (radiance; `estimator`'s, [`noise_floats_per_pixel`] a pixel); `exposure_mask`: the pixels auto exposure looks at (the inspected faces, as the
     /// sensor step); `object_mask`: the pixels the rms is taken over (all when it selects
     /// none). The mean image is the one [`super::View::read`] would return at `n`.
     pub fn estimate(
         &self,
+        estimator: NoiseEstimator,
         sum: &[f32],
-        sum_sq: &[f32],
+        noise: &[f32],
         n: u32,
         exposure_mask: &[bool],
         object_mask: &[bool],
     ) -> Result<NoiseEstimate, SensorError> {
         let px = self.resp.electrons_per_s.len();
         if sum.len() != px
-            || sum_sq.len() != px
+            || noise.len() != px * noise_floats_per_pixel(estimator)
             || exposure_mask.len() != px
             || object_mask.len() != px
         {
             return Err(SensorError::Invalid(format!(
                 "noise estimate: {} / {} sums and {} / {} mask values for {px} pixels",
                 sum.len(),
-                sum_sq.len(),
+                noise.len(),
                 exposure_mask.len(),
                 object_mask.len()
             )));
@@ -139,7 +201,7 @@ impl CameraNoise {
             if mu >= full {
                 continue;
             }
-            let var_l = mean_variance(sum[i] as f64, sum_sq[i] as f64, n);
+            let var_l = pixel_variance(estimator, sum, noise, n, i);
             render += (k * e_per_l).powi(2) * var_l;
             camera += camera_variance_dn(&self.sensor, mu);
             pixels += 1;
@@ -173,11 +235,19 @@ impl NoiseStop {
     /// Samples at the next check after an estimate of `ratio` at `done` samples: where
     /// the noise is predicted to reach the target (done (ratio / target)^2), kept within
     /// [done + done / MIN_CHECK_STEP_DIVISOR, MAX_CHECK_GROWTH done] and at least one
-    /// more sample. The render checks at the first batch end at or after it.
+    /// more sample. With "halves" also at most the next power of two above `done`: the
+    /// estimate only learns about the stratification of more samples when a power of two
+    /// completes (in between it falls as 1 / n, the prediction itself), and it often
+    /// falls faster there than the prediction assumes. The render checks at the first
+    /// batch end at or after it.
     pub fn next_check(&self, done: u32, ratio: f64) -> u32 {
         let predicted = (done as f64 * (ratio / self.target).powi(2)).ceil();
         let lo = done as f64 + (done.div_ceil(MIN_CHECK_STEP_DIVISOR)).max(1) as f64;
-        let hi = done as f64 * MAX_CHECK_GROWTH as f64;
+        let mut hi = done as f64 * MAX_CHECK_GROWTH as f64;
+        if self.estimator == NoiseEstimator::Halves {
+            let power = (done as u64 + 1).next_power_of_two() as f64;
+            hi = hi.min(power);
+        }
         let next = if predicted.is_finite() {
             predicted.clamp(lo, hi.max(lo))
         } else {
@@ -240,7 +310,9 @@ mod tests {
         let sum = [12.0f32, 2.0, 100.0];
         let sum_sq = [50.0f32, 1.0, 1.0e4];
         let object = [true, true, false];
-        let est = cam.estimate(&sum, &sum_sq, n, &object, &object).unwrap();
+        let est = cam
+            .estimate(NoiseEstimator::Samples, &sum, &sum_sq, n, &object, &object)
+            .unwrap();
         assert!((est.exposure_s - 3e-3).abs() < 1e-15);
         // Render: (K * 300)^2 * [14/12, 0]; camera: K^2 (900 + 9) + 1/12 and
         // K^2 (150 + 9) + 1/12 (pixel 0's 900 e- is below the 1000 e- full well).
@@ -263,7 +335,9 @@ mod tests {
             },
             ..cam.clone()
         };
-        let est = auto.estimate(&sum, &sum_sq, n, &object, &object).unwrap();
+        let est = auto
+            .estimate(NoiseEstimator::Samples, &sum, &sum_sq, n, &object, &object)
+            .unwrap();
         let t = 0.9 * 1000.0 / 3.0e5 * 1.5;
         assert!((est.exposure_s / t - 1.0).abs() < 1e-12, "{est:?}");
         // Pixel 0 is now at 1.5 x 900 e- (above the full well): only pixel 1 counts,
@@ -272,10 +346,96 @@ mod tests {
         assert_eq!(est.ratio, 0.0);
         // An empty object mask counts every pixel; wrong lengths are an error.
         let est = cam
-            .estimate(&sum, &sum_sq, n, &object, &[false; 3])
+            .estimate(
+                NoiseEstimator::Samples,
+                &sum,
+                &sum_sq,
+                n,
+                &object,
+                &[false; 3],
+            )
             .unwrap();
         assert_eq!(est.pixels, 2, "the background pixel's mean is saturated");
-        assert!(cam.estimate(&sum, &sum_sq, n, &object, &[true]).is_err());
+        assert!(
+            cam.estimate(NoiseEstimator::Samples, &sum, &sum_sq, n, &object, &[true])
+                .is_err()
+        );
+        // Halves: pixel 0's samples 1, 2, 3, 6 hold levels 0 {1}, 1 {2}, 2 {3, 6}: the
+        // two floats are level 2 (even) = 9 and level 1 (odd) = 2. P = 4, h = 2: halves
+        // (1, 2) and (3, 6), means 1.5 and 4.5: (3^2) / 2 * 2 / 4 = 2.25.
+        let levels = [9.0f32, 2.0, 1.0, 1.0, 0.0, 0.0];
+        let est = cam
+            .estimate(NoiseEstimator::Halves, &sum, &levels, n, &object, &object)
+            .unwrap();
+        let render = (0.5f64 * 300.0).powi(2) * 2.25 / 2.0;
+        assert!((est.render_rms_dn - render.sqrt()).abs() < 1e-9, "{est:?}");
+        assert!(
+            cam.estimate(NoiseEstimator::Halves, &sum, &sum_sq, n, &object, &object)
+                .is_err(),
+            "halves need two floats a pixel"
+        );
+    }
+
+    /// The shader's level sums (glsl/path_trace.comp) for samples `x`: level L >= 1 holds
+    /// indices [2^(L-1), 2^L), level 0 index 0, into float L & 1, cleared at its first.
+    fn level_sums(x: &[f64]) -> [f64; 2] {
+        let mut h = [0.0f64; 2];
+        for (j, &r) in x.iter().enumerate() {
+            let j = j as u32;
+            let level = if j == 0 { 0 } else { 32 - j.leading_zeros() };
+            let k = (level & 1) as usize;
+            if j & j.wrapping_sub(1) == 0 {
+                h[k] = 0.0;
+            }
+            h[k] += r;
+        }
+        h
+    }
+
+    #[test]
+    fn halves_compare_the_two_halves_of_the_last_whole_block() {
+        // n = 8: halves [0, 4) and [4, 8); n = 11: the same halves (P = 8, h = 4), scaled by
+        // 4 / 11; n = 2: samples 0 and 1.
+        let x: Vec<f64> = (0..11)
+            .map(|k| ((k * 7) % 5) as f64 + 0.5 * k as f64)
+            .collect();
+        for n in [2usize, 3, 4, 5, 8, 11] {
+            let p = 1usize << (usize::BITS - 1 - n.leading_zeros());
+            let h = p / 2;
+            let m1 = x[..h].iter().sum::<f64>() / h as f64;
+            let m2 = x[h..2 * h].iter().sum::<f64>() / h as f64;
+            let want = (m1 - m2).powi(2) / 2.0 * h as f64 / n as f64;
+            let got = halves_mean_variance(x[..n].iter().sum(), level_sums(&x[..n]), n as u32);
+            assert!(
+                (got - want).abs() < 1e-9 * want.max(1.0),
+                "n {n}: {got} vs {want}"
+            );
+        }
+        assert_eq!(halves_mean_variance(1.0, [1.0, 0.0], 1), f64::INFINITY);
+    }
+
+    #[test]
+    fn halves_are_unbiased_for_independent_samples() {
+        // Uniform samples on [0, 1) (variance 1/12) from a fixed LCG: the mean of the
+        // estimate over many pixels is 1 / (12 n) within its statistical error.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for n in [2u32, 7, 16, 40] {
+            let pixels = 20_000;
+            let mut total = 0.0;
+            for _ in 0..pixels {
+                let x: Vec<f64> = (0..n).map(|_| uniform()).collect();
+                total += halves_mean_variance(x.iter().sum(), level_sums(&x), n);
+            }
+            let got = total / pixels as f64 * 12.0 * n as f64;
+            // One degree of freedom a pixel: relative error sqrt(2 / pixels) = 1 %.
+            assert!((got - 1.0).abs() < 0.05, "n {n}: {got}");
+        }
     }
 
     #[test]
@@ -288,6 +448,7 @@ mod tests {
             },
             target: 1.0,
             min_spp: 16,
+            estimator: NoiseEstimator::Samples,
         };
         assert_eq!(stop.first_check(1000), 16);
         assert_eq!(stop.first_check(8), 8);
@@ -299,5 +460,23 @@ mod tests {
         assert_eq!(stop.next_check(1024, 1.001), 1040);
         assert_eq!(stop.next_check(12000, 1.003), 12188);
         assert_eq!(stop.next_check(3, 1.001), 4);
+        // Halves: never past the next power of two (where the estimate learns more).
+        let halves = NoiseStop {
+            estimator: NoiseEstimator::Halves,
+            ..stop.clone()
+        };
+        assert_eq!(halves.next_check(64, 1.2), 93, "within: as predicted");
+        assert_eq!(
+            halves.next_check(32, 3.0),
+            64,
+            "predicted 288, capped at 64"
+        );
+        assert_eq!(halves.next_check(64, 10.0), 128);
+        assert_eq!(halves.next_check(48, 3.0), 64);
+        assert_eq!(
+            halves.next_check(1024, 1.001),
+            1040,
+            "the smallest step stays"
+        );
     }
 }

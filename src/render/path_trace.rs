@@ -92,7 +92,7 @@ pub fn render_frame(
         setup,
         settings,
         opts.annotate_grid,
-        opts.noise.is_some(),
+        opts.noise.map(|n| n.estimator),
         opts.profiler,
     )?;
     let (spp, batch) = (settings.spp, settings.batch_spp.max(1));
@@ -155,7 +155,7 @@ fn noise_estimate(
     masks: &mut Option<(Vec<bool>, Vec<bool>)>,
 ) -> Result<NoiseEstimate, RenderError> {
     let (sum, sq) = view.read_sums()?;
-    let sq = sq.expect("a view with a noise target sums squares");
+    let sq = sq.expect("a view with a noise target keeps noise sums");
     if masks.is_none() {
         *masks = Some(match view.read_annotation()? {
             Some(a) => (
@@ -166,7 +166,9 @@ fn noise_estimate(
         });
     }
     let (exposure, object) = masks.as_ref().expect("just filled");
-    Ok(stop.camera.estimate(&sum, &sq, done, exposure, object)?)
+    Ok(stop
+        .camera
+        .estimate(stop.estimator, &sum, &sq, done, exposure, object)?)
 }
 
 /// Renders a whole assembled scene once: builds the path tracer and the GPU scene for

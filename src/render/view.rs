@@ -7,11 +7,12 @@ use ash::vk;
 use super::RenderError;
 use super::annotate::{Annotation, AnnotationTargets, record_annotate};
 use super::gpu_scene::GpuScene;
+use super::noise::{NoiseEstimator, noise_floats_per_pixel};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
-    LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, PathParams, PathPush,
-    PathTraceBinding as B, TILE, TileBlock,
+    LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, NOISE_HALVES, NOISE_OFF, NOISE_SQUARES,
+    PathParams, PathPush, PathTraceBinding as B, TILE, TileBlock,
 };
 use crate::graph::Graph;
 use crate::scene::Camera;
@@ -84,9 +85,9 @@ pub struct View<'s> {
     emitters: Buffer,
     params: Buffer,
     accum: Buffer,
-    /// The per-pixel sum of squared sample radiance when the view estimates its noise
+    /// The per-pixel sums of the noise estimate when the view estimates its noise
     /// (`variance`), else one float the shader never writes.
-    accum_sq: Buffer,
+    noise_sums: Buffer,
     variance: bool,
     annotation: Option<(AnnotationTargets, u32)>,
     /// The path tracer's first batch labels the pixels from its own samples
@@ -118,21 +119,21 @@ impl<'s> View<'s> {
             setup,
             settings,
             annotate_grid,
-            false,
+            None,
             profiler,
         )
     }
 
-    /// [`View::new`]; with `variance` the path tracer also sums each sample's squared
-    /// radiance per pixel ([`View::read_sums`]), the noise estimate of
-    /// `[render] noise_target` (src/render/noise.rs). Without it, nothing changes.
+    /// [`View::new`]; with `variance` the path tracer also keeps that estimator's
+    /// per-pixel sums ([`View::read_sums`]), the noise estimate of `[render]
+    /// noise_target` (src/render/noise.rs). Without it, nothing changes.
     pub fn with_variance(
         tracer: &PathTracer,
         scene: &'s GpuScene,
         setup: &ViewSetup,
         settings: &RenderSettings,
         annotate_grid: Option<u32>,
-        variance: bool,
+        variance: Option<NoiseEstimator>,
         profiler: Option<&Profiler>,
     ) -> Result<View<'s>, RenderError> {
         let ctx = &tracer.ctx;
@@ -166,7 +167,11 @@ impl<'s> View<'s> {
         if !emitting {
             params.emitter_count = 0;
         }
-        params.accum_sq = variance as u32;
+        params.noise_sums = match variance {
+            None => NOISE_OFF,
+            Some(NoiseEstimator::Samples) => NOISE_SQUARES,
+            Some(NoiseEstimator::Halves) => NOISE_HALVES,
+        };
         let annotation = match annotate_grid {
             Some(grid) => Some((AnnotationTargets::new(ctx, width, height)?, grid)),
             None => None,
@@ -190,17 +195,16 @@ impl<'s> View<'s> {
             emitters: Buffer::from_slice(ctx, "light list", &blocks, storage)?,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
-            accum_sq: {
+            noise_sums: {
                 // Without `variance` one float: a binding may not be empty, and the shader
-                // never writes it (accum_sq = 0).
-                let (name, bytes) = if variance {
-                    ("radiance square sum", n * 4)
-                } else {
-                    ("radiance square sum (unused)", 4)
+                // never writes it (NOISE_OFF).
+                let (name, bytes) = match variance {
+                    Some(e) => ("noise sums", n * 4 * noise_floats_per_pixel(e) as u64),
+                    None => ("noise sums (unused)", 4),
                 };
                 Buffer::new(ctx, name, bytes, usage, MemoryKind::Readback)?
             },
-            variance,
+            variance: variance.is_some(),
             annotation,
             labels_from_samples,
             label_placeholders,
@@ -239,7 +243,7 @@ impl<'s> View<'s> {
         let en = g.import(&tracer.energy);
         let pr = g.import(&self.params);
         let mut acc = g.import(&self.accum);
-        let mut acc_sq = g.import(&self.accum_sq);
+        let mut noise = g.import(&self.noise_sums);
         let mh = g.import(headers);
         let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(&texels[k]));
         let moments = self.scene.moment_buffers();
@@ -252,7 +256,7 @@ impl<'s> View<'s> {
         if start == 0 {
             g.fill("clear radiance", &mut acc, 0);
             if self.variance {
-                g.fill("clear radiance squares", &mut acc_sq, 0);
+                g.fill("clear noise sums", &mut noise, 0);
             }
             if let Some((t, grid)) = &self.annotation {
                 let n = (*grid).clamp(1, 16);
@@ -312,7 +316,7 @@ impl<'s> View<'s> {
                 .read(B::Moments0.at(off), &m0)
                 .read(B::Moments1.at(off), &m1)
                 .read(B::Moments2.at(off), &m2)
-                .read_write(B::AccumSq.at(off), &mut acc_sq)
+                .read_write(B::NoiseSums.at(off), &mut noise)
                 .read(B::LabelWords.at(off), &labels)
                 .write(B::LabelIds.at(off), &mut ids)
                 .write(B::LabelCoverage.at(off), &mut cov)
@@ -321,12 +325,12 @@ impl<'s> View<'s> {
         }
     }
 
-    /// The per-pixel sums so far: radiance, and squared radiance when the view was made
-    /// `with_variance` (else None).
+    /// The per-pixel sums so far: radiance, and the noise estimate's when the view was
+    /// made `with_variance` (else None).
     pub fn read_sums(&self) -> Result<(Vec<f32>, Option<Vec<f32>>), RenderError> {
         let sum: Vec<f32> = self.accum.read()?;
         let sq = if self.variance {
-            Some(self.accum_sq.read()?)
+            Some(self.noise_sums.read()?)
         } else {
             None
         };

@@ -860,6 +860,9 @@ pub struct RenderConfig {
     /// Samples before the first noise check (with `noise_target`), [2, spp]; default 64
     /// (or `spp` when smaller).
     pub min_spp: Option<u32>,
+    /// How the noise check estimates a pixel's render noise (with `noise_target`):
+    /// "halves" (default) or "samples" ([`NoiseEstimator`]).
+    pub noise_estimate: Option<NoiseEstimator>,
     /// Where the labels (class, instance, face, coverage) come from: "auto" (default),
     /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
     /// camera samples); [`LabelSource`].
@@ -892,6 +895,21 @@ pub enum DirectLight {
     /// very samples of the light (unbiased: its expectation is the closed form).
     #[default]
     Analytic = 1,
+}
+
+/// How `[render] noise_target` estimates the variance of a pixel's mean
+/// (`[render] noise_estimate`; src/render/noise.rs, docs/dataset.md "Samples chosen from a
+/// noise target").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseEstimator {
+    /// From the two halves of the largest aligned power-of-two block of samples done:
+    /// sees the sampler's stratification (Sobol), conservative.
+    #[default]
+    Halves,
+    /// From the spread of single samples, as if independent (the estimate before
+    /// 2026-11-24): conservative by the stratification it does not see.
+    Samples,
 }
 
 /// Where a render's labels come from (`[render] labels`; docs/scene-format.md).
@@ -968,6 +986,7 @@ impl Default for RenderConfig {
             texture_filter_scale: 1.0,
             noise_target: None,
             min_spp: None,
+            noise_estimate: None,
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
             analytic_rays: DEFAULT_ANALYTIC_RAYS,
@@ -1423,6 +1442,14 @@ impl SceneConfig {
             }
             range_u("render.min_spp", m, 2, r.spp.max(2), "[2, render.spp]")?;
         }
+        if r.noise_estimate.is_some() && r.noise_target.is_none() {
+            return Err(ConfigError::Invalid {
+                field: "render.noise_estimate",
+                message:
+                    "is how render.noise_target estimates the noise: give that too, or remove it"
+                        .into(),
+            });
+        }
         let t = &self.texture;
         if !["flat", "test-grooves", "file"].contains(&t.kind.as_str()) {
             return Err(ConfigError::Invalid {
@@ -1525,6 +1552,29 @@ impl SceneConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn noise_estimate_needs_a_noise_target() {
+        let c = SceneConfig::parse(
+            "[render]\nnoise_target = 2.0\nnoise_estimate = \"samples\"\n[camera]\nf_number = 8.0\n[sensor]\n",
+        )
+        .expect("samples");
+        assert_eq!(c.render.noise_estimate, Some(NoiseEstimator::Samples));
+        assert_eq!(NoiseEstimator::default(), NoiseEstimator::Halves);
+        let e = SceneConfig::parse("[render]\nnoise_estimate = \"halves\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("render.noise_estimate") && e.contains("noise_target"),
+            "{e}"
+        );
+        let e = SceneConfig::parse(
+            "[render]\nnoise_target = 2.0\nnoise_estimate = \"pairs\"\n[camera]\nf_number = 8.0\n[sensor]\n",
+        )
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("halves") && e.contains("samples"), "{e}");
+    }
 
     #[test]
     fn texture_filter_parses_and_checks_its_scale() {
