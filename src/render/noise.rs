@@ -21,7 +21,7 @@
 //! - **"samples"** (the estimate before 2026-11-24): each sample's squared radiance Q;
 //!   s^2 = (Q - S^2 / n) / (n - 1), the mean's variance s^2 / n. *Approximation
 //!   (independent samples)*: conservative under Sobol by all of its stratification (on the
-//!   paper job's crops 1.3 to 2.7x the measured error, issue 15).
+//!   paper job's crops 1.2 to 2.9x the measured error, issue 15).
 //!
 //! The render noise is brought into the sensor's codes exactly as the sensor step will
 //! expose the image ([`exposure_time_s`] on the current mean image, times the caller's
@@ -157,7 +157,8 @@ pub fn noise_floats_per_pixel(estimator: NoiseEstimator) -> usize {
 
 impl CameraNoise {
     /// The criterion after `n` samples. `sum`, `noise`: the path tracer's per-pixel sums
-    /// (radiance; `estimator`'s, [`noise_floats_per_pixel`] a pixel); `exposure_mask`: the pixels auto exposure looks at (the inspected faces, as the
+    /// (radiance; `estimator`'s, [`noise_floats_per_pixel`] a pixel); `exposure_mask`:
+    /// the pixels auto exposure looks at (the inspected faces, as the
     /// sensor step); `object_mask`: the pixels the rms is taken over (all when it selects
     /// none). The mean image is the one [`super::View::read`] would return at `n`.
     pub fn estimate(
