@@ -429,7 +429,12 @@ fn render_html(job: &Job, reports: &[FinishReport], threshold: Option<f64>) -> S
         job.render.height,
         match job.render.noise_target {
             // Each image's own spp is in the manifest.
-            Some(t) => format!("up to {} spp (noise target {t})", job.render.spp),
+            Some(t) => format!(
+                "up to {} spp (noise target {t}, {:?} estimate)",
+                job.render.spp,
+                job.render.noise_estimate.unwrap_or_default()
+            )
+            .to_lowercase(),
             None => format!("{} spp", job.render.spp),
         },
         threshold.map_or("(none)".into(), |t| format!("{t}"))
