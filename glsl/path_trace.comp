@@ -707,13 +707,15 @@ void main() {
         if (label) words[s] = word;
         sum += r;
         sq += r * r;
-        uint j = pc.sample_start + s;
-        uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
-        bool level_starts = (j & (j - 1u)) == 0u;   // j = 0 or a power of two
-        if ((level & 1u) == 0u) {
-            halves.x = (level_starts ? 0.0 : halves.x) + r;
-        } else {
-            halves.y = (level_starts ? 0.0 : halves.y) + r;
+        if (prm.noise_sums == NOISE_HALVES) {
+            uint j = pc.sample_start + s;
+            uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
+            bool level_starts = (j & (j - 1u)) == 0u;   // j = 0 or a power of two
+            if ((level & 1u) == 0u) {
+                halves.x = (level_starts ? 0.0 : halves.x) + r;
+            } else {
+                halves.y = (level_starts ? 0.0 : halves.y) + r;
+            }
         }
     }
     accum[i] += sum;

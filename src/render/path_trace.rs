@@ -154,8 +154,8 @@ fn noise_estimate(
     done: u32,
     masks: &mut Option<(Vec<bool>, Vec<bool>)>,
 ) -> Result<NoiseEstimate, RenderError> {
-    let (sum, sq) = view.read_sums()?;
-    let sq = sq.expect("a view with a noise target keeps noise sums");
+    let (sum, noise) = view.read_sums()?;
+    let noise = noise.expect("a view with a noise target keeps noise sums");
     if masks.is_none() {
         *masks = Some(match view.read_annotation()? {
             Some(a) => (
@@ -168,7 +168,7 @@ fn noise_estimate(
     let (exposure, object) = masks.as_ref().expect("just filled");
     Ok(stop
         .camera
-        .estimate(stop.estimator, &sum, &sq, done, exposure, object)?)
+        .estimate(stop.estimator, &sum, &noise, done, exposure, object)?)
 }
 
 /// Renders a whole assembled scene once: builds the path tracer and the GPU scene for

@@ -1555,10 +1555,13 @@ mod tests {
 
     #[test]
     fn noise_estimate_needs_a_noise_target() {
-        let c = SceneConfig::parse(
-            "[render]\nnoise_target = 2.0\nnoise_estimate = \"samples\"\n[camera]\nf_number = 8.0\n[sensor]\n",
-        )
-        .expect("samples");
+        // A noise target needs the EMVA sensor, and so the lens's f-number.
+        let with_target = |estimate: &str| {
+            SceneConfig::parse(&format!(
+                "[render]\nnoise_target = 2.0\nnoise_estimate = \"{estimate}\"\n[camera]\nf_number = 8.0\n[sensor]\n"
+            ))
+        };
+        let c = with_target("samples").expect("samples");
         assert_eq!(c.render.noise_estimate, Some(NoiseEstimator::Samples));
         assert_eq!(NoiseEstimator::default(), NoiseEstimator::Halves);
         let e = SceneConfig::parse("[render]\nnoise_estimate = \"halves\"\n")
@@ -1568,11 +1571,7 @@ mod tests {
             e.contains("render.noise_estimate") && e.contains("noise_target"),
             "{e}"
         );
-        let e = SceneConfig::parse(
-            "[render]\nnoise_target = 2.0\nnoise_estimate = \"pairs\"\n[camera]\nf_number = 8.0\n[sensor]\n",
-        )
-            .unwrap_err()
-            .to_string();
+        let e = with_target("pairs").unwrap_err().to_string();
         assert!(e.contains("halves") && e.contains("samples"), "{e}");
     }
 
