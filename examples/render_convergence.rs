@@ -46,6 +46,16 @@ struct Args {
     /// Turn Kulla-Conty compensation off (Mitsuba's roughconductor has none).
     #[arg(long)]
     no_compensation: bool,
+    /// The reference's configuration (the --configs syntax; default: ray query, Sobol,
+    /// facing, the scene's direct light).
+    #[arg(long)]
+    ref_config: Option<String>,
+    /// Render the reference as two halves of --ref-spp with independent seeds and
+    /// average them: their difference estimates the reference's own noise, which is
+    /// taken out of every row's RMSE ("net RMSE" = sqrt(RMSE^2 - reference variance);
+    /// the row and the reference are independent).
+    #[arg(long)]
+    ref_halves: bool,
     /// Reuse this reference (an earlier run's `<name>-reference.exr` of the same scene
     /// and size) instead of rendering one.
     #[arg(long)]
@@ -112,12 +122,21 @@ fn main() -> anyhow::Result<()> {
         w.render.spp = 1;
         render(&w, b)?;
     }
-    let mut rc = cfg.clone();
+    let (ref_backend, mut rc) = match &a.ref_config {
+        Some(c) => parse_config(c, &cfg).context("--ref-config")?,
+        None => {
+            let mut rc = cfg.clone();
+            rc.render.sampler = SamplerKind::Sobol;
+            rc.light.sampling = LightSampling::Facing;
+            (Backend::RayQuery, rc)
+        }
+    };
     rc.render.spp = a.ref_spp;
     rc.render.batch_spp = 64;
     rc.render.seed = cfg.render.seed.wrapping_add(1000);
-    rc.render.sampler = SamplerKind::Sobol;
-    rc.light.sampling = LightSampling::Facing;
+    // The reference's own noise (variance per pixel, averaged over the image) when it
+    // is rendered as two independent halves: Var(mean) = mean((R1 - R2)^2) / 4.
+    let mut ref_var = None;
     let (reference, ref_secs, _) = match &a.reference {
         // A reference written by an earlier run of the same scene and size.
         Some(path) => {
@@ -132,7 +151,21 @@ fn main() -> anyhow::Result<()> {
             );
             (data, 0.0, 0.0)
         }
-        None => render(&rc, Backend::RayQuery)?,
+        None if a.ref_halves => {
+            anyhow::ensure!(
+                a.ref_spp >= 2,
+                "--ref-spp {}: at least 2 with --ref-halves",
+                a.ref_spp
+            );
+            rc.render.spp = a.ref_spp / 2;
+            let (r1, s1, g1) = render(&rc, ref_backend)?;
+            rc.render.seed = cfg.render.seed.wrapping_add(2000);
+            let (r2, s2, g2) = render(&rc, ref_backend)?;
+            ref_var = Some(rmse(&r1, &r2).powi(2) / 4.0);
+            let mean = r1.iter().zip(&r2).map(|(x, y)| 0.5 * (x + y)).collect();
+            (mean, s1 + s2, g1 + g2)
+        }
+        None => render(&rc, ref_backend)?,
     };
     let ref_mean = reference.iter().map(|&v| v as f64).sum::<f64>() / reference.len() as f64;
     synosis::image_io::write_exr_f32(
@@ -149,32 +182,7 @@ fn main() -> anyhow::Result<()> {
     );
     let mut rows = Vec::new();
     for c in a.configs.split(',') {
-        let parts: Vec<&str> = c.trim().split(':').collect();
-        anyhow::ensure!(
-            parts.len() == 3 || parts.len() == 4,
-            "--configs: {c:?} is not backend:sampler:light[:direct]"
-        );
-        let backend = match parts[0] {
-            "ray-query" => Backend::RayQuery,
-            "software" => Backend::Software,
-            o => anyhow::bail!("backend {o:?}"),
-        };
-        let mut cc = cfg.clone();
-        cc.render.sampler = match parts[1] {
-            "sobol" => SamplerKind::Sobol,
-            "independent" => SamplerKind::Independent,
-            o => anyhow::bail!("sampler {o:?}"),
-        };
-        cc.light.sampling = match parts[2] {
-            "facing" => LightSampling::Facing,
-            "uniform" => LightSampling::Uniform,
-            o => anyhow::bail!("light sampling {o:?}"),
-        };
-        cc.render.direct_light = match parts.get(3).copied() {
-            None | Some("sampled") => DirectLight::Sampled,
-            Some("analytic") => DirectLight::Analytic,
-            Some(o) => anyhow::bail!("direct light {o:?}"),
-        };
+        let (backend, mut cc) = parse_config(c, &cfg)?;
         for &spp in &spps {
             cc.render.spp = spp;
             cc.render.batch_spp = spp.min(64);
@@ -191,10 +199,13 @@ fn main() -> anyhow::Result<()> {
             });
         }
     }
+    // A row's RMSE without the reference's own noise (independent renders: the mean
+    // squared difference is the sum of both variances and the squared bias).
+    let net = |r: &Row| ref_var.map(|v| (r.rmse * r.rmse - v).max(0.0).sqrt());
     let mut md = String::new();
     writeln!(
         md,
-        "Scene `{}` at {} x {}, {} bounces, compensation {}; reference: {} spp (Sobol, facing, ray query, other seed), mean radiance {ref_mean:.5}.\n",
+        "Scene `{}` at {} x {}, {} bounces, compensation {}; reference: {} spp ({}, other seed{}), mean radiance {ref_mean:.5}.\n",
         a.scene.display(),
         a.width,
         a.height,
@@ -204,17 +215,33 @@ fn main() -> anyhow::Result<()> {
         } else {
             "off"
         },
-        a.ref_spp
+        a.ref_spp,
+        a.ref_config
+            .as_deref()
+            .unwrap_or("Sobol, facing, ray query, the scene's direct light"),
+        match ref_var {
+            Some(v) => format!(
+                "; two halves, its own noise {:.3e} RMSE, taken out of the net RMSE",
+                v.sqrt()
+            ),
+            None => String::new(),
+        }
+    )?;
+    let net_head = if ref_var.is_some() { " net RMSE |" } else { "" };
+    writeln!(
+        md,
+        "| backend:sampler:light | spp | seconds (wall) | GPU ms | RMSE |{net_head} RMSE / mean | load (1 min) |"
     )?;
     writeln!(
         md,
-        "| backend:sampler:light | spp | seconds (wall) | GPU ms | RMSE | RMSE / mean | load (1 min) |"
+        "|---|---|---|---|---|{}---|---|",
+        if ref_var.is_some() { "---|" } else { "" }
     )?;
-    writeln!(md, "|---|---|---|---|---|---|---|")?;
     for r in &rows {
+        let net_col = net(r).map_or(String::new(), |n| format!(" {n:.3e} |"));
         writeln!(
             md,
-            "| {} | {} | {:.2} | {:.0} | {:.3e} | {:.3} | {:.2} |",
+            "| {} | {} | {:.2} | {:.0} | {:.3e} |{net_col} {:.3} | {:.2} |",
             r.label,
             r.spp,
             r.secs,
@@ -228,13 +255,14 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .map(|r| {
             serde_json::json!({"label": r.label, "spp": r.spp, "secs": r.secs,
-                "gpu_ms": r.gpu_ms, "rmse": r.rmse, "load": r.load})
+                "gpu_ms": r.gpu_ms, "rmse": r.rmse, "rmse_net": net(r), "load": r.load})
         })
         .collect();
     std::fs::write(
         a.out.join(format!("{}.json", a.name)),
         serde_json::to_string_pretty(&serde_json::json!({
-            "ref_spp": a.ref_spp, "ref_secs": ref_secs, "ref_mean": ref_mean, "rows": json
+            "ref_spp": a.ref_spp, "ref_secs": ref_secs, "ref_mean": ref_mean,
+            "ref_config": a.ref_config, "ref_var": ref_var, "rows": json
         }))?,
     )?;
     std::fs::write(a.out.join(format!("{}.md", a.name)), &md)?;
@@ -245,6 +273,46 @@ fn main() -> anyhow::Result<()> {
     )?;
     print!("{md}");
     Ok(())
+}
+
+/// One `--configs` entry, backend:sampler:light[:direct], on top of the scene's
+/// settings; direct is "sampled" (the default), "analytic" (the scene's
+/// `analytic_rays`) or "analyticN" (N camera rays per sample).
+fn parse_config(c: &str, cfg: &SceneConfig) -> anyhow::Result<(Backend, SceneConfig)> {
+    let parts: Vec<&str> = c.trim().split(':').collect();
+    anyhow::ensure!(
+        parts.len() == 3 || parts.len() == 4,
+        "--configs: {c:?} is not backend:sampler:light[:direct]"
+    );
+    let backend = match parts[0] {
+        "ray-query" => Backend::RayQuery,
+        "software" => Backend::Software,
+        o => anyhow::bail!("backend {o:?}"),
+    };
+    let mut cc = cfg.clone();
+    cc.render.sampler = match parts[1] {
+        "sobol" => SamplerKind::Sobol,
+        "independent" => SamplerKind::Independent,
+        o => anyhow::bail!("sampler {o:?}"),
+    };
+    cc.light.sampling = match parts[2] {
+        "facing" => LightSampling::Facing,
+        "uniform" => LightSampling::Uniform,
+        o => anyhow::bail!("light sampling {o:?}"),
+    };
+    cc.render.direct_light = match parts.get(3).copied() {
+        None | Some("sampled") => DirectLight::Sampled,
+        Some("analytic") => DirectLight::Analytic,
+        Some(o) => match o.strip_prefix("analytic").map(str::parse::<u32>) {
+            Some(Ok(n)) => {
+                cc.render.analytic_rays = n;
+                DirectLight::Analytic
+            }
+            _ => anyhow::bail!("direct light {o:?}: sampled, analytic or analyticN"),
+        },
+    };
+    cc.validate()?;
+    Ok((backend, cc))
 }
 
 fn rmse(a: &[f32], b: &[f32]) -> f64 {
@@ -356,55 +424,204 @@ pub fn svg_plot(series: &[(String, Vec<(f64, f64)>)], xlabel: &str, ylabel: &str
     s
 }
 
-/// Object, table and light as binary PLY (flat, with the triangles' winding: the light's
-/// normals point outward) and the camera and materials as JSON.
-fn export_mitsuba(dir: &Path, scene: &RenderScene, cfg: &SceneConfig) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir)?;
-    let light = &scene.view.light.tris;
-    for (name, pick) in [
-        ("object", None),
-        ("table", Some(MAT_TABLE)),
-        ("light", Some(MAT_LIGHT)),
-    ] {
-        let (positions, tris): (&[glam::Vec3], Vec<[u32; 3]>) = if pick == Some(MAT_LIGHT) {
-            (&light.positions, light.triangles.clone())
-        } else {
-            let tris = scene
-                .stage
-                .mesh
-                .triangles
-                .iter()
-                .zip(&scene.stage.materials)
-                .filter(|(_, m)| match pick {
-                    Some(p) => **m == p,
-                    None => **m != MAT_TABLE,
-                })
-                .map(|(t, _)| *t)
-                .collect();
-            (&scene.stage.mesh.positions, tris)
-        };
-        let mut f =
-            std::io::BufWriter::new(std::fs::File::create(dir.join(format!("{name}.ply")))?);
-        write!(
-            f,
-            "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
-            tris.len() * 3,
-            tris.len()
-        )?;
-        // Unshared vertices: Mitsuba would otherwise be free to smooth normals.
-        for t in &tris {
-            for &i in t {
-                for c in positions[i as usize].to_array() {
-                    f.write_all(&c.to_le_bytes())?;
-                }
-            }
+/// One group of the object's triangles for Mitsuba: its vertices (unshared, three per
+/// triangle), their map coordinates when the group carries a slope map, and which map.
+#[derive(Default)]
+struct ExportPart {
+    positions: Vec<glam::Vec3>,
+    uv: Vec<[f32; 2]>,
+    /// (texel buffer, handedness): the shading frame's t = cross(n, map x) is +map up
+    /// (1) or -map up (-1).
+    map: Option<(usize, i32)>,
+}
+
+/// Splits the object's triangles by slope map: triangles without one, and per distinct
+/// map and handedness of the triangle's frame one group with per-vertex map coordinates
+/// (u = map x / width, v = map y / height, texel centres at (i + 0.5) / size, row 0 at
+/// v = 0, as Mitsuba's bitmap texture reads them). The object's placed maps are planar
+/// projections (`slope::lookup`), so interpolating the vertices' coordinates over a
+/// triangle is the shader's lookup exactly. Returns the parts and the decoded slopes of
+/// each texel buffer ([dh/dx, dh/dy] per texel, the f16 values the shader reads).
+#[allow(clippy::type_complexity)]
+fn object_parts(
+    scene: &RenderScene,
+) -> anyhow::Result<(Vec<ExportPart>, Vec<(u32, u32, Vec<[f32; 2]>)>)> {
+    use synosis::gpu_interface::{
+        MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_WRAP, MAT_LABELLED, MAT_MAP_SHIFT,
+        MAT_SLOT_MASK,
+    };
+    use synosis::render::slope;
+    let stage = &scene.stage;
+    anyhow::ensure!(
+        stage.surfaces.is_empty(),
+        "--export-mitsuba: the scene has [[material.region]] entries; the export writes one material"
+    );
+    anyhow::ensure!(
+        scene.face_maps.is_empty() || stage.curved.is_empty(),
+        "--export-mitsuba: slope maps on curved patches (revolved, triplanar) are not exported"
+    );
+    let placed = synosis::scene::assemble::place_maps(
+        &scene.face_maps,
+        &stage.face_frames,
+        &stage.regions,
+        &scene.placement,
+    )?;
+    let slots = stage.regions.len() + stage.curved.len() + 1;
+    let (headers, texels) = slope::pack(&placed, slots, u64::MAX)?;
+    let mut buffers = Vec::new();
+    for (b, t) in texels.iter().enumerate() {
+        // The buffer's dimensions from any header that reads it (all read it whole).
+        let dims = headers
+            .iter()
+            .find(|h| (h.dims[3] & MAP_BUFFER_MASK) as usize == b + 1)
+            .map(|h| (h.dims[0], h.dims[1]));
+        let slopes = t
+            .iter()
+            .map(|&w| [slope::f16_to_f32(w as u16), slope::f16_to_f32((w >> 16) as u16)])
+            .collect::<Vec<_>>();
+        let (w, h) = dims.unwrap_or((0, 0));
+        anyhow::ensure!(
+            slopes.len() == (w * h) as usize,
+            "slope buffer {b}: {} texels for a {w} x {h} map",
+            slopes.len()
+        );
+        buffers.push((w, h, slopes));
+    }
+    let mut parts: Vec<ExportPart> = vec![ExportPart::default()];
+    let v3 = |a: &[f32]| glam::Vec3::from_slice(&a[..3]);
+    let words = synosis::render::gpu_scene::material_words(stage);
+    for (t, &word) in stage.mesh.triangles.iter().zip(&words) {
+        if word & 0xff == MAT_TABLE || word & 0xff == MAT_LIGHT {
+            continue;
         }
-        for k in 0..tris.len() as i32 {
-            f.write_all(&[3u8])?;
-            for c in [3 * k, 3 * k + 1, 3 * k + 2] {
+        let p = t.map(|i| stage.mesh.positions[i as usize]);
+        let h = &headers[((word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK) as usize];
+        let buffer = (h.dims[3] & MAP_BUFFER_MASK) as usize;
+        let mapped = buffer != 0 && (h.dims[3] & MAP_LABELLED_ONLY == 0 || word & MAT_LABELLED != 0);
+        if !mapped {
+            parts[0].positions.extend(p);
+            continue;
+        }
+        anyhow::ensure!(
+            h.dims[3] & MAP_WRAP != 0,
+            "--export-mitsuba: maps clipped to their extent (`[texture] cover = \"faces\"`) are not exported; use cover = \"part\""
+        );
+        let (ax, up) = (v3(&h.axis_x), v3(&h.axis_up));
+        // Mitsuba's face normal (this winding) and its tangent frame's t = cross(n, s).
+        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+        let hand = if n.cross(ax).dot(up) >= 0.0 { 1 } else { -1 };
+        let key = Some((buffer - 1, hand));
+        let i = match parts.iter().position(|q| q.map == key) {
+            Some(i) => i,
+            None => {
+                parts.push(ExportPart {
+                    map: key,
+                    ..Default::default()
+                });
+                parts.len() - 1
+            }
+        };
+        for q in p {
+            parts[i].uv.push(slope::map_uv(h, q));
+            parts[i].positions.push(q);
+        }
+    }
+    Ok((parts, buffers))
+}
+
+/// Writes flat triangles (three unshared vertices each: Mitsuba would otherwise be free
+/// to smooth normals) as binary PLY, with per-vertex `u`, `v` when given.
+fn write_ply(path: &Path, positions: &[glam::Vec3], uv: &[[f32; 2]]) -> anyhow::Result<()> {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let tris = positions.len() / 3;
+    let uv_props = if uv.is_empty() {
+        ""
+    } else {
+        "property float u\nproperty float v\n"
+    };
+    write!(
+        f,
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n{uv_props}element face {tris}\nproperty list uchar int vertex_indices\nend_header\n",
+        positions.len()
+    )?;
+    for (i, p) in positions.iter().enumerate() {
+        for c in p.to_array() {
+            f.write_all(&c.to_le_bytes())?;
+        }
+        if let Some(t) = uv.get(i) {
+            for c in t {
                 f.write_all(&c.to_le_bytes())?;
             }
         }
+    }
+    for k in 0..tris as i32 {
+        f.write_all(&[3u8])?;
+        for c in [3 * k, 3 * k + 1, 3 * k + 2] {
+            f.write_all(&c.to_le_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// Object, table and light as binary PLY (flat, with the triangles' winding: the light's
+/// normals point outward), the object split by slope map (`object_parts`; each map's
+/// slopes as two one-channel EXRs, `slopes-B-x.exr` = dh/dx and `-y` = dh/dy), and the
+/// camera, materials and parts as JSON.
+fn export_mitsuba(dir: &Path, scene: &RenderScene, cfg: &SceneConfig) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let light = &scene.view.light.tris;
+    let corners = |positions: &[glam::Vec3], tris: &mut dyn Iterator<Item = [u32; 3]>| {
+        tris.flat_map(|t| t.map(|i| positions[i as usize]))
+            .collect::<Vec<_>>()
+    };
+    let stage = &scene.stage;
+    let table = corners(
+        &stage.mesh.positions,
+        &mut stage
+            .mesh
+            .triangles
+            .iter()
+            .zip(&stage.materials)
+            .filter(|(_, m)| **m == MAT_TABLE)
+            .map(|(t, _)| *t),
+    );
+    write_ply(&dir.join("table.ply"), &table, &[])?;
+    let lights = corners(&light.positions, &mut light.triangles.iter().copied());
+    write_ply(&dir.join("light.ply"), &lights, &[])?;
+    let (parts, buffers) = object_parts(scene)?;
+    let mut part_json = Vec::new();
+    for part in &parts {
+        if part.positions.is_empty() {
+            continue;
+        }
+        let name = match part.map {
+            None => "object.ply".to_string(),
+            Some((b, hand)) => format!("object-map{b}{}.ply", if hand > 0 { "p" } else { "n" }),
+        };
+        write_ply(&dir.join(&name), &part.positions, &part.uv)?;
+        part_json.push(serde_json::json!({
+            "ply": name,
+            "map": part.map.map(|(b, _)| b),
+            "handedness": part.map.map(|(_, h)| h),
+        }));
+    }
+    let mut maps_json = Vec::new();
+    for (b, (w, h, slopes)) in buffers.iter().enumerate() {
+        if slopes.is_empty() {
+            maps_json.push(serde_json::Value::Null);
+            continue;
+        }
+        for (c, axis) in ["x", "y"].iter().enumerate() {
+            let data: Vec<f32> = slopes.iter().map(|s| s[c]).collect();
+            synosis::image_io::write_exr_f32(
+                &dir.join(format!("slopes-{b}-{axis}.exr")),
+                *w as usize,
+                *h as usize,
+                "Y",
+                &data,
+            )?;
+        }
+        maps_json.push(serde_json::json!({ "width": w, "height": h }));
     }
     let c = &scene.view.camera;
     let json = serde_json::json!({
@@ -422,6 +639,8 @@ fn export_mitsuba(dir: &Path, scene: &RenderScene, cfg: &SceneConfig) -> anyhow:
         "table_albedo": cfg.table.albedo,
         "radiance": cfg.light.radiance,
         "max_bounces": cfg.render.max_bounces,
+        "object_parts": part_json,
+        "slope_maps": maps_json,
     });
     std::fs::write(dir.join("scene.json"), serde_json::to_string_pretty(&json)?)?;
     Ok(())

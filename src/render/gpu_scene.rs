@@ -106,23 +106,7 @@ impl GpuScene {
                 ),
             }));
         }
-        let mat_words: Vec<u32> = stage
-            .materials
-            .iter()
-            .zip(&stage.mesh.labels)
-            .enumerate()
-            .map(|(t, (&m, l))| {
-                // A material without the finish (`finish = "none"`) gets no slope map.
-                let bare = m >= MAT_REGION_FIRST
-                    && stage
-                        .surfaces
-                        .get((m - MAT_REGION_FIRST) as usize)
-                        .is_none_or(|s| s.finish == Finish::None);
-                let slot = if bare { 0 } else { stage.map_slot(t) };
-                let labelled = (FACE_A..=FACE_C).contains(&l.face) as u32 * MAT_LABELLED;
-                m | (slot & MAT_SLOT_MASK) << MAT_MAP_SHIFT | labelled
-            })
-            .collect();
+        let mat_words = material_words(stage);
         let labels: Vec<u32> = stage.mesh.labels.iter().map(label_word).collect();
         let empty = MapKey {
             maps: Vec::new(),
@@ -299,6 +283,30 @@ fn map_key(maps: &[FaceMap], p: &Placement, filter: TextureFilter) -> MapKey {
         placement: Some((p.cover, p.seed, p.rotation_range_deg.to_bits())),
         filter,
     }
+}
+
+/// The per-triangle material words the shader reads (src/gpu_interface.in): material
+/// in the low byte, the slope-map slot above it (`MAT_MAP_SHIFT`: region + 1, curved
+/// patch after the regions, 0 for the table and for `finish = "none"` entries),
+/// `MAT_LABELLED` for triangles labelled A, B or C.
+pub fn material_words(stage: &Stage) -> Vec<u32> {
+    stage
+        .materials
+        .iter()
+        .zip(&stage.mesh.labels)
+        .enumerate()
+        .map(|(t, (&m, l))| {
+            // A material without the finish (`finish = "none"`) gets no slope map.
+            let bare = m >= MAT_REGION_FIRST
+                && stage
+                    .surfaces
+                    .get((m - MAT_REGION_FIRST) as usize)
+                    .is_none_or(|s| s.finish == Finish::None);
+            let slot = if bare { 0 } else { stage.map_slot(t) };
+            let labelled = (FACE_A..=FACE_C).contains(&l.face) as u32 * MAT_LABELLED;
+            m | (slot & MAT_SLOT_MASK) << MAT_MAP_SHIFT | labelled
+        })
+        .collect()
 }
 
 fn upload_maps(

@@ -339,11 +339,36 @@ pub fn triplanar_normal(
 }
 
 /// Bilinear slopes at map-plane coordinates `q` (mm along map x and up from its centre).
-fn lookup_plane(h: &MapHeader, texels: &[u32], q: [f32; 2]) -> [f32; 2] {
+/// Texel coordinates (x right, y down, texel i's centre at i + 0.5) of the point with
+/// plane coordinates `q` (along the map's x and up axes from its centre).
+fn plane_xy(h: &MapHeader, q: [f32; 2]) -> (f32, f32) {
     let k = h.origin[3];
+    (
+        q[0] * k + 0.5 * h.dims[0] as f32,
+        -q[1] * k + 0.5 * h.dims[1] as f32,
+    )
+}
+
+/// The map coordinates of `p` on a planar slot as texture coordinates: u = x / width,
+/// v = y / height (texel i's centre at (i + 0.5) / size, row 0 at v = 0, unbounded:
+/// the map repeats). A renderer that filters the map bilinearly at (u, v) with
+/// wrap-around reads what `lookup` reads (used by the Mitsuba export of
+/// examples/render_convergence).
+pub fn map_uv(h: &MapHeader, p: Vec3) -> [f32; 2] {
+    let d = p - Vec3::from_slice(&h.origin[..3]);
+    let (x, y) = plane_xy(
+        h,
+        [
+            d.dot(Vec3::from_slice(&h.axis_x[..3])),
+            d.dot(Vec3::from_slice(&h.axis_up[..3])),
+        ],
+    );
+    [x / h.dims[0] as f32, y / h.dims[1] as f32]
+}
+
+fn lookup_plane(h: &MapHeader, texels: &[u32], q: [f32; 2]) -> [f32; 2] {
     let (w, ht) = (h.dims[0] as f32, h.dims[1] as f32);
-    let x = q[0] * k + 0.5 * w;
-    let y = -q[1] * k + 0.5 * ht;
+    let (x, y) = plane_xy(h, q);
     let (x0, y0, x1, y1, tx, ty);
     if h.dims[3] & MAP_WRAP != 0 {
         let fx = (x - 0.5) - w * ((x - 0.5) / w).floor();
@@ -757,6 +782,53 @@ mod tests {
         let one = place_maps(&[place(0.0, [0.0; 2])], &[frame], &regions, &FACES).expect("one");
         let e = pack(&one, 2, 32).unwrap_err().to_string();
         assert!(e.contains("storage buffer"), "{e}");
+    }
+
+    #[test]
+    fn map_uv_is_what_a_wrapped_bilinear_texture_reads() {
+        // A 5 x 3 map of distinct slopes (not square, not symmetric), rotated and
+        // offset, repeated over the part: bilinear filtering with wrap-around at
+        // map_uv (texel i's centre at (i + 0.5) / size, row 0 at v = 0; Mitsuba's bitmap
+        // texture) reads what the shader's lookup reads.
+        let frame = frame_a();
+        let mut map = SlopeMap::flat(5, 3, 700.0);
+        for (i, s) in map.data.iter_mut().enumerate() {
+            *s = [0.1 * i as f32 - 0.4, 0.05 * (i * i % 7) as f32 - 0.1];
+        }
+        let face_map = FaceMap {
+            face: frame.face,
+            slopes: Arc::new(map),
+            rotation_deg: 30.0,
+            offset_mm: [1.3, -0.4],
+        };
+        let part = Placement {
+            cover: Cover::Part,
+            ..FACES
+        };
+        let placed = place_maps(&[face_map], &[frame], &[region_a(&frame)], &part).expect("place");
+        let (h, t) = pack(&placed, 2, 1 << 27).expect("pack");
+        let (h, t) = (h[1], &t[0]);
+        let (w, ht) = (h.dims[0] as i64, h.dims[1] as i64);
+        let texel = |x: i64, y: i64| {
+            let word = t[(h.dims[2] as i64 + y.rem_euclid(ht) * w + x.rem_euclid(w)) as usize];
+            [f16_to_f32(word as u16), f16_to_f32((word >> 16) as u16)]
+        };
+        for k in 0..200 {
+            let p = frame.centre
+                + Vec3::new(k as f32 * 0.0731 - 7.0, (k * 37 % 200) as f32 * 0.0613 - 6.0, 0.0);
+            let uv = map_uv(&h, p);
+            let (x, y) = (uv[0] * w as f32 - 0.5, uv[1] * ht as f32 - 0.5);
+            let (x0, y0) = (x.floor(), y.floor());
+            let (tx, ty) = (x - x0, y - y0);
+            let (x0, y0) = (x0 as i64, y0 as i64);
+            let got = lookup(&h, t, p);
+            for c in 0..2 {
+                let a = texel(x0, y0)[c] * (1.0 - tx) + texel(x0 + 1, y0)[c] * tx;
+                let b = texel(x0, y0 + 1)[c] * (1.0 - tx) + texel(x0 + 1, y0 + 1)[c] * tx;
+                let want = a * (1.0 - ty) + b * ty;
+                assert!((got[c] - want).abs() < 1e-4, "{p} {c}: {} vs {want}", got[c]);
+            }
+        }
     }
 
     #[test]
