@@ -447,8 +447,7 @@ fn object_parts(
     scene: &RenderScene,
 ) -> anyhow::Result<(Vec<ExportPart>, Vec<(u32, u32, Vec<[f32; 2]>)>)> {
     use synosis::gpu_interface::{
-        MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_WRAP, MAT_LABELLED, MAT_MAP_SHIFT,
-        MAT_SLOT_MASK,
+        MAP_BUFFER_MASK, MAP_LABELLED_ONLY, MAP_WRAP, MAT_LABELLED, MAT_MAP_SHIFT, MAT_SLOT_MASK,
     };
     use synosis::render::slope;
     let stage = &scene.stage;
@@ -477,7 +476,12 @@ fn object_parts(
             .map(|h| (h.dims[0], h.dims[1]));
         let slopes = t
             .iter()
-            .map(|&w| [slope::f16_to_f32(w as u16), slope::f16_to_f32((w >> 16) as u16)])
+            .map(|&w| {
+                [
+                    slope::f16_to_f32(w as u16),
+                    slope::f16_to_f32((w >> 16) as u16),
+                ]
+            })
             .collect::<Vec<_>>();
         let (w, h) = dims.unwrap_or((0, 0));
         anyhow::ensure!(
@@ -497,7 +501,8 @@ fn object_parts(
         let p = t.map(|i| stage.mesh.positions[i as usize]);
         let h = &headers[((word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK) as usize];
         let buffer = (h.dims[3] & MAP_BUFFER_MASK) as usize;
-        let mapped = buffer != 0 && (h.dims[3] & MAP_LABELLED_ONLY == 0 || word & MAT_LABELLED != 0);
+        let mapped =
+            buffer != 0 && (h.dims[3] & MAP_LABELLED_ONLY == 0 || word & MAT_LABELLED != 0);
         if !mapped {
             parts[0].positions.extend(p);
             continue;

@@ -815,7 +815,11 @@ mod tests {
         };
         for k in 0..200 {
             let p = frame.centre
-                + Vec3::new(k as f32 * 0.0731 - 7.0, (k * 37 % 200) as f32 * 0.0613 - 6.0, 0.0);
+                + Vec3::new(
+                    k as f32 * 0.0731 - 7.0,
+                    (k * 37 % 200) as f32 * 0.0613 - 6.0,
+                    0.0,
+                );
             let uv = map_uv(&h, p);
             let (x, y) = (uv[0] * w as f32 - 0.5, uv[1] * ht as f32 - 0.5);
             let (x0, y0) = (x.floor(), y.floor());
@@ -826,7 +830,11 @@ mod tests {
                 let a = texel(x0, y0)[c] * (1.0 - tx) + texel(x0 + 1, y0)[c] * tx;
                 let b = texel(x0, y0 + 1)[c] * (1.0 - tx) + texel(x0 + 1, y0 + 1)[c] * tx;
                 let want = a * (1.0 - ty) + b * ty;
-                assert!((got[c] - want).abs() < 1e-4, "{p} {c}: {} vs {want}", got[c]);
+                assert!(
+                    (got[c] - want).abs() < 1e-4,
+                    "{p} {c}: {} vs {want}",
+                    got[c]
+                );
             }
         }
     }
