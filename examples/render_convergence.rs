@@ -103,6 +103,7 @@ fn main() -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out)?;
     let object = load_object(&cfg)?;
     let scene = RenderScene::assemble(&object, &cfg)?;
+    let scene_sampling = cfg.light.sampling;
     if let Some(dir) = &a.export_mitsuba {
         export_mitsuba(dir, &scene, &cfg)?;
     }
@@ -111,9 +112,19 @@ fn main() -> anyhow::Result<()> {
         validation: false,
         ray_query: true,
     })?;
+    // The light sampling is the assembled scene's (each emitter's), not a render setting:
+    // a configuration with another one renders a scene assembled with it (before the
+    // clock starts).
     let render = |cfg: &SceneConfig, backend| -> anyhow::Result<(Vec<f32>, f64, f64)> {
+        let own;
+        let scene = if cfg.light.sampling == scene_sampling {
+            &scene
+        } else {
+            own = RenderScene::assemble(&object, cfg)?;
+            &own
+        };
         let t = Instant::now();
-        let img = path_trace(&ctx, &scene, cfg, backend, &tables, None, |_| {})?;
+        let img = path_trace(&ctx, scene, cfg, backend, &tables, None, |_| {})?;
         Ok((img.data, t.elapsed().as_secs_f64(), img.gpu_ms))
     };
     // Warm-up: lavapipe compiles the shader at the first dispatch.
