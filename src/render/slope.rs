@@ -826,15 +826,11 @@ mod tests {
             let (tx, ty) = (x - x0, y - y0);
             let (x0, y0) = (x0 as i64, y0 as i64);
             let got = lookup(&h, t, p);
-            for c in 0..2 {
+            for (c, got) in got.iter().enumerate() {
                 let a = texel(x0, y0)[c] * (1.0 - tx) + texel(x0 + 1, y0)[c] * tx;
                 let b = texel(x0, y0 + 1)[c] * (1.0 - tx) + texel(x0 + 1, y0 + 1)[c] * tx;
                 let want = a * (1.0 - ty) + b * ty;
-                assert!(
-                    (got[c] - want).abs() < 1e-4,
-                    "{p} {c}: {} vs {want}",
-                    got[c]
-                );
+                assert!((got - want).abs() < 1e-4, "{p} {c}: {got} vs {want}");
             }
         }
     }
