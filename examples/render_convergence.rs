@@ -69,6 +69,9 @@ struct Args {
     /// Also write the scene for tools/mitsuba_scene.py into this directory.
     #[arg(long)]
     export_mitsuba: Option<PathBuf>,
+    /// Also write every row's image (`<name>-<config>-<spp>.exr`, ':' as '_').
+    #[arg(long)]
+    save_images: bool,
 }
 
 struct Row {
@@ -198,6 +201,19 @@ fn main() -> anyhow::Result<()> {
             cc.render.spp = spp;
             cc.render.batch_spp = spp.min(64);
             let (img, secs, gpu_ms) = render(&cc, backend)?;
+            if a.save_images {
+                synosis::image_io::write_exr_f32(
+                    &a.out.join(format!(
+                        "{}-{}-{spp}.exr",
+                        a.name,
+                        c.trim().replace(':', "_")
+                    )),
+                    a.width as usize,
+                    a.height as usize,
+                    "Y",
+                    &img,
+                )?;
+            }
             let rmse = rmse(&img, &reference);
             eprintln!("{c} {spp:5} spp: {secs:8.2} s, RMSE {rmse:.3e}");
             rows.push(Row {

@@ -35,6 +35,8 @@ def main():
     ap.add_argument("--spp", default="1,4,16,64,256,1024")
     ap.add_argument("--ref-spp", type=int, default=4096)
     ap.add_argument("--variant", default="llvm_ad_rgb")
+    ap.add_argument("--save-images", action="store_true",
+                    help="write each row's image as OUT_STEM-SPP.exr (channel Y)")
     ap.add_argument("--ref-halves", action="store_true",
                     help="reference = two halves of --ref-spp with independent seeds; their difference "
                          "estimates its own noise, taken out of each row's RMSE (rmse_net)")
@@ -152,6 +154,8 @@ def main():
     rows = []
     for spp in [int(x) for x in a.spp.split(",")]:
         img, secs = render(spp, 7)
+        if a.save_images:
+            mi.Bitmap(img.astype(np.float32)).write(f"{a.out}-{spp}.exr")
         mse = float(np.mean((img - ref) ** 2))
         rows.append({"spp": spp, "secs": secs, "rmse": float(np.sqrt(mse)),
                      "rmse_net": None if ref_var is None else float(np.sqrt(max(mse - ref_var, 0.0))),
