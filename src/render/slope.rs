@@ -161,6 +161,12 @@ pub fn f16_bits(x: f32) -> u16 {
     sign | ((a + 0x0fff + ((a >> 13) & 1)) >> 13) as u16
 }
 
+/// The two f16 halves of a packed word (low half first), as `unpackHalf2x16` gives them:
+/// a texel's [dh/dx, dh/dy].
+pub fn unpack_half2(word: u32) -> [f32; 2] {
+    [f16_to_f32(word as u16), f16_to_f32((word >> 16) as u16)]
+}
+
 /// IEEE half bits to f32 (what `unpackHalf2x16` gives).
 pub fn f16_to_f32(h: u16) -> f32 {
     let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
@@ -392,10 +398,7 @@ fn lookup_plane(h: &MapHeader, texels: &[u32], q: [f32; 2]) -> [f32; 2] {
         (x1, y1) = ((x0 + 1).min(h.dims[0] - 1), (y0 + 1).min(h.dims[1] - 1));
         (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
     }
-    let at = |x: u32, y: u32| {
-        let w = texels[(h.dims[2] + y * h.dims[0] + x) as usize];
-        [f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16)]
-    };
+    let at = |x: u32, y: u32| unpack_half2(texels[(h.dims[2] + y * h.dims[0] + x) as usize]);
     let mut out = [0.0; 2];
     for (c, o) in out.iter_mut().enumerate() {
         let a = at(x0, y0)[c] + (at(x1, y0)[c] - at(x0, y0)[c]) * tx;
@@ -452,11 +455,8 @@ pub fn moments_pyramid(level0: &[u32], width: u32, height: u32) -> Vec<u32> {
     let mut prev: Vec<M> = level0
         .iter()
         .map(|&w| {
-            let (x, y) = (
-                f16_to_f32(w as u16) as f64,
-                f16_to_f32((w >> 16) as u16) as f64,
-            );
-            [x, y, 0.0, 0.0, 0.0, 1.0]
+            let [x, y] = unpack_half2(w);
+            [x as f64, y as f64, 0.0, 0.0, 0.0, 1.0]
         })
         .collect();
     let (mut pw, mut ph) = (width as usize, height as usize);
@@ -642,8 +642,8 @@ fn level_moments(h: &MapHeader, moments: &[u32], p: Vec3, k: u32) -> Option<([f3
     let at = |x: u32, y: u32| {
         let i = base + (y * w + x) as usize * MOMENT_WORDS;
         let (a, b) = (moments[i], moments[i + 1]);
-        let m = [f16_to_f32(a as u16), f16_to_f32((a >> 16) as u16)];
-        (m, f16_to_f32(b as u16) + f16_to_f32((b >> 16) as u16))
+        let v = unpack_half2(b);
+        (unpack_half2(a), v[0] + v[1])
     };
     // Bilinear weights; the mixture of the four texels' distributions.
     let taps = [
@@ -810,8 +810,7 @@ mod tests {
         let (h, t) = (h[1], &t[0]);
         let (w, ht) = (h.dims[0] as i64, h.dims[1] as i64);
         let texel = |x: i64, y: i64| {
-            let word = t[(h.dims[2] as i64 + y.rem_euclid(ht) * w + x.rem_euclid(w)) as usize];
-            [f16_to_f32(word as u16), f16_to_f32((word >> 16) as u16)]
+            unpack_half2(t[(h.dims[2] as i64 + y.rem_euclid(ht) * w + x.rem_euclid(w)) as usize])
         };
         for k in 0..200 {
             let p = frame.centre
