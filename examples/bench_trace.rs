@@ -5,9 +5,11 @@ use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use synosis::render::raycast::{benchmark_rays, trace_rays, traversal_work};
+use synosis::render::raycast::{benchmark_rays, trace_rays, traversal_work, wide_traversal_work};
 use synosis::scene::procedural::bumpy_sphere;
-use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
+use synosis::trace::software_bvh::{
+    DEFAULT_BVH_QUALITY, build_bvh, build_wide_with, cpu_closest_hit, flatten_wide, obvhs_triangles,
+};
 use synosis::trace::{Backend, TraceScene};
 use synosis::vk::{Context, ContextOptions};
 
@@ -29,7 +31,7 @@ fn main() -> anyhow::Result<()> {
     println!();
     println!("| tracer | build ms | primary Mrays/s | random Mrays/s |");
     println!("|---|---|---|---|");
-    for backend in [Backend::RayQuery, Backend::Software] {
+    for backend in [Backend::RayQuery, Backend::Software, Backend::SoftwareWide] {
         if backend == Backend::RayQuery && !ctx.info.ray_query_enabled {
             continue;
         }
@@ -96,14 +98,22 @@ fn main() -> anyhow::Result<()> {
         "| our CPU reference (watertight), {threads} threads | {build:.1} | {:.2} | {:.2} |",
         ours_rates[0], ours_rates[1]
     );
-    // Work per ray of the software traversal (the CPU reference visits nodes in the
-    // shader's order), to say where the time goes.
+    // Work per ray of the software traversal (CPU mirrors that visit nodes in the
+    // shaders' order), to say where the time goes: the wide layout the shader traverses
+    // and the BVH2 it is collapsed from.
+    let (wide_nodes, wide_tris) = flatten_wide(&build_wide_with(&tris, DEFAULT_BVH_QUALITY), &tris)
+        .map_err(anyhow::Error::msg)?;
     println!();
-    println!("| rays | box tests / ray | triangle tests / ray |");
-    println!("|---|---|---|");
+    println!("| rays | layout | nodes loaded / ray | box tests / ray | triangle tests / ray |");
+    println!("|---|---|---|---|---|");
     for (name, rays) in [("primary", &primary), ("random", &random)] {
+        let (boxes, triangles, loads) = wide_traversal_work(&wide_nodes, &wide_tris, rays, 16);
+        println!("| {name} | wide (8 children) | {loads:.1} | {boxes:.1} | {triangles:.1} |");
         let (boxes, triangles) = traversal_work(&bvh, &tris, rays, 16);
-        println!("| {name} | {boxes:.1} | {triangles:.1} |");
+        println!(
+            "| {name} | BVH2 | {:.1} | {boxes:.1} | {triangles:.1} |",
+            boxes / 2.0
+        );
     }
     Ok(())
 }

@@ -140,7 +140,17 @@ fn main() -> anyhow::Result<()> {
         Ok((img.data, t.elapsed().as_secs_f64(), img.gpu_ms))
     };
     // Warm-up: lavapipe compiles the shader at the first dispatch.
-    for b in [Backend::RayQuery, Backend::Software] {
+    let mut used: Vec<Backend> = Vec::new();
+    for c in a.configs.split(',').chain(a.ref_config.as_deref()) {
+        let b = parse_config(c, &cfg)?.0;
+        if !used.contains(&b) {
+            used.push(b);
+        }
+    }
+    if a.ref_config.is_none() && !used.contains(&Backend::RayQuery) {
+        used.push(Backend::RayQuery);
+    }
+    for b in used {
         let mut w = cfg.clone();
         w.render.spp = 1;
         render(&w, b)?;
@@ -323,7 +333,8 @@ fn parse_config(c: &str, cfg: &SceneConfig) -> anyhow::Result<(Backend, SceneCon
     let backend = match parts[0] {
         "ray-query" => Backend::RayQuery,
         "software" => Backend::Software,
-        o => anyhow::bail!("backend {o:?}"),
+        "software-wide" => Backend::SoftwareWide,
+        o => anyhow::bail!("backend {o:?}: allowed ray-query, software, software-wide"),
     };
     let mut cc = cfg.clone();
     cc.render.sampler = match parts[1] {

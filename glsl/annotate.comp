@@ -1,5 +1,5 @@
 #version 460
-//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
+//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
 // Annotation pass: per pixel the label of the first surface hit by the centre ray
 // (class, defect instance, face) and the share of an n x n stratified grid of rays in
 // the pixel whose first hit is a defect triangle. Occlusion is exact: these are first

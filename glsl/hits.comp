@@ -1,5 +1,5 @@
 #version 460
-//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
+//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
 // Traces a list of rays and writes the closest hit of each (tests and benchmarks).
 #include "common/trace.glsl"
 #include "interface.glsl"

@@ -1,5 +1,5 @@
 #version 460
-//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
+//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
 // object (materials per region: common/material.glsl), Lambertian table, lights (area
 // lights as emissive triangles: ring, bar, panel, dome; spot lights as points,

@@ -1,5 +1,5 @@
 #version 460
-//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE
+//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
 // Primary rays of a pinhole camera: hit distance and geometric normal per pixel.
 #include "common/trace.glsl"
 #include "interface.glsl"

@@ -4,10 +4,17 @@
 //                      first triangle index of the level)
 //   TRACE_SOFTWARE   - stack traversal of two flattened obvhs BVH2s, the object's
 //                      (bindings 0, 1) and the second level's (bindings 2, 3)
+//   TRACE_SOFTWARE_WIDE - the same with compressed wide BVHs (obvhs CWBVH, eight
+//                      children a node, src/trace/software_bvh.rs)
 // Both return the closest hit over both levels, triangles numbered in one index space.
 // Passes put their own bindings from TRACE_BINDING_COUNT on.
 #ifndef TRACE_GLSL
 #define TRACE_GLSL
+
+#if defined(TRACE_SOFTWARE_WIDE)
+#define TRACE_SOFTWARE
+#define TRACE_WIDE
+#endif
 
 #define NO_HIT 0xffffffffu
 
@@ -48,18 +55,25 @@ Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u)
 
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
+// Triangles in BVH leaf order; v0.w holds the original triangle index.
+struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
+#if defined(TRACE_WIDE)
+// WideNode (a compressed wide BVH node) and TRACE_WIDE_STACK come from the interface;
+// its binding numbers count from TRACE_BINDING_COUNT, defined above.
+#include "interface.glsl"
+#define TRACE_NODE WideNode
+#else
 // Child-pair node: both children's boxes live in the parent, so one 64-byte load
 // tests two boxes. w of *_min: child node index (inner) or first triangle (leaf);
 // w of *_max: triangle count, 0 for an inner child.
 struct BvhNode { vec4 l_min; vec4 l_max; vec4 r_min; vec4 r_max; };
-// Triangles in BVH leaf order; v0.w holds the original triangle index.
-struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
-layout(std430, set = 0, binding = 0) readonly buffer TraceNodes { BvhNode trace_nodes[]; };
-layout(std430, set = 0, binding = 1) readonly buffer TraceTris { BvhTri trace_tris[]; };
-layout(std430, set = 0, binding = 2) readonly buffer TraceNodes2 { BvhNode trace_nodes2[]; };
-layout(std430, set = 0, binding = 3) readonly buffer TraceTris2 { BvhTri trace_tris2[]; };
-
+#define TRACE_NODE BvhNode
 #define TRACE_STACK 64
+#endif
+layout(std430, set = 0, binding = 0) readonly buffer TraceNodes { TRACE_NODE trace_nodes[]; };
+layout(std430, set = 0, binding = 1) readonly buffer TraceTris { BvhTri trace_tris[]; };
+layout(std430, set = 0, binding = 2) readonly buffer TraceNodes2 { TRACE_NODE trace_nodes2[]; };
+layout(std430, set = 0, binding = 3) readonly buffer TraceTris2 { BvhTri trace_tris2[]; };
 
 // Slab test; the far distance is widened by 3 ulps-worth (Ize 2013) so rounding never
 // drops a box that the ray grazes.
@@ -72,6 +86,33 @@ bool trace_box(vec3 bmin, vec3 bmax, vec3 o, vec3 inv_d, float tmin, float tmax,
     float tfar = min(min(hi.x, hi.y), min(hi.z, tmax)) * 1.0000004;
     return tnear <= tfar;
 }
+
+#if defined(TRACE_WIDE)
+// The hit mask of four child slots of a wide node: their meta bytes,
+// grid minima and maxima (one byte per slot and axis), decoded as min + q * cell in f32
+// (conservative by construction, src/trace/software_bvh.rs) and tested with the widened
+// slab test, so no ray is lost to quantization or rounding. Inner children (meta
+// 0b001_11sss) set bit 24 + (s ^ octant), which orders their visit; a leaf sets its
+// triangles' bits (unary count at its offset).
+uint trace_wide_half(uint metas, uvec3 qlos, uvec3 qhis, vec3 nmin, vec3 cell,
+                vec3 o, vec3 inv_d, float tmin, float tmax, uint oct_inv) {
+    uint hitmask = 0u;
+    for (uint k = 0u; k < 4u; ++k) {
+        uint sh = k * 8u;
+        uint meta = (metas >> sh) & 0xffu;
+        if (meta == 0u) continue;
+        vec3 bmin = nmin + vec3((qlos >> sh) & 0xffu) * cell;
+        vec3 bmax = nmin + vec3((qhis >> sh) & 0xffu) * cell;
+        float tn;
+        if (trace_box(bmin, bmax, o, inv_d, tmin, tmax, tn)) {
+            bool inner = (meta & 0x18u) == 0x18u;
+            uint at = inner ? ((meta ^ oct_inv) & 0x1fu) : (meta & 0x1fu);
+            hitmask |= ((meta >> 5u) & 7u) << at;
+        }
+    }
+    return hitmask;
+}
+#endif
 
 // Watertight ray/triangle test (Woop, Benthin, Wald 2013): the ray is sheared to +z
 // and the edge functions are evaluated in 2D, so a ray through a shared edge or vertex

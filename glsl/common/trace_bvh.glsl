@@ -33,6 +33,53 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
     }
 }
 
+#if defined(TRACE_WIDE)
+// Closest hit in a compressed wide BVH (Ylitie, Karras, Laine 2017): the stack holds
+// node groups (first child node, a mask of the children still to visit in the top byte
+// and the node's inner-child mask in the low byte); hit leaves' triangles are a mask of
+// up to 24 bits from a first triangle. Children are visited in the order the builder
+// arranged for the ray's octant (trace_wide_half, glsl/common/trace.glsl).
+void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
+    uint oct_inv = (inv_d.x < 0.0 ? 0u : 4u) | (inv_d.y < 0.0 ? 0u : 2u) | (inv_d.z < 0.0 ? 0u : 1u);
+    uvec2 stack[TRACE_WIDE_STACK];
+    int sp = 0;
+    uvec2 group = uvec2(0u, 0x80000000u);   // the root, as the only child of a virtual node
+    uvec2 tris = uvec2(0u);
+    while (true) {
+        while (tris.y != 0u) {
+            int b = findMSB(tris.y);
+            tris.y &= ~(1u << uint(b));
+            TRACE_LEAF(tris.x + uint(b), 1u, tr, tmin, h);
+        }
+        if ((group.y & 0xff000000u) != 0u) {
+            uint hits = group.y;
+            uint bit = uint(findMSB(hits));
+            group.y &= ~(1u << bit);
+            if ((group.y & 0xff000000u) != 0u && sp < TRACE_WIDE_STACK) { stack[sp] = group; ++sp; }
+            uint slot = (bit - 24u) ^ oct_inv;
+            uint node = group.x + uint(bitCount(hits & ~(0xffffffffu << slot)));
+            WideNode n = TRACE_NODES[node];
+            vec3 nmin = uintBitsToFloat(n.head.xyz);
+            uint ew = n.head.w;
+            vec3 cell = uintBitsToFloat(uvec3(ew & 0xffu, (ew >> 8u) & 0xffu, (ew >> 16u) & 0xffu) << 23u);
+            uint hitmask = trace_wide_half(n.meta.z, uvec3(n.qx.x, n.qy.x, n.qz.x), uvec3(n.qx.z, n.qy.z, n.qz.z) ,
+                                      nmin, cell, o, inv_d, tmin, h.t, oct_inv)
+                          | trace_wide_half(n.meta.w, uvec3(n.qx.y, n.qy.y, n.qz.y), uvec3(n.qx.w, n.qy.w, n.qz.w) ,
+                                      nmin, cell, o, inv_d, tmin, h.t, oct_inv);
+            group = uvec2(n.meta.x, (hitmask & 0xff000000u) | (ew >> 24u));
+            tris = uvec2(n.meta.y, hitmask & 0x00ffffffu);
+        } else {
+            group = uvec2(0u);
+        }
+        if (tris.y == 0u && (group.y & 0xff000000u) == 0u) {
+            if (sp == 0) break;
+            --sp;
+            group = stack[sp];
+        }
+    }
+}
+#else
+// Closest hit in a child-pair BVH2.
 void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
     // Each pushed node keeps its entry distance, so a node farther than a hit found
     // meanwhile is dropped on pop without loading it.
@@ -64,9 +111,13 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
             bool found = false;
             while (sp > 0) {
                 --sp;
-                if (stack_t[sp] <= h.t) { node = stack[sp]; found = true; break; }
+                // Widened as the slab test's far distance: a node whose entry rounds
+                // past an equally distant hit (a ray through a shared vertex) is still
+                // visited, so ties go to the lower index whatever the order.
+                if (stack_t[sp] <= h.t * 1.0000004) { node = stack[sp]; found = true; break; }
             }
             if (!found) break;
         }
     }
 }
+#endif

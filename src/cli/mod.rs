@@ -64,7 +64,7 @@ pub fn error_text(e: &anyhow::Error) -> String {
     text
 }
 
-/// `SYNOSIS_ACCEL` (`auto`, `software`, `ray-query`), if set; another value is an error.
+/// `SYNOSIS_ACCEL` (`auto`, `software`, `software-wide`, `ray-query`), if set; another value is an error.
 pub fn accel_from_env() -> anyhow::Result<Option<synosis::trace::AccelChoice>> {
     use synosis::trace::AccelChoice;
     match std::env::var("SYNOSIS_ACCEL") {
@@ -73,9 +73,10 @@ pub fn accel_from_env() -> anyhow::Result<Option<synosis::trace::AccelChoice>> {
             "" => Ok(None),
             "auto" => Ok(Some(AccelChoice::Auto)),
             "software" => Ok(Some(AccelChoice::Software)),
+            "software-wide" => Ok(Some(AccelChoice::SoftwareWide)),
             "ray-query" => Ok(Some(AccelChoice::RayQuery)),
             other => anyhow::bail!(
-                "SYNOSIS_ACCEL={other:?}: allowed \"auto\", \"software\" or \"ray-query\""
+                "SYNOSIS_ACCEL={other:?}: allowed \"auto\", \"software\", \"software-wide\" or \"ray-query\""
             ),
         },
     }

@@ -71,9 +71,10 @@ pub fn benchmark_rays(mesh: &crate::scene::Mesh, side: u32) -> (Vec<RayIn>, Vec<
     (primary, random)
 }
 
-/// Box and triangle tests per ray of the software traversal over every `stride`-th ray
-/// of `rays` (counted by the CPU reference, which visits nodes in the shader's order):
-/// the tree's quality, independent of the machine (`examples/bench_trace`, `bench_bvh`).
+/// Box and triangle tests per ray of the BVH2 traversal over every `stride`-th ray of
+/// `rays` (counted by the CPU reference, which visits a BVH2's nodes in the order of the
+/// child-pair shader the software backend had before the wide layout): the tree's
+/// quality, independent of the machine (`examples/bench_trace`, `bench_bvh`).
 pub fn traversal_work(
     bvh: &obvhs::bvh2::Bvh2,
     tris: &[obvhs::triangle::Triangle],
@@ -88,6 +89,29 @@ pub fn traversal_work(
     }
     let n = rays.len().div_ceil(stride).max(1) as f64;
     (st.box_tests as f64 / n, st.triangle_tests as f64 / n)
+}
+
+/// [`traversal_work`] of the shader's wide layout (`software_bvh::flatten_wide`'s nodes
+/// and triangles), counted by its CPU mirror: (box tests, triangle tests, nodes loaded)
+/// per ray.
+pub fn wide_traversal_work(
+    nodes: &[crate::gpu_interface::WideNode],
+    tris: &[crate::trace::software_bvh::GpuTri],
+    rays: &[RayIn],
+    stride: usize,
+) -> (f64, f64, f64) {
+    use crate::trace::software_bvh::{TraversalStats, cpu_closest_hit_wide};
+    let mut st = TraversalStats::default();
+    for r in rays.iter().step_by(stride) {
+        let (o, d) = (r.origin.into(), r.dir.into());
+        cpu_closest_hit_wide(nodes, tris, o, d, r.tmin, r.tmax, &mut st);
+    }
+    let n = rays.len().div_ceil(stride).max(1) as f64;
+    (
+        st.box_tests as f64 / n,
+        st.triangle_tests as f64 / n,
+        st.node_visits as f64 / n,
+    )
 }
 
 /// Traces `rays` against `scene` on the GPU; returns the hits and the trace pass's time.

@@ -841,7 +841,7 @@ pub struct RenderConfig {
     pub seed: u32,
     /// Samples per pixel per dispatch, [1, 1024].
     pub batch_spp: u32,
-    /// Trace backend: "auto", "ray-query", "software".
+    /// Trace backend: "auto", "ray-query", "software" (BVH2), "software-wide" (CWBVH).
     pub accel: AccelChoice,
     /// Random numbers: "sobol" (Owen-scrambled, low discrepancy) or "independent".
     pub sampler: SamplerKind,

@@ -1,6 +1,7 @@
-//! The two intersection backends behind one GLSL interface (`glsl/common/trace.glsl`):
-//! `ray-query` (KHR acceleration structures) and `software` (obvhs BVH2 traversed in the
-//! shader). A pipeline is built from the shader variant of the chosen backend; the
+//! The intersection backends behind one GLSL interface (`glsl/common/trace.glsl`):
+//! `ray-query` (KHR acceleration structures), `software` (an obvhs BVH2 traversed in the
+//! shader, child pairs) and `software-wide` (an obvhs compressed wide BVH, eight children
+//! a node, traversed in the shader). A pipeline is built from the shader variant of the chosen backend; the
 //! backend's bindings come first (0 .. `binding_kinds().len()`), the pass's after them.
 
 pub mod software_bvh;
@@ -41,6 +42,7 @@ pub enum AccelChoice {
     Auto,
     RayQuery,
     Software,
+    SoftwareWide,
 }
 
 /// A concrete backend.
@@ -48,7 +50,10 @@ pub enum AccelChoice {
 #[serde(rename_all = "kebab-case")]
 pub enum Backend {
     RayQuery,
+    /// The software BVH in child-pair nodes (obvhs BVH2).
     Software,
+    /// The software BVH in compressed wide nodes (obvhs CWBVH, Ylitie et al. 2017).
+    SoftwareWide,
 }
 
 impl Backend {
@@ -57,13 +62,20 @@ impl Backend {
         match self {
             Backend::RayQuery => "rq",
             Backend::Software => "sw",
+            Backend::SoftwareWide => "sw8",
         }
     }
     pub fn name(self) -> &'static str {
         match self {
             Backend::RayQuery => "ray-query",
             Backend::Software => "software",
+            Backend::SoftwareWide => "software-wide",
         }
+    }
+
+    /// Whether the backend traverses our own BVH in the shader (both software layouts).
+    pub fn is_software(self) -> bool {
+        matches!(self, Backend::Software | Backend::SoftwareWide)
     }
 }
 
@@ -88,6 +100,7 @@ pub fn resolve(choice: AccelChoice, info: &crate::vk::DeviceInfo) -> Result<Back
     match choice {
         AccelChoice::Auto => Ok(auto_backend(info).0),
         AccelChoice::Software => Ok(Backend::Software),
+        AccelChoice::SoftwareWide => Ok(Backend::SoftwareWide),
         AccelChoice::RayQuery if info.ray_query_enabled => Ok(Backend::RayQuery),
         AccelChoice::RayQuery => Err(VkError::RayQueryUnavailable),
     }
@@ -219,14 +232,33 @@ impl TraceGeometry {
                 })?;
                 Data::RayQuery(Some(blas))
             }
-            Backend::Software => {
+            Backend::Software | Backend::SoftwareWide => {
                 let tris = software_bvh::obvhs_triangles(positions, triangles);
-                let (nodes, mut gtris) = if tris.is_empty() {
-                    software_bvh::empty()
-                } else {
-                    timed(profiler, "BVH build (obvhs)", || {
-                        software_bvh::flatten(&software_bvh::build_bvh_with(&tris, quality), &tris)
+                // Both layouts as bytes: the buffer is the shader's node array.
+                let (nodes, mut gtris): (Vec<u8>, _) = match (backend, tris.is_empty()) {
+                    (Backend::SoftwareWide, true) => {
+                        let (n, t) = software_bvh::empty_wide();
+                        (bytemuck::cast_slice(&n).to_vec(), t)
+                    }
+                    (_, true) => {
+                        let (n, t) = software_bvh::empty();
+                        (bytemuck::cast_slice(&n).to_vec(), t)
+                    }
+                    (Backend::SoftwareWide, false) => timed(profiler, "BVH build (obvhs)", || {
+                        software_bvh::flatten_wide(
+                            &software_bvh::build_wide_with(&tris, quality),
+                            &tris,
+                        )
+                        .map(|(n, t)| (bytemuck::cast_slice(&n).to_vec(), t))
                     })
+                    .map_err(VkError::Bvh)?,
+                    (_, false) => timed(profiler, "BVH build (obvhs)", || {
+                        let (n, t) = software_bvh::flatten(
+                            &software_bvh::build_bvh_with(&tris, quality),
+                            &tris,
+                        );
+                        (bytemuck::cast_slice(&n).to_vec(), t)
+                    }),
                 };
                 if first_prim != 0 {
                     for t in &mut gtris {
@@ -363,7 +395,7 @@ impl TraceScene {
     pub fn binding_kinds(backend: Backend) -> Vec<BindingKind> {
         match backend {
             Backend::RayQuery => vec![BindingKind::AccelerationStructure],
-            Backend::Software => vec![BindingKind::StorageBuffer; 4],
+            Backend::Software | Backend::SoftwareWide => vec![BindingKind::StorageBuffer; 4],
         }
     }
 

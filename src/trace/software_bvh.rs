@@ -1,8 +1,14 @@
-//! The software backend's data: an obvhs BVH2 built on the CPU, flattened into the
-//! child-pair node layout that glsl/common/trace.glsl traverses.
+//! The software backend's data: an obvhs compressed wide BVH (CWBVH, eight children a
+//! node) built on the CPU and re-quantized so the shader's child boxes are conservative
+//! (`flatten_wide`), which glsl/common/trace_bvh.glsl traverses; and the obvhs BVH2
+//! the CPU reference traversal (`cpu_closest_hit`) and the child-pair layout
+//! (`flatten`, kept for comparisons in examples/bench_bvh) use.
 
 use obvhs::bvh2::Bvh2;
+use obvhs::cwbvh::CwBvh;
 use obvhs::triangle::Triangle;
+
+use crate::gpu_interface::{TRACE_WIDE_STACK, WideNode};
 
 /// 64 bytes: both children's boxes. `*_min[3]` holds the child's node index (inner) or
 /// first triangle (leaf) as bits; `*_max[3]` the triangle count as bits, 0 = inner.
@@ -183,6 +189,338 @@ pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
     (out, gpu_tris)
 }
 
+/// Builds obvhs's compressed wide BVH (PLOC, reinsertion, the BVH2 collapsed into nodes of
+/// eight children and leaves of up to `max_prims_per_leaf` (at most 3) triangles) with the
+/// `quality` preset.
+pub fn build_wide_with(tris: &[Triangle], quality: BvhQuality) -> CwBvh {
+    let mut core = std::time::Duration::ZERO;
+    obvhs::cwbvh::builder::build_cwbvh_from_tris(tris, quality.params(), &mut core)
+}
+
+/// One wide node with no children: no ray hits anything (an empty level; bindings may not
+/// be empty), and one degenerate triangle.
+pub fn empty_wide() -> (Vec<WideNode>, Vec<GpuTri>) {
+    (vec![WideNode::default()], vec![GpuTri::default()])
+}
+
+/// A byte of a node's per-slot arrays (`slot` 0..8 of the two words from `w`).
+fn slot_byte(words: [u32; 2], slot: usize) -> u32 {
+    (words[slot / 4] >> ((slot % 4) * 8)) & 0xff
+}
+
+/// Grid cell size of exponent byte `e` (2^(e - 127)), as the shader decodes it.
+fn cell(e: u32) -> f32 {
+    f32::from_bits(e << 23)
+}
+
+/// A child-box plane as the shader computes it: `min + q * cell` in f32 (q * cell is
+/// exact, a power of two times an integer below 256, so a fused multiply-add gives the
+/// same bits).
+fn plane(min: f32, q: u32, e: u32) -> f32 {
+    min + q as f32 * cell(e)
+}
+
+/// The quantized grid of one axis of a node: the smallest exponent whose 255 cells reach
+/// `max` from `min`, and for each child box [lo, hi] the largest q with plane <= lo and
+/// the smallest with plane >= hi. Rounding is monotonic, so the planes enclose the box.
+fn quantize_axis(min: f32, max: f32, children: &[(f32, f32)]) -> (u32, Vec<(u32, u32)>) {
+    let extent = (max - min).max(f32::MIN_POSITIVE);
+    let mut e = ((extent / 255.0).log2().ceil() as i32 + 127).clamp(1, 254) as u32;
+    while e > 1 && plane(min, 255, e - 1) >= max {
+        e -= 1;
+    }
+    while e < 254 && plane(min, 255, e) < max {
+        e += 1;
+    }
+    let qs = children
+        .iter()
+        .map(|&(lo, hi)| {
+            let guess = |v: f32| ((v - min) / cell(e)).clamp(0.0, 255.0) as u32;
+            let mut ql = guess(lo);
+            while ql > 0 && plane(min, ql, e) > lo {
+                ql -= 1;
+            }
+            while ql < 255 && plane(min, ql + 1, e) <= lo {
+                ql += 1;
+            }
+            let mut qh = guess(hi).max(ql);
+            while qh < 255 && plane(min, qh, e) < hi {
+                qh += 1;
+            }
+            while qh > ql && plane(min, qh - 1, e) >= hi {
+                qh -= 1;
+            }
+            (ql, qh)
+        })
+        .collect();
+    (e, qs)
+}
+
+/// Where a wide node's child in `slot` points: an inner node's index, or a leaf's
+/// triangles (first, count) in `primitive_indices` order.
+enum WideChild {
+    Inner(usize),
+    Leaf(u32, u32),
+}
+
+fn wide_child(n: &WideNode, slot: usize) -> Option<WideChild> {
+    let meta = slot_byte([n.meta[2], n.meta[3]], slot);
+    if meta == 0 {
+        return None;
+    }
+    let imask = n.head[3] >> 24;
+    Some(if imask & (1 << slot) != 0 {
+        let rank = (imask & ((1 << slot) - 1)).count_ones();
+        WideChild::Inner((n.meta[0] + rank) as usize)
+    } else {
+        WideChild::Leaf(n.meta[1] + (meta & 0x1f), (meta >> 5).count_ones())
+    })
+}
+
+/// Flattens obvhs's `cw` into the shader's nodes (root at 0) and leaf-ordered triangles,
+/// re-quantizing every node's child boxes from the exact bounds of their triangles so
+/// the boxes the shader decodes contain them (obvhs quantizes with rounded float
+/// arithmetic, which can cut a box by an ulp; a ray through that ulp would be lost).
+/// Fails if the tree is deeper than the shader's stack (TRACE_WIDE_STACK).
+pub fn flatten_wide(cw: &CwBvh, tris: &[Triangle]) -> Result<(Vec<WideNode>, Vec<GpuTri>), String> {
+    let gpu_tris: Vec<GpuTri> = cw
+        .primitive_indices
+        .iter()
+        .map(|&p| {
+            let t = &tris[p as usize];
+            GpuTri {
+                v0: [t.v0.x, t.v0.y, t.v0.z, f32::from_bits(p)],
+                v1: [t.v1.x, t.v1.y, t.v1.z, 0.0],
+                v2: [t.v2.x, t.v2.y, t.v2.z, 0.0],
+            }
+        })
+        .collect();
+    if cw.nodes.is_empty() {
+        return Ok((vec![WideNode::default()], gpu_tris));
+    }
+    let mut nodes: Vec<WideNode> = cw.nodes.iter().map(|n| bytemuck::cast(*n)).collect();
+    type Bounds = (glam::Vec3, glam::Vec3);
+    let leaf_bounds = |first: u32, count: u32| -> Bounds {
+        let mut b = (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY);
+        for t in &gpu_tris[first as usize..(first + count) as usize] {
+            for v in [t.v0, t.v1, t.v2] {
+                let v = glam::Vec3::new(v[0], v[1], v[2]);
+                b = (b.0.min(v), b.1.max(v));
+            }
+        }
+        b
+    };
+    // Children come after their parent, so one backward sweep has every child's bounds
+    // before its parent needs them.
+    let mut bounds: Vec<Bounds> = vec![(glam::Vec3::ZERO, glam::Vec3::ZERO); nodes.len()];
+    let mut depth = vec![1usize; nodes.len()];
+    for i in (0..nodes.len()).rev() {
+        let n = nodes[i];
+        let mut kids: Vec<(usize, Bounds)> = Vec::with_capacity(8);
+        for slot in 0..8 {
+            let b = match wide_child(&n, slot) {
+                None => continue,
+                Some(WideChild::Inner(c)) => {
+                    depth[i] = depth[i].max(depth[c] + 1);
+                    bounds[c]
+                }
+                Some(WideChild::Leaf(first, count)) => leaf_bounds(first, count),
+            };
+            kids.push((slot, b));
+        }
+        let all = kids.iter().fold(
+            (glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY),
+            |a, (_, b)| (a.0.min(b.0), a.1.max(b.1)),
+        );
+        if kids.is_empty() {
+            continue;
+        }
+        bounds[i] = all;
+        let node = &mut nodes[i];
+        node.head[0] = all.0.x.to_bits();
+        node.head[1] = all.0.y.to_bits();
+        node.head[2] = all.0.z.to_bits();
+        let mut head_w = node.head[3] & 0xff00_0000;
+        for axis in 0..3 {
+            let child_ranges: Vec<(f32, f32)> =
+                kids.iter().map(|(_, b)| (b.0[axis], b.1[axis])).collect();
+            let (e, qs) = quantize_axis(all.0[axis], all.1[axis], &child_ranges);
+            head_w |= e << (8 * axis);
+            let q = match axis {
+                0 => &mut node.qx,
+                1 => &mut node.qy,
+                _ => &mut node.qz,
+            };
+            for (&(slot, _), &(ql, qh)) in kids.iter().zip(&qs) {
+                let (w, shift) = (slot / 4, (slot % 4) * 8);
+                q[w] = (q[w] & !(0xff << shift)) | (ql << shift);
+                q[2 + w] = (q[2 + w] & !(0xff << shift)) | (qh << shift);
+            }
+        }
+        node.head[3] = head_w;
+    }
+    if depth[0] > TRACE_WIDE_STACK as usize {
+        return Err(format!(
+            "the wide BVH is {} levels deep; the shader's traversal stack holds {TRACE_WIDE_STACK} \
+             (degenerate geometry?)",
+            depth[0]
+        ));
+    }
+    Ok((nodes, gpu_tris))
+}
+
+/// Every triangle of `nodes` as the shader's traversal would reach it, with the boxes it
+/// decodes on the way: (triangle position in leaf order, the decoded boxes of its
+/// ancestors' slots, innermost last). For tests of [`flatten_wide`].
+pub fn wide_paths(nodes: &[WideNode]) -> Vec<(u32, Vec<(glam::Vec3, glam::Vec3)>)> {
+    let mut out = Vec::new();
+    let mut todo = vec![(0usize, Vec::new())];
+    while let Some((i, path)) = todo.pop() {
+        let n = &nodes[i];
+        let min = glam::Vec3::new(
+            f32::from_bits(n.head[0]),
+            f32::from_bits(n.head[1]),
+            f32::from_bits(n.head[2]),
+        );
+        let e = [
+            n.head[3] & 0xff,
+            (n.head[3] >> 8) & 0xff,
+            (n.head[3] >> 16) & 0xff,
+        ];
+        for slot in 0..8 {
+            let Some(child) = wide_child(n, slot) else {
+                continue;
+            };
+            let q = [n.qx, n.qy, n.qz];
+            let lo = glam::Vec3::from_array(std::array::from_fn(|a| {
+                plane(min[a], slot_byte([q[a][0], q[a][1]], slot), e[a])
+            }));
+            let hi = glam::Vec3::from_array(std::array::from_fn(|a| {
+                plane(min[a], slot_byte([q[a][2], q[a][3]], slot), e[a])
+            }));
+            let mut p = path.clone();
+            p.push((lo, hi));
+            match child {
+                WideChild::Inner(c) => todo.push((c, p)),
+                WideChild::Leaf(first, count) => {
+                    out.extend((first..first + count).map(|t| (t, p.clone())));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Closest hit in the shader's wide layout, visiting nodes in the shader's order
+/// (glsl/common/trace_bvh.glsl, mirrored step by step): node groups on a stack, children
+/// in the octant order, each decoded box tested with the widened slab test. Returns
+/// (t, original triangle) and counts the work: box tests (eight slots a node, empty ones
+/// not counted), triangle tests and node visits in `stats`.
+pub fn cpu_closest_hit_wide(
+    nodes: &[WideNode],
+    tris: &[GpuTri],
+    origin: glam::Vec3,
+    dir: glam::Vec3,
+    tmin: f32,
+    tmax: f32,
+    stats: &mut TraversalStats,
+) -> Option<(f32, u32)> {
+    let o = glam::Vec3A::from(origin);
+    let inv_d = glam::Vec3A::from(dir).recip();
+    let sheared = super::watertight::ShearedRay::new(origin, dir);
+    let oct_inv = (if dir.x < 0.0 { 0 } else { 4 })
+        | (if dir.y < 0.0 { 0 } else { 2 })
+        | (if dir.z < 0.0 { 0 } else { 1 });
+    let mut best: Option<(f32, u32)> = None;
+    let mut t_best = tmax;
+    let mut stack: Vec<[u32; 2]> = Vec::with_capacity(TRACE_WIDE_STACK as usize);
+    let mut group = [0u32, 0x8000_0000];
+    let mut leaf = [0u32, 0];
+    loop {
+        while leaf[1] != 0 {
+            let b = 31 - leaf[1].leading_zeros();
+            leaf[1] &= !(1 << b);
+            let t = &tris[(leaf[0] + b) as usize];
+            let p = t.v0[3].to_bits();
+            stats.triangle_tests += 1;
+            let corner = |v: [f32; 4]| glam::Vec3::new(v[0], v[1], v[2]);
+            let hit = sheared.intersect(
+                corner(t.v0),
+                corner(t.v1),
+                corner(t.v2),
+                tmin,
+                t_best.next_up(),
+            );
+            if let Some((th, _)) = hit {
+                let closer = match best {
+                    Some((tb, pb)) => th < tb || (th == tb && p < pb),
+                    None => th < t_best,
+                };
+                if closer {
+                    t_best = th;
+                    best = Some((th, p));
+                }
+            }
+        }
+        if group[1] & 0xff00_0000 != 0 {
+            let hits = group[1];
+            let bit = 31 - hits.leading_zeros();
+            group[1] &= !(1 << bit);
+            if group[1] & 0xff00_0000 != 0 {
+                stack.push(group);
+            }
+            let slot = (bit - 24) ^ oct_inv;
+            let n = &nodes[(group[0] + (hits & !(u32::MAX << slot)).count_ones()) as usize];
+            stats.node_visits += 1;
+            let min = glam::Vec3::new(
+                f32::from_bits(n.head[0]),
+                f32::from_bits(n.head[1]),
+                f32::from_bits(n.head[2]),
+            );
+            let e = [
+                n.head[3] & 0xff,
+                (n.head[3] >> 8) & 0xff,
+                (n.head[3] >> 16) & 0xff,
+            ];
+            let q = [n.qx, n.qy, n.qz];
+            let mut hitmask = 0u32;
+            for s in 0..8 {
+                let meta = slot_byte([n.meta[2], n.meta[3]], s);
+                if meta == 0 {
+                    continue;
+                }
+                stats.box_tests += 1;
+                let lo = glam::Vec3A::from_array(std::array::from_fn(|a| {
+                    plane(min[a], slot_byte([q[a][0], q[a][1]], s), e[a])
+                }));
+                let hi = glam::Vec3A::from_array(std::array::from_fn(|a| {
+                    plane(min[a], slot_byte([q[a][2], q[a][3]], s), e[a])
+                }));
+                if robust_box_t(lo, hi, o, inv_d, tmin, t_best).is_some() {
+                    let inner = meta & 0x18 == 0x18;
+                    let at = if inner {
+                        (meta ^ oct_inv) & 0x1f
+                    } else {
+                        meta & 0x1f
+                    };
+                    hitmask |= ((meta >> 5) & 7) << at;
+                }
+            }
+            group = [n.meta[0], (hitmask & 0xff00_0000) | (n.head[3] >> 24)];
+            leaf = [n.meta[1], hitmask & 0x00ff_ffff];
+        } else {
+            group = [0, 0];
+        }
+        if leaf[1] == 0 && group[1] & 0xff00_0000 == 0 {
+            match stack.pop() {
+                Some(g) => group = g,
+                None => break,
+            }
+        }
+    }
+    best
+}
+
 /// Slab test with the far distance widened as in the shader (Ize 2013), so a ray through
 /// a vertex on a box face is never dropped by rounding. obvhs's own `ray_traverse` uses an
 /// exact slab test and misses such rays (measured: about 3 % of vertex-aimed rays on a
@@ -225,11 +563,13 @@ pub fn cpu_closest_hit(
     )
 }
 
-/// Work done by a traversal: box tests and triangle tests.
+/// Work done by a traversal: box tests, triangle tests, nodes loaded.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct TraversalStats {
     pub box_tests: u64,
     pub triangle_tests: u64,
+    /// Nodes loaded (the wide traversal's; the BVH2 reference leaves it 0).
+    pub node_visits: u64,
 }
 
 /// [`cpu_closest_hit`], counting its work. The order is the shader's: both children's
@@ -266,7 +606,7 @@ pub fn cpu_closest_hit_counted(
                 );
                 if let Some((t, _)) = hit {
                     let closer = match best {
-                        Some((tb, pb)) => t < tb || p < pb,
+                        Some((tb, pb)) => t < tb || (t == tb && p < pb),
                         None => t < *t_best,
                     };
                     if closer {
@@ -304,12 +644,195 @@ pub fn cpu_closest_hit_counted(
                 n.1
             }
             [Some(a), None] | [None, Some(a)] => a.1,
-            // Nodes farther than a hit found since they were pushed are dropped.
-            [None, None] => match std::iter::from_fn(|| stack.pop()).find(|&(t, _)| t <= t_best) {
-                Some((_, n)) => n,
-                None => break,
-            },
+            // Nodes farther than a hit found since they were pushed are dropped; the
+            // comparison is widened as the slab test's far distance is, so a node whose
+            // entry rounds past an equally distant hit (a ray through a shared vertex)
+            // is still visited and the tie goes to the lower index whatever the order.
+            [None, None] => {
+                match std::iter::from_fn(|| stack.pop()).find(|&(t, _)| t <= t_best * 1.000_000_4) {
+                    Some((_, n)) => n,
+                    None => break,
+                }
+            }
         };
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// The six faces of an axis-aligned box split into n x n quads each: flat node boxes
+    /// (zero extent on an axis), planes shared by many leaves.
+    fn box_faces(lo: Vec3, hi: Vec3, n: u32) -> Vec<Triangle> {
+        let mut out = Vec::new();
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for side in [lo[axis], hi[axis]] {
+                let at = |i: u32, j: u32| {
+                    let mut p = Vec3::ZERO;
+                    p[axis] = side;
+                    p[u] = lo[u] + (hi[u] - lo[u]) * i as f32 / n as f32;
+                    p[v] = lo[v] + (hi[v] - lo[v]) * j as f32 / n as f32;
+                    p
+                };
+                for i in 0..n {
+                    for j in 0..n {
+                        let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                        out.push(Triangle {
+                            v0: a.into(),
+                            v1: b.into(),
+                            v2: c.into(),
+                        });
+                        out.push(Triangle {
+                            v0: a.into(),
+                            v1: c.into(),
+                            v2: d.into(),
+                        });
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn meshes() -> Vec<(&'static str, Vec<Triangle>)> {
+        // 3000 small triangles scattered in a slab (a simple LCG: no scene module here).
+        let mut state = 0x2545_f491_u32;
+        let mut rnd = move || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1 << 24) as f32
+        };
+        let soup: Vec<Triangle> = (0..3000)
+            .map(|_| {
+                let c = Vec3::new(rnd() * 40.0 - 20.0, rnd() * 40.0 - 20.0, rnd() * 2.0);
+                let mut corner = || (c + (Vec3::new(rnd(), rnd(), rnd()) - 0.5) * 1.5).into();
+                Triangle {
+                    v0: corner(),
+                    v1: corner(),
+                    v2: corner(),
+                }
+            })
+            .collect();
+        let one = Triangle {
+            v0: Vec3::new(0.1, 0.2, 0.3).into(),
+            v1: Vec3::new(1.0, 0.2, 0.3).into(),
+            v2: Vec3::new(0.1, 1.7, 0.3).into(),
+        };
+        vec![
+            ("triangle soup", soup),
+            // Far from the origin, small against its coordinates: every plane rounds.
+            (
+                "small box far away",
+                box_faces(
+                    Vec3::splat(1234.567),
+                    Vec3::splat(1234.567) + Vec3::new(0.003, 0.0071, 0.0019),
+                    9,
+                ),
+            ),
+            (
+                "box about the origin",
+                box_faces(Vec3::new(-3.1, -0.0, -1e-3), Vec3::new(2.9, 7.3, 1e-3), 12),
+            ),
+            ("one triangle", vec![one]),
+            (
+                "two triangles",
+                box_faces(Vec3::ZERO, Vec3::ONE, 1)[..2].to_vec(),
+            ),
+        ]
+    }
+
+    #[test]
+    fn every_decoded_box_contains_its_triangles() {
+        for (name, tris) in meshes() {
+            let (nodes, gtris) =
+                flatten_wide(&build_wide_with(&tris, DEFAULT_BVH_QUALITY), &tris).expect("shallow");
+            let paths = wide_paths(&nodes);
+            assert_eq!(
+                paths.len(),
+                tris.len(),
+                "{name}: every triangle in one leaf"
+            );
+            for (t, boxes) in paths {
+                let tri = gtris[t as usize];
+                for v in [tri.v0, tri.v1, tri.v2] {
+                    let v = Vec3::new(v[0], v[1], v[2]);
+                    for (lo, hi) in &boxes {
+                        assert!(
+                            v.cmpge(*lo).all() && v.cmple(*hi).all(),
+                            "{name}: corner {v} of triangle {t} outside a decoded box {lo}..{hi}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_quantized_grid_is_tight_and_conservative() {
+        // A child that is the whole node spans the grid; one in the middle is enclosed
+        // by the planes next to it, no wider.
+        let (e, qs) = quantize_axis(1.0, 2.0, &[(1.0, 2.0), (1.25, 1.5)]);
+        assert!(
+            plane(1.0, 255, e) >= 2.0 && plane(1.0, 255, e - 1) < 2.0,
+            "smallest exponent"
+        );
+        assert_eq!(qs[0].0, 0);
+        assert!(plane(1.0, qs[0].1, e) >= 2.0 && plane(1.0, qs[0].1 - 1, e) < 2.0);
+        let (ql, qh) = qs[1];
+        assert!(plane(1.0, ql, e) <= 1.25 && plane(1.0, ql + 1, e) > 1.25);
+        assert!(plane(1.0, qh, e) >= 1.5 && plane(1.0, qh - 1, e) < 1.5);
+        // Flat: both planes decode to the plane itself.
+        let (e, qs) = quantize_axis(5.5, 5.5, &[(5.5, 5.5)]);
+        assert_eq!((plane(5.5, qs[0].0, e), plane(5.5, qs[0].1, e)), (5.5, 5.5));
+    }
+
+    #[test]
+    fn the_wide_traversal_finds_the_references_hits() {
+        for (name, tris) in meshes() {
+            let bvh = build_bvh(&tris);
+            let (nodes, gtris) =
+                flatten_wide(&build_wide_with(&tris, DEFAULT_BVH_QUALITY), &tris).expect("shallow");
+            let (lo, hi) = tris
+                .iter()
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |b, t| {
+                    let (a, c, d): (Vec3, Vec3, Vec3) = (t.v0.into(), t.v1.into(), t.v2.into());
+                    (b.0.min(a).min(c).min(d), b.1.max(a).max(c).max(d))
+                });
+            let centre = (lo + hi) * 0.5;
+            let r = (hi - lo).length().max(1.0);
+            let mut hits = 0;
+            // Rays from a sphere around the mesh at its vertices (where watertightness
+            // and box rounding are tested hardest) and at triangle centres.
+            for (k, t) in tris.iter().enumerate().step_by((tris.len() / 500).max(1)) {
+                let targets: [Vec3; 2] = [
+                    t.v0.into(),
+                    (Vec3::from(t.v0) + Vec3::from(t.v1) + Vec3::from(t.v2)) / 3.0,
+                ];
+                for (j, target) in targets.into_iter().enumerate() {
+                    let a = (k * 2 + j) as f32 * 2.399_963;
+                    let z = ((k * 7 + j * 3) % 97) as f32 / 48.0 - 1.0;
+                    let s = (1.0 - z * z).sqrt();
+                    let origin = centre + r * Vec3::new(s * a.cos(), s * a.sin(), z);
+                    let dir = (target - origin).normalize();
+                    let want = cpu_closest_hit(&bvh, &tris, origin, dir, 0.0, 1e30);
+                    let got = cpu_closest_hit_wide(
+                        &nodes,
+                        &gtris,
+                        origin,
+                        dir,
+                        0.0,
+                        1e30,
+                        &mut TraversalStats::default(),
+                    );
+                    assert_eq!(got.map(|h| h.1), want.map(|h| h.1), "{name}: ray {k}/{j}");
+                    assert_eq!(got.map(|h| h.0), want.map(|h| h.0), "{name}: ray {k}/{j}");
+                    hits += got.is_some() as usize;
+                }
+            }
+            assert!(hits > 0, "{name}: the rays hit");
+        }
+    }
 }

@@ -32,6 +32,9 @@ pub enum VkError {
     RayQueryUnavailable,
     #[error("buffer {0:?} is not host-visible")]
     NotMappable(String),
+    /// The software backend's BVH cannot be traversed (src/trace/software_bvh.rs).
+    #[error("software BVH: {0}")]
+    Bvh(String),
     #[error("Vulkan call failed: {0}")]
     Vk(#[from] ash::vk::Result),
     #[error("GPU memory allocation failed: {0}")]

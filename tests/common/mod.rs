@@ -30,7 +30,9 @@ pub fn gpu() -> Arc<Context> {
     ctx
 }
 
-pub const BACKENDS: [Backend; 2] = [Backend::RayQuery, Backend::Software];
+/// Every trace backend (both software layouts too): tests over it hold each to the same
+/// bounds, so they are tested against each other.
+pub const BACKENDS: [Backend; 3] = [Backend::RayQuery, Backend::Software, Backend::SoftwareWide];
 
 /// Fails the test on any validation error collected so far.
 pub fn assert_clean(ctx: &Context) {
