@@ -58,6 +58,7 @@ Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u)
 // Triangles in BVH leaf order; v0.w holds the original triangle index.
 struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
 #if defined(TRACE_WIDE)
+#extension GL_EXT_control_flow_attributes : require
 // WideNode (a compressed wide BVH node) and TRACE_WIDE_STACK come from the interface;
 // its binding numbers count from TRACE_BINDING_COUNT, defined above.
 #include "interface.glsl"
@@ -97,18 +98,16 @@ bool trace_box(vec3 bmin, vec3 bmax, vec3 o, vec3 inv_d, float tmin, float tmax,
 uint trace_wide_half(uint metas, uvec3 qlos, uvec3 qhis, vec3 nmin, vec3 cell,
                 vec3 o, vec3 inv_d, float tmin, float tmax, uint oct_inv) {
     uint hitmask = 0u;
-    for (uint k = 0u; k < 4u; ++k) {
+    [[unroll]] for (uint k = 0u; k < 4u; ++k) {
         uint sh = k * 8u;
         uint meta = (metas >> sh) & 0xffu;
-        if (meta == 0u) continue;
         vec3 bmin = nmin + vec3((qlos >> sh) & 0xffu) * cell;
         vec3 bmax = nmin + vec3((qhis >> sh) & 0xffu) * cell;
         float tn;
-        if (trace_box(bmin, bmax, o, inv_d, tmin, tmax, tn)) {
-            bool inner = (meta & 0x18u) == 0x18u;
-            uint at = inner ? ((meta ^ oct_inv) & 0x1fu) : (meta & 0x1fu);
-            hitmask |= ((meta >> 5u) & 7u) << at;
-        }
+        bool hit = trace_box(bmin, bmax, o, inv_d, tmin, tmax, tn);
+        bool inner = (meta & 0x18u) == 0x18u;
+        uint at = inner ? ((meta ^ oct_inv) & 0x1fu) : (meta & 0x1fu);
+        hitmask |= hit ? ((meta >> 5u) & 7u) << at : 0u;
     }
     return hitmask;
 }

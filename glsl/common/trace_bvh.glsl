@@ -16,20 +16,20 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
         precise float u = cx * by - cy * bx;
         precise float v = ax * cy - ay * cx;
         precise float w = bx * ay - by * ax;
-        if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) continue;
+        bool inside = !((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0));
         precise float det = u + v + w;
-        if (det == 0.0) continue;
         precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
         precise float t = tt / det;
         // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
-        // triangle index, so the result does not depend on the traversal order.
+        // triangle index, so the result does not depend on the traversal order. Taken
+        // with selects, not a branch: lanes run both sides of a branch on lavapipe.
         uint prim = floatBitsToUint(tri.v0.w);
-        if (t >= tmin && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim))) {
-            h.t = t;
-            h.prim = prim;
-            h.bary = vec2(v / det, w / det);
-            h.inst = TRACE_INST;
-        }
+        bool take = inside && det != 0.0 && t >= tmin
+            && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim));
+        h.t = take ? t : h.t;
+        h.prim = take ? prim : h.prim;
+        h.bary = take ? vec2(v / det, w / det) : h.bary;
+        h.inst = take ? TRACE_INST : h.inst;
     }
 }
 
@@ -41,7 +41,7 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
 // arranged for the ray's octant (trace_wide_half, glsl/common/trace.glsl).
 void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
     uint oct_inv = (inv_d.x < 0.0 ? 0u : 4u) | (inv_d.y < 0.0 ? 0u : 2u) | (inv_d.z < 0.0 ? 0u : 1u);
-    uvec2 stack[TRACE_WIDE_STACK];
+    uvec2 stack[TRACE_WIDE_STACK + 1];   // the last: a spare slot written when full
     int sp = 0;
     uvec2 group = uvec2(0u, 0x80000000u);   // the root, as the only child of a virtual node
     uvec2 tris = uvec2(0u);
@@ -55,7 +55,10 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
             uint hits = group.y;
             uint bit = uint(findMSB(hits));
             group.y &= ~(1u << bit);
-            if ((group.y & 0xff000000u) != 0u && sp < TRACE_WIDE_STACK) { stack[sp] = group; ++sp; }
+            // Pushed without a branch (lanes run both sides of one on lavapipe): the
+            // entry is written always and kept only if the group has more children.
+            stack[min(sp, TRACE_WIDE_STACK)] = group;
+            sp += (group.y & 0xff000000u) != 0u && sp < TRACE_WIDE_STACK ? 1 : 0;
             uint slot = (bit - 24u) ^ oct_inv;
             uint node = group.x + uint(bitCount(hits & ~(0xffffffffu << slot)));
             WideNode n = TRACE_NODES[node];

@@ -81,14 +81,22 @@ impl Backend {
 
 /// The backend `auto` picks, and why. On a GPU with ray query, the hardware traversal
 /// wins. On lavapipe (a CPU device) our software BVH traces about twice as fast as
-/// lavapipe's own ray query (measured, docs/benchmarks.md), so auto picks software there.
+/// lavapipe's own ray query (measured, docs/benchmarks.md), so auto picks software there,
+/// in the wide layout: as fast as the child pairs on coherent rays and 1.1x to 1.25x
+/// faster per path-traced sample (docs/benchmarks/rendering.md, "Compressed wide BVH
+/// nodes"). GPUs without ray query (data-centre GPUs) get the wide layout too, the one
+/// the literature measured fastest on them (Ylitie et al. 2017: about 2x on incoherent
+/// rays); not measured here yet.
 pub fn auto_backend(ctx_info: &crate::vk::DeviceInfo) -> (Backend, &'static str) {
     if !ctx_info.ray_query_supported {
-        (Backend::Software, "the device has no ray query")
+        (
+            Backend::SoftwareWide,
+            "the device has no ray query: the software BVH, compressed wide nodes",
+        )
     } else if ctx_info.is_cpu {
         (
-            Backend::Software,
-            "CPU device (lavapipe): the software BVH is measured faster than its ray query",
+            Backend::SoftwareWide,
+            "CPU device (lavapipe): the software BVH (compressed wide nodes) is measured faster than its ray query",
         )
     } else {
         (Backend::RayQuery, "the device has hardware ray query")
