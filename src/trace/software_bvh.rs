@@ -118,10 +118,10 @@ pub fn empty() -> (Vec<GpuNode>, Vec<GpuTri>) {
     )
 }
 
-/// Flattens `bvh` into GPU nodes (root at 0) and leaf-ordered triangles.
-pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
-    let gpu_tris: Vec<GpuTri> = bvh
-        .primitive_indices
+/// The triangles in a BVH's leaf order (`indices`: its primitive indices), each with its
+/// original index in `v0[3]` as bits.
+fn leaf_order(indices: &[u32], tris: &[Triangle]) -> Vec<GpuTri> {
+    indices
         .iter()
         .map(|&p| {
             let t = &tris[p as usize];
@@ -131,7 +131,12 @@ pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
                 v2: [t.v2.x, t.v2.y, t.v2.z, 0.0],
             }
         })
-        .collect();
+        .collect()
+}
+
+/// Flattens `bvh` into GPU nodes (root at 0) and leaf-ordered triangles.
+pub fn flatten(bvh: &Bvh2, tris: &[Triangle]) -> (Vec<GpuNode>, Vec<GpuTri>) {
+    let gpu_tris = leaf_order(&bvh.primitive_indices, tris);
     let nodes = &bvh.nodes;
     let child = |idx: usize, gpu_index: u32| -> ([f32; 4], [f32; 4]) {
         let n = &nodes[idx];
@@ -256,6 +261,20 @@ fn quantize_axis(min: f32, max: f32, children: &[(f32, f32)]) -> (u32, Vec<(u32,
     (e, qs)
 }
 
+/// The box of `slot` of a wide node as the shader decodes it (glsl/common/trace.glsl,
+/// `trace_wide_half`): per axis `min + q * cell` for the slot's grid minimum and maximum.
+fn slot_box(n: &WideNode, slot: usize) -> (glam::Vec3, glam::Vec3) {
+    let q = [n.qx, n.qy, n.qz];
+    let corner = |lo_hi: usize| {
+        glam::Vec3::from_array(std::array::from_fn(|a| {
+            let e = (n.head[3] >> (8 * a)) & 0xff;
+            let qv = slot_byte([q[a][2 * lo_hi], q[a][2 * lo_hi + 1]], slot);
+            plane(f32::from_bits(n.head[a]), qv, e)
+        }))
+    };
+    (corner(0), corner(1))
+}
+
 /// Where a wide node's child in `slot` points: an inner node's index, or a leaf's
 /// triangles (first, count) in `primitive_indices` order.
 enum WideChild {
@@ -283,18 +302,7 @@ fn wide_child(n: &WideNode, slot: usize) -> Option<WideChild> {
 /// arithmetic, which can cut a box by an ulp; a ray through that ulp would be lost).
 /// Fails if the tree is deeper than the shader's stack (TRACE_WIDE_STACK).
 pub fn flatten_wide(cw: &CwBvh, tris: &[Triangle]) -> Result<(Vec<WideNode>, Vec<GpuTri>), String> {
-    let gpu_tris: Vec<GpuTri> = cw
-        .primitive_indices
-        .iter()
-        .map(|&p| {
-            let t = &tris[p as usize];
-            GpuTri {
-                v0: [t.v0.x, t.v0.y, t.v0.z, f32::from_bits(p)],
-                v1: [t.v1.x, t.v1.y, t.v1.z, 0.0],
-                v2: [t.v2.x, t.v2.y, t.v2.z, 0.0],
-            }
-        })
-        .collect();
+    let gpu_tris = leaf_order(&cw.primitive_indices, tris);
     if cw.nodes.is_empty() {
         return Ok((vec![WideNode::default()], gpu_tris));
     }
@@ -377,29 +385,12 @@ pub fn wide_paths(nodes: &[WideNode]) -> Vec<(u32, Vec<(glam::Vec3, glam::Vec3)>
     let mut todo = vec![(0usize, Vec::new())];
     while let Some((i, path)) = todo.pop() {
         let n = &nodes[i];
-        let min = glam::Vec3::new(
-            f32::from_bits(n.head[0]),
-            f32::from_bits(n.head[1]),
-            f32::from_bits(n.head[2]),
-        );
-        let e = [
-            n.head[3] & 0xff,
-            (n.head[3] >> 8) & 0xff,
-            (n.head[3] >> 16) & 0xff,
-        ];
         for slot in 0..8 {
             let Some(child) = wide_child(n, slot) else {
                 continue;
             };
-            let q = [n.qx, n.qy, n.qz];
-            let lo = glam::Vec3::from_array(std::array::from_fn(|a| {
-                plane(min[a], slot_byte([q[a][0], q[a][1]], slot), e[a])
-            }));
-            let hi = glam::Vec3::from_array(std::array::from_fn(|a| {
-                plane(min[a], slot_byte([q[a][2], q[a][3]], slot), e[a])
-            }));
             let mut p = path.clone();
-            p.push((lo, hi));
+            p.push(slot_box(n, slot));
             match child {
                 WideChild::Inner(c) => todo.push((c, p)),
                 WideChild::Leaf(first, count) => {
@@ -472,17 +463,6 @@ pub fn cpu_closest_hit_wide(
             let slot = (bit - 24) ^ oct_inv;
             let n = &nodes[(group[0] + (hits & !(u32::MAX << slot)).count_ones()) as usize];
             stats.node_visits += 1;
-            let min = glam::Vec3::new(
-                f32::from_bits(n.head[0]),
-                f32::from_bits(n.head[1]),
-                f32::from_bits(n.head[2]),
-            );
-            let e = [
-                n.head[3] & 0xff,
-                (n.head[3] >> 8) & 0xff,
-                (n.head[3] >> 16) & 0xff,
-            ];
-            let q = [n.qx, n.qy, n.qz];
             let mut hitmask = 0u32;
             for s in 0..8 {
                 let meta = slot_byte([n.meta[2], n.meta[3]], s);
@@ -490,13 +470,8 @@ pub fn cpu_closest_hit_wide(
                     continue;
                 }
                 stats.box_tests += 1;
-                let lo = glam::Vec3A::from_array(std::array::from_fn(|a| {
-                    plane(min[a], slot_byte([q[a][0], q[a][1]], s), e[a])
-                }));
-                let hi = glam::Vec3A::from_array(std::array::from_fn(|a| {
-                    plane(min[a], slot_byte([q[a][2], q[a][3]], s), e[a])
-                }));
-                if robust_box_t(lo, hi, o, inv_d, tmin, t_best).is_some() {
+                let (lo, hi) = slot_box(n, s);
+                if robust_box_t(lo.into(), hi.into(), o, inv_d, tmin, t_best).is_some() {
                     let inner = meta & 0x18 == 0x18;
                     let at = if inner {
                         (meta ^ oct_inv) & 0x1f
