@@ -100,7 +100,7 @@ fn both_backends_agree_with_cpu_reference_on_100k_rays() {
         // test; ties at equal distance go to the lower index whatever the order);
         // ray query 0 hit/miss and 69 distance mismatches, all on vertex- or edge-aimed
         // rays where lavapipe's intersector slips through a shared vertex to a farther
-        // surface. Bounds: software 5, ray query 300 (0.3 %); rays through the volume
+        // surface. Bounds: software 0, ray query 300 (0.3 %); rays through the volume
         // (not aimed at edges) must agree in both (a traversal bug costs thousands).
         let bound = match backend {
             synosis::trace::Backend::Software | synosis::trace::Backend::SoftwareWide => 0,

@@ -58,7 +58,6 @@ Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u)
 // Triangles in BVH leaf order; v0.w holds the original triangle index.
 struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
 #if defined(TRACE_WIDE)
-#extension GL_EXT_control_flow_attributes : require
 // WideNode (a compressed wide BVH node) and TRACE_WIDE_STACK come from the interface;
 // its binding numbers count from TRACE_BINDING_COUNT, defined above.
 #include "interface.glsl"
@@ -89,16 +88,17 @@ bool trace_box(vec3 bmin, vec3 bmax, vec3 o, vec3 inv_d, float tmin, float tmax,
 }
 
 #if defined(TRACE_WIDE)
-// The hit mask of four child slots of a wide node: their meta bytes,
-// grid minima and maxima (one byte per slot and axis), decoded as min + q * cell in f32
-// (conservative by construction, src/trace/software_bvh.rs) and tested with the widened
-// slab test, so no ray is lost to quantization or rounding. Inner children (meta
-// 0b001_11sss) set bit 24 + (s ^ octant), which orders their visit; a leaf sets its
-// triangles' bits (unary count at its offset).
+// The hit mask of four child slots of a wide node: their meta bytes, grid minima and
+// maxima (one byte per slot and axis), decoded as min + q * cell in f32 (conservative by
+// construction, src/trace/software_bvh.rs) and tested with the widened slab test, so no
+// ray is lost to quantization or rounding. Inner children (meta 0b001_11sss) set bit
+// 24 + (s ^ octant), which orders their visit; a leaf sets its triangles' bits (unary
+// count at its offset); an empty slot (meta 0) sets none. Every slot is tested and its
+// bits or-ed in with a select: lanes run both sides of a branch on lavapipe.
 uint trace_wide_half(uint metas, uvec3 qlos, uvec3 qhis, vec3 nmin, vec3 cell,
                 vec3 o, vec3 inv_d, float tmin, float tmax, uint oct_inv) {
     uint hitmask = 0u;
-    [[unroll]] for (uint k = 0u; k < 4u; ++k) {
+    for (uint k = 0u; k < 4u; ++k) {
         uint sh = k * 8u;
         uint meta = (metas >> sh) & 0xffu;
         vec3 bmin = nmin + vec3((qlos >> sh) & 0xffu) * cell;

@@ -65,10 +65,12 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
             vec3 nmin = uintBitsToFloat(n.head.xyz);
             uint ew = n.head.w;
             vec3 cell = uintBitsToFloat(uvec3(ew & 0xffu, (ew >> 8u) & 0xffu, (ew >> 16u) & 0xffu) << 23u);
-            uint hitmask = trace_wide_half(n.meta.z, uvec3(n.qx.x, n.qy.x, n.qz.x), uvec3(n.qx.z, n.qy.z, n.qz.z) ,
-                                      nmin, cell, o, inv_d, tmin, h.t, oct_inv)
-                          | trace_wide_half(n.meta.w, uvec3(n.qx.y, n.qy.y, n.qz.y), uvec3(n.qx.w, n.qy.w, n.qz.w) ,
-                                      nmin, cell, o, inv_d, tmin, h.t, oct_inv);
+            // Slots 0-3 in the x (minima) and z (maxima) words, 4-7 in y and w.
+            uint hitmask =
+                trace_wide_half(n.meta.z, uvec3(n.qx.x, n.qy.x, n.qz.x), uvec3(n.qx.z, n.qy.z, n.qz.z),
+                                nmin, cell, o, inv_d, tmin, h.t, oct_inv)
+                | trace_wide_half(n.meta.w, uvec3(n.qx.y, n.qy.y, n.qz.y), uvec3(n.qx.w, n.qy.w, n.qz.w),
+                                  nmin, cell, o, inv_d, tmin, h.t, oct_inv);
             group = uvec2(n.meta.x, (hitmask & 0xff000000u) | (ew >> 24u));
             tris = uvec2(n.meta.y, hitmask & 0x00ffffffu);
         } else {

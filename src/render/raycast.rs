@@ -73,8 +73,8 @@ pub fn benchmark_rays(mesh: &crate::scene::Mesh, side: u32) -> (Vec<RayIn>, Vec<
 
 /// Box and triangle tests per ray of the BVH2 traversal over every `stride`-th ray of
 /// `rays` (counted by the CPU reference, which visits a BVH2's nodes in the order of the
-/// child-pair shader the software backend had before the wide layout): the tree's
-/// quality, independent of the machine (`examples/bench_trace`, `bench_bvh`).
+/// `software` backend's child-pair shader): the tree's quality, independent of the
+/// machine (`examples/bench_trace`, `bench_bvh`).
 pub fn traversal_work(
     bvh: &obvhs::bvh2::Bvh2,
     tris: &[obvhs::triangle::Triangle],

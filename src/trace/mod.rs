@@ -1,8 +1,9 @@
 //! The intersection backends behind one GLSL interface (`glsl/common/trace.glsl`):
 //! `ray-query` (KHR acceleration structures), `software` (an obvhs BVH2 traversed in the
 //! shader, child pairs) and `software-wide` (an obvhs compressed wide BVH, eight children
-//! a node, traversed in the shader). A pipeline is built from the shader variant of the chosen backend; the
-//! backend's bindings come first (0 .. `binding_kinds().len()`), the pass's after them.
+//! a node, traversed in the shader). A pipeline is built from the shader variant of the
+//! chosen backend; the backend's bindings come first (0 .. `binding_kinds().len()`), the
+//! pass's after them.
 
 pub mod software_bvh;
 pub mod watertight;
@@ -242,32 +243,14 @@ impl TraceGeometry {
             }
             Backend::Software | Backend::SoftwareWide => {
                 let tris = software_bvh::obvhs_triangles(positions, triangles);
-                // Both layouts as bytes: the buffer is the shader's node array.
-                let (nodes, mut gtris): (Vec<u8>, _) = match (backend, tris.is_empty()) {
-                    (Backend::SoftwareWide, true) => {
-                        let (n, t) = software_bvh::empty_wide();
-                        (bytemuck::cast_slice(&n).to_vec(), t)
-                    }
-                    (_, true) => {
-                        let (n, t) = software_bvh::empty();
-                        (bytemuck::cast_slice(&n).to_vec(), t)
-                    }
-                    (Backend::SoftwareWide, false) => timed(profiler, "BVH build (obvhs)", || {
-                        software_bvh::flatten_wide(
-                            &software_bvh::build_wide_with(&tris, quality),
-                            &tris,
-                        )
-                        .map(|(n, t)| (bytemuck::cast_slice(&n).to_vec(), t))
-                    })
-                    .map_err(VkError::Bvh)?,
-                    (_, false) => timed(profiler, "BVH build (obvhs)", || {
-                        let (n, t) = software_bvh::flatten(
-                            &software_bvh::build_bvh_with(&tris, quality),
-                            &tris,
-                        );
-                        (bytemuck::cast_slice(&n).to_vec(), t)
-                    }),
-                };
+                let wide = backend == Backend::SoftwareWide;
+                let build = || software_bvh::gpu_level(&tris, quality, wide);
+                let (nodes, mut gtris) = if tris.is_empty() {
+                    build()
+                } else {
+                    timed(profiler, "BVH build (obvhs)", build)
+                }
+                .map_err(VkError::Bvh)?;
                 if first_prim != 0 {
                     for t in &mut gtris {
                         t.v0[3] = f32::from_bits(t.v0[3].to_bits() + first_prim);

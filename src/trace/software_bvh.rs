@@ -208,6 +208,25 @@ pub fn empty_wide() -> (Vec<WideNode>, Vec<GpuTri>) {
     (vec![WideNode::default()], vec![GpuTri::default()])
 }
 
+/// One level of the software backend in the shader's layout: the node array as bytes
+/// (the wide layout's if `wide`, else the child pairs') and the triangles in leaf order.
+/// An empty mesh gets the layout's empty level (bindings may not be empty).
+pub fn gpu_level(
+    tris: &[Triangle],
+    quality: BvhQuality,
+    wide: bool,
+) -> Result<(Vec<u8>, Vec<GpuTri>), String> {
+    fn bytes<T: bytemuck::Pod>((nodes, tris): (Vec<T>, Vec<GpuTri>)) -> (Vec<u8>, Vec<GpuTri>) {
+        (bytemuck::cast_slice(&nodes).to_vec(), tris)
+    }
+    Ok(match (wide, tris.is_empty()) {
+        (true, true) => bytes(empty_wide()),
+        (false, true) => bytes(empty()),
+        (true, false) => bytes(flatten_wide(&build_wide_with(tris, quality), tris)?),
+        (false, false) => bytes(flatten(&build_bvh_with(tris, quality), tris)),
+    })
+}
+
 /// A byte of a node's per-slot arrays (`slot` 0..8 of the two words from `w`).
 fn slot_byte(words: [u32; 2], slot: usize) -> u32 {
     (words[slot / 4] >> ((slot % 4) * 8)) & 0xff
