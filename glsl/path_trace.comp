@@ -596,7 +596,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                     float pdf_b;
                     float f = surface_eval(surf, wo, wi, pdf_b);
-                    if (f > 0.0 && trace(origin, wi_w, 0.0, dist).prim == NO_HIT) {
+                    if (f > 0.0 && !trace_blocked(origin, wi_w, dist)) {
                         L += T * f * I / (dist2 * emitter_pdf(ei));
                     }
                 }
@@ -628,10 +628,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                         : 0.0;
                 }
                 if (lit && f > 0.0) {
-                    Hit s = trace(origin, wi_w, 0.0, dist * 1.001);
-                    bool visible = s.prim == NO_HIT
-                        || ((mat_word(s.prim) & 0xffu) == MAT_LIGHT && s.t >= dist * 0.999);
-                    if (visible) {
+                    // Visible: nothing up to the sampled point, or a light triangle no
+                    // nearer than it (up to rounding).
+                    if (trace_light_visible(origin, wi_w, dist * 1.001, dist * 0.999)) {
                         L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
                     }
                 }

@@ -53,6 +53,32 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) { return trace_masked(o, d, tm
 // src/trace/mod.rs), occluders ignored.
 Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u); }
 
+// Whether any object triangle (instance mask 0x01) lies on the ray within [0, tmax].
+bool trace_object_blocked(vec3 o, vec3 d, float tmax) {
+    rayQueryEXT rq;
+    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT | gl_RayFlagsTerminateOnFirstHitEXT,
+                          0x01u, o, 0.0, d, tmax);
+    while (rayQueryProceedEXT(rq)) {}
+    return rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT;
+}
+
+// trace_light_visible (below), with the ray query: the lights' closest hit, then an
+// occlusion query against the object up to it.
+bool trace_light_visible(vec3 o, vec3 d, float tmax, float t_light) {
+    Hit l = trace_masked(o, d, 0.0, tmax, 0x02u);
+    if (l.prim != NO_HIT && l.t < t_light) return false;
+    return !trace_object_blocked(o, d, l.prim != NO_HIT ? l.t : tmax);
+}
+
+// Whether any triangle, object or light, lies on the ray within [0, tmax].
+bool trace_blocked(vec3 o, vec3 d, float tmax) {
+    rayQueryEXT rq;
+    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT | gl_RayFlagsTerminateOnFirstHitEXT,
+                          0xffu, o, 0.0, d, tmax);
+    while (rayQueryProceedEXT(rq)) {}
+    return rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT;
+}
+
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
 // Triangles in BVH leaf order; v0.w holds the original triangle index.
@@ -167,8 +193,8 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
-    trace_bvh_0(o, inv_d, tr, tmin, h);
-    trace_bvh_1(o, inv_d, tr, tmin, h);
+    trace_bvh_0(o, inv_d, tr, tmin, h, false);
+    trace_bvh_1(o, inv_d, tr, tmin, h, false);
     return h;
 }
 
@@ -179,8 +205,43 @@ Hit trace_lights(vec3 o, vec3 d) {
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
-    trace_bvh_1(o, inv_d, tr, 0.0, h);
+    trace_bvh_1(o, inv_d, tr, 0.0, h, false);
     return h;
+}
+
+// Whether the closest hit of trace(o, d, 0, tmax) would be nothing, or a light triangle
+// at t_light or farther: a light sample's shadow test, exactly as that closest hit
+// decides it, without finding the closest occluder. The lights' closest hit first (the
+// small second level); then the object traversal stops at its first hit up to there
+// (inclusive: an object triangle wins a tie, its index is lower), or up to tmax
+// (exclusive, as trace's) without one.
+bool trace_light_visible(vec3 o, vec3 d, float tmax, float t_light) {
+    vec3 inv_d;
+    TraceRay tr;
+    trace_prepare(o, d, inv_d, tr);
+    Hit l;
+    l.t = tmax; l.prim = NO_HIT; l.bary = vec2(0.0); l.inst = 0u;
+    trace_bvh_1(o, inv_d, tr, 0.0, l, false);
+    if (l.prim != NO_HIT && l.t < t_light) return false;
+    Hit h;
+    // A hit is taken when t < h.t: the next float up makes the bound inclusive.
+    h.t = l.prim != NO_HIT ? uintBitsToFloat(floatBitsToUint(l.t) + 1u) : tmax;
+    h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    trace_bvh_0(o, inv_d, tr, 0.0, h, true);
+    return h.prim == NO_HIT;
+}
+
+// Whether trace(o, d, 0, tmax) would hit anything (object or light): stops at the first
+// hit found.
+bool trace_blocked(vec3 o, vec3 d, float tmax) {
+    vec3 inv_d;
+    TraceRay tr;
+    trace_prepare(o, d, inv_d, tr);
+    Hit h;
+    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    trace_bvh_0(o, inv_d, tr, 0.0, h, true);
+    if (h.prim == NO_HIT) trace_bvh_1(o, inv_d, tr, 0.0, h, true);
+    return h.prim != NO_HIT;
 }
 #else
 #error "define TRACE_RAY_QUERY or TRACE_SOFTWARE"

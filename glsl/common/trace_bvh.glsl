@@ -38,8 +38,9 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
 // node groups (first child node, a mask of the children still to visit in the top byte
 // and the node's inner-child mask in the low byte); hit leaves' triangles are a mask of
 // up to 24 bits from a first triangle. Children are visited in the order the builder
-// arranged for the ray's octant (trace_wide_half, glsl/common/trace.glsl).
-void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
+// arranged for the ray's octant (trace_wide_half, glsl/common/trace.glsl). With `any`
+// (a constant at every call) it stops at the first hit found: an occlusion test.
+void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
     uint oct_inv = (inv_d.x < 0.0 ? 0u : 4u) | (inv_d.y < 0.0 ? 0u : 2u) | (inv_d.z < 0.0 ? 0u : 1u);
     uvec2 stack[TRACE_WIDE_STACK + 1];   // the last: a spare slot written when full
     int sp = 0;
@@ -51,6 +52,7 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
             tris.y &= ~(1u << uint(b));
             TRACE_LEAF(tris.x + uint(b), 1u, tr, tmin, h);
         }
+        if (any && h.prim != NO_HIT) break;
         if ((group.y & 0xff000000u) != 0u) {
             uint hits = group.y;
             uint bit = uint(findMSB(hits));
@@ -84,8 +86,9 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
     }
 }
 #else
-// Closest hit in a child-pair BVH2.
-void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
+// Closest hit in a child-pair BVH2; with `any` (a constant at every call) the first hit
+// found: an occlusion test.
+void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
     // Each pushed node keeps its entry distance, so a node farther than a hit found
     // meanwhile is dropped on pop without loading it.
     uint stack[TRACE_STACK];
@@ -101,6 +104,7 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h) {
         uint rc = floatBitsToUint(n.r_max.w);
         if (hl && lc > 0u) { TRACE_LEAF(floatBitsToUint(n.l_min.w), lc, tr, tmin, h); hl = false; }
         if (hr && rc > 0u) { TRACE_LEAF(floatBitsToUint(n.r_min.w), rc, tr, tmin, h); hr = false; }
+        if (any && h.prim != NO_HIT) break;
         uint li = floatBitsToUint(n.l_min.w);
         uint ri = floatBitsToUint(n.r_min.w);
         if (hl && hr) {
