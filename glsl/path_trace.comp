@@ -465,10 +465,11 @@ vec3 hit_point(Tri t, vec2 bary) {
     return t.a.xyz * (1.0 - bary.x - bary.y) + t.b.xyz * bary.x + t.c.xyz * bary.y;
 }
 
-// The control variate's closed form A (analytic_rings) at the primary hit of a camera
-// ray through pixel (px, py) whose jitter and aperture point come from `rng`, exactly as
-// radiance_sample computes it at its own primary hit; 0 where that hit has none (no hit,
-// a light, a diffuse surface, no ring the control variate may use).
+// The extra camera rays' closed form A' (analytic_rings over the coarser ring,
+// CV_EXTRA_RING_DIVISOR) at the primary hit of a camera ray through pixel (px, py) whose
+// jitter and aperture point come from `rng`, exactly as radiance_sample computes it at
+// its own primary hit; 0 where that hit has none (no hit, a light, a diffuse surface, no
+// ring the control variate may use).
 float primary_analytic(uint px, uint py, inout Sampler rng) {
     vec3 o, d;
     pixel_ray(px, py, rng, o, d);
@@ -490,7 +491,7 @@ float primary_analytic(uint px, uint py, inout Sampler rng) {
     Lobe lobe;
     if (!conductor_lobe(surf.c, wo, tb, bt, ns, lobe)) return 0.0;
     uint mask;
-    return analytic_rings(lobe, offset_ray(p, ng), ns, ng, mask);
+    return analytic_rings(lobe, offset_ray(p, ng), ns, ng, CV_EXTRA_RING_DIVISOR, mask);
 }
 
 // The control variate's BSDF-sample term at the primary hit, once the path's next trace
@@ -524,7 +525,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // term c D / pdf, awaiting the light the next trace meets (cv_bsdf_weight).
     uint cv_mask = 0u;
     float cv_pending = 0.0;
-    float cv_a0 = 0.0;      // A at this sample's primary hit (0: none)
+    float cv_a0 = 0.0;      // A' at this sample's primary hit (primary_analytic's; 0: none)
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
@@ -576,7 +577,11 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             && prm.emitter_count > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
         // A (closed form, over the rings of cv_rings) and G's light-sample term.
         uint cv_rings = 0u;
-        float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, cv_rings) : 0.0;
+        float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, 1u, cv_rings) : 0.0;
+        if (cv && prm.cv_extra_rays > 0u) {
+            uint coarse_rings;
+            cv_a0 = analytic_rings(lobe, origin, ns, ng, CV_EXTRA_RING_DIVISOR, coarse_rings);
+        }
         float cv_nee_val = 0.0;
 
         // Next-event estimation: a light by power, then a point on it (a spot light is
@@ -646,7 +651,6 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         vec3 d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
         if (cv_rings != 0u) {
             cv_mask = cv_rings;
-            cv_a0 = cv_a;
             L += cv_a - cv_nee_val;
             cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
         }
@@ -670,10 +674,12 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     if (cv_pending != 0.0) {
         L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, trace_lights(o, d), cv_mask) * cv_pending;
     }
-    // More camera rays for A alone (`[render] analytic_rays` = M + 1): the pixel's mean
-    // of A(u) over its camera rays u estimated from this sample's ray and M more (their
-    // own stratified sequence: sample index s M + j under another seed), L - A(u_0) from
-    // this one: L + (sum_j A(u_j) - M A(u_0)) / (M + 1). Unbiased for any M.
+    // More camera rays for the closed form alone (`[render] analytic_rays` = M + 1): the
+    // pixel's mean of A(u) over its camera rays u estimated from this sample's ray and M
+    // more (their own stratified sequence: sample index s M + j under another seed):
+    // L + (sum_j A'(u_j) - M A'(u_0)) / (M + 1), zero mean for any M and any one
+    // function A' of the camera ray; A' is A over a coarser ring (a quarter of the cost),
+    // close enough to A that the difference's variance is left.
     uint extra = prm.direct_light == DIRECT_ANALYTIC ? prm.cv_extra_rays : 0u;
     if (extra > 0u) {
         float sum_a = 0.0;

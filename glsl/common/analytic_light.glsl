@@ -21,6 +21,7 @@
 // unbiased, and its variance falls where f V ~ g over the ring.
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
+#extension GL_KHR_shader_subgroup_vote : require
 
 // A linearly transformed cosine in world space: orthonormal frame (t1, t2, r), r its
 // axis, widths a1 along t1 and a2 along t2; g = c D.
@@ -136,6 +137,15 @@ struct Side {
     vec2 v;
 };
 
+// Whether tube vertex `v` is the current segment's run boundary already (what
+// ring_side checks before it steps): the first facing quad's first vertex (`lo`), else
+// the vertex after the last facing quad.
+bool ring_settled(Ring g, vec2 v, bool lo) {
+    bool after = ring_faces(g, v);
+    bool before = ring_faces(g, rot_back(v, g.step));
+    return lo ? after && !before : !after && before;
+}
+
 // Moves side `s` to the current segment's run boundary, one tube vertex at a time (the
 // boundary's edges along the section at `rad`, added to the loop when `add`); false if
 // it takes more than m steps (no quad of the segment faces x, or every one does).
@@ -174,7 +184,9 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
 // quad or every one, or a loop vertex lies at or below the cosine space's horizon or
 // below the shading point's shading (ns) or geometric (ng) horizon: the ring's image is
 // then within all three (each a hemisphere, the image within 53 degrees).
-float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, out bool ok) {
+// With `divisor` > 1 the same over a coarser torus: the light's n sections around its
+// axis become n / divisor (at least 3), its tube keeps its m.
+float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out bool ok) {
     ok = false;
     uint n = uint(e.emit.z);
     Ring g;
@@ -186,6 +198,7 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, out bool ok)
     g.r = e.dir.w;
     g.m = n >= 3u ? int(e.shape.y / (2u * n)) : 0;
     if (g.m < 3) return 0.0;
+    n = max(n / divisor, 3u);
     float dth = 2.0 * PI / float(g.m), dphi = 2.0 * PI / float(n);
     g.step = vec2(cos(dth), sin(dth));
     g.half_step = vec2(cos(0.5 * dth), sin(0.5 * dth));
@@ -222,7 +235,12 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, out bool ok)
         if (i > 0u) {
             g.a = -(d0_1 * (phi.x + phi_next.x) + d0_2 * (phi.y + phi_next.y)) / (2.0 * cn)
                 - g.big_r * cn;
-            if (!ring_side(lo, g, l, rad, true, true) || !ring_side(hi, g, l, rad, false, true)) {
+            // Most segments keep both boundaries: the walk (a loop whose steps every lane
+            // of a subgroup pays for on lavapipe) runs only where a lane's boundary moves
+            // (a vote: a uniform branch, skipped for real).
+            bool settled = ring_settled(g, lo.v, true) && ring_settled(g, hi.v, false);
+            if (subgroupAny(!settled)
+                    && (!ring_side(lo, g, l, rad, true, true) || !ring_side(hi, g, l, rad, false, true))) {
                 return 0.0;
             }
         }
@@ -282,15 +300,16 @@ bool ring_cv_valid(uint k, vec3 x) {
 
 // The control variate's closed form at x (shading and geometric normals ns, ng): the
 // sum over the rings it may use (bit k of `mask`, rings among the first 32 lights) of
-// c Le times the integral of D over the ring.
-float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, out uint mask) {
+// c Le times the integral of D over the ring; with `divisor` > 1 over the coarser ring
+// of ring_integral (what the extra camera rays of `[render] analytic_rays` take).
+float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint mask) {
     mask = 0u;
     float a = 0.0;
     for (uint k = 0u; k < min(prm.emitter_count, 32u); k++) {
         LightBlock e = emitters[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;
-        float integral = ring_integral(e, l, x, ns, ng, ok);
+        float integral = ring_integral(e, l, x, ns, ng, divisor, ok);
         if (!ok) continue;
         a += l.c * e.emit.x * integral;
         mask |= 1u << k;
