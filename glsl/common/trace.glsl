@@ -53,31 +53,26 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) { return trace_masked(o, d, tm
 // src/trace/mod.rs), occluders ignored.
 Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u); }
 
-// Whether any object triangle (instance mask 0x01) lies on the ray within [0, tmax].
-bool trace_object_blocked(vec3 o, vec3 d, float tmax) {
+// Whether any triangle of the instances whose mask meets `mask` lies on the ray within
+// [0, tmax]: the query ends at its first hit.
+bool trace_any_masked(vec3 o, vec3 d, float tmax, uint mask) {
     rayQueryEXT rq;
     rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT | gl_RayFlagsTerminateOnFirstHitEXT,
-                          0x01u, o, 0.0, d, tmax);
+                          mask, o, 0.0, d, tmax);
     while (rayQueryProceedEXT(rq)) {}
     return rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT;
 }
 
 // trace_light_visible (below), with the ray query: the lights' closest hit, then an
-// occlusion query against the object up to it.
+// occlusion query against the object (mask 0x01) up to it.
 bool trace_light_visible(vec3 o, vec3 d, float tmax, float t_light) {
     Hit l = trace_masked(o, d, 0.0, tmax, 0x02u);
     if (l.prim != NO_HIT && l.t < t_light) return false;
-    return !trace_object_blocked(o, d, l.prim != NO_HIT ? l.t : tmax);
+    return !trace_any_masked(o, d, l.prim != NO_HIT ? l.t : tmax, 0x01u);
 }
 
 // Whether any triangle, object or light, lies on the ray within [0, tmax].
-bool trace_blocked(vec3 o, vec3 d, float tmax) {
-    rayQueryEXT rq;
-    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT | gl_RayFlagsTerminateOnFirstHitEXT,
-                          0xffu, o, 0.0, d, tmax);
-    while (rayQueryProceedEXT(rq)) {}
-    return rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT;
-}
+bool trace_blocked(vec3 o, vec3 d, float tmax) { return trace_any_masked(o, d, tmax, 0xffu); }
 
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
