@@ -25,6 +25,13 @@ struct Hit {
     uint inst;    // instance index (one instance today: 0)
 };
 
+// No hit yet, with tmax as the distance a hit must beat.
+Hit hit_none(float tmax) {
+    Hit h;
+    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    return h;
+}
+
 #if defined(TRACE_RAY_QUERY)
 #extension GL_EXT_ray_query : require
 #define TRACE_BINDING_COUNT 1
@@ -32,8 +39,7 @@ layout(set = 0, binding = 0) uniform accelerationStructureEXT trace_tlas;
 
 // The closest hit among the instances whose mask meets `mask`.
 Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask) {
-    Hit h;
-    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    Hit h = hit_none(tmax);
     rayQueryEXT rq;
     rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, mask, o, tmin, d, tmax);
     while (rayQueryProceedEXT(rq)) {}
@@ -183,8 +189,7 @@ void trace_prepare(vec3 o, vec3 d, out vec3 inv_d, out TraceRay tr) {
 }
 
 Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
-    Hit h;
-    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    Hit h = hit_none(tmax);
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
@@ -195,8 +200,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
 
 // The closest hit among the view's lights alone (the second level), occluders ignored.
 Hit trace_lights(vec3 o, vec3 d) {
-    Hit h;
-    h.t = 3.0e38; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    Hit h = hit_none(3.0e38);
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
@@ -214,14 +218,11 @@ bool trace_light_visible(vec3 o, vec3 d, float tmax, float t_light) {
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
-    Hit l;
-    l.t = tmax; l.prim = NO_HIT; l.bary = vec2(0.0); l.inst = 0u;
+    Hit l = hit_none(tmax);
     trace_bvh_1(o, inv_d, tr, 0.0, l, false);
     if (l.prim != NO_HIT && l.t < t_light) return false;
-    Hit h;
     // A hit is taken when t < h.t: the next float up makes the bound inclusive.
-    h.t = l.prim != NO_HIT ? uintBitsToFloat(floatBitsToUint(l.t) + 1u) : tmax;
-    h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    Hit h = hit_none(l.prim != NO_HIT ? uintBitsToFloat(floatBitsToUint(l.t) + 1u) : tmax);
     trace_bvh_0(o, inv_d, tr, 0.0, h, true);
     return h.prim == NO_HIT;
 }
@@ -232,8 +233,7 @@ bool trace_blocked(vec3 o, vec3 d, float tmax) {
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
-    Hit h;
-    h.t = tmax; h.prim = NO_HIT; h.bary = vec2(0.0); h.inst = 0u;
+    Hit h = hit_none(tmax);
     trace_bvh_0(o, inv_d, tr, 0.0, h, true);
     if (h.prim == NO_HIT) trace_bvh_1(o, inv_d, tr, 0.0, h, true);
     return h.prim != NO_HIT;
