@@ -465,33 +465,80 @@ vec3 hit_point(Tri t, vec2 bary) {
     return t.a.xyz * (1.0 - bary.x - bary.y) + t.b.xyz * bary.x + t.c.xyz * bary.y;
 }
 
-// The extra camera rays' closed form A' (analytic_rings over the coarser ring,
-// CV_EXTRA_RING_DIVISOR) at the primary hit of a camera ray through pixel (px, py) whose
-// jitter and aperture point come from `rng`, exactly as radiance_sample computes it at
-// its own primary hit; 0 where that hit has none (no hit, a light, a diffuse surface, no
-// ring the control variate may use).
-float primary_analytic(uint px, uint py, inout Sampler rng) {
+// The extra camera rays' closed form A' (`[render] analytic_rays`): per pixel a
+// reference point, where the ray through the pixel's centre (and the lens's) first meets
+// the scene; where that is a conductor, the rings the control variate may use there are
+// recorded as seen from it over the coarser ring (record_rings, CV_EXTRA_RING_DIVISOR).
+// A' of a camera ray is then, with no trace: the ray meets the reference triangle's
+// plane at p; the shading normal there (the reference triangle's map, material and
+// frame, extrapolated beyond its edges) and the lobe as the path tracer builds them at a
+// primary hit; the lobe's closed form over the recorded rings (recorded_rings). One fixed
+// function of the camera ray per pixel, which is all the extra-ray term needs to stay
+// unbiased; on a face it follows the texture under the pixel as A does (A' ignores what
+// lies off the reference plane: edges, defects, other faces, where it only helps less).
+struct PixelPlane {
+    vec3 p;       // the reference point
+    vec3 ng;      // its triangle's normal, towards the camera
+    uint prim;
+    uint word;
+    Surface surf;
+};
+PixelPlane pix_plane;
+
+// Sets the pixel's reference point and records its rings (none where the centre ray
+// meets no conductor).
+void pixel_plane_init(uint px, uint py) {
+    rec_rings = 0u;
     vec3 o, d;
-    pixel_ray(px, py, rng, o, d);
+    camera_ray(prm.cam, vec2(px, py) + 0.5, vec2(prm.width, prm.height), vec2(0.5), o, d);
     Hit h = trace(o, d, 0.0, 3.0e38);
-    if (h.prim == NO_HIT) return 0.0;
+    if (h.prim == NO_HIT) return;
     uint word = mat_word(h.prim);
     uint mat = word & 0xffu;
-    if (mat == MAT_LIGHT) return 0.0;
+    if (mat == MAT_LIGHT) return;
     Surface surf = surface_of(mat, path_conductor());
-    if (surf.diffuse) return 0.0;
+    if (surf.diffuse) return;
     Tri t = fetch_tri(h.prim);
     vec3 ng = normalize(tri_normal(t));
-    vec3 p = hit_point(t, h.bary);
     if (dot(ng, d) > 0.0) ng = -ng;
-    vec3 ns = surface_normal(h, d, p, ng, word, 0u, surf);
+    pix_plane.p = hit_point(t, h.bary);
+    pix_plane.ng = ng;
+    pix_plane.prim = h.prim;
+    pix_plane.word = word;
+    pix_plane.surf = surf;
+    record_rings(offset_ray(pix_plane.p, ng), ng, CV_EXTRA_RING_DIVISOR);
+}
+
+// Barycentrics (of the 2nd and 3rd corner) of p in t's plane, beyond its edges too.
+vec2 plane_bary(Tri t, vec3 p) {
+    vec3 e1 = t.b.xyz - t.a.xyz, e2 = t.c.xyz - t.a.xyz, v = p - t.a.xyz;
+    float d00 = dot(e1, e1), d01 = dot(e1, e2), d11 = dot(e2, e2);
+    float d20 = dot(v, e1), d21 = dot(v, e2);
+    float den = d00 * d11 - d01 * d01;
+    return vec2(d11 * d20 - d01 * d21, d00 * d21 - d01 * d20) / den;
+}
+
+// A' of the camera ray o, d (pixel_plane_init's pixel); 0 where the pixel has no
+// recorded ring or the ray does not meet the reference plane in front of the camera.
+float pixel_plane_analytic(vec3 o, vec3 d) {
+    if (rec_rings == 0u) return 0.0;
+    float dn = dot(d, pix_plane.ng);
+    if (!(dn < 0.0)) return 0.0;
+    Hit h;
+    h.t = dot(pix_plane.p - o, pix_plane.ng) / dn;
+    if (!(h.t > 0.0)) return 0.0;
+    vec3 p = o + h.t * d;
+    h.prim = pix_plane.prim;
+    h.bary = plane_bary(fetch_tri(h.prim), p);
+    h.inst = 0u;
+    Surface surf = pix_plane.surf;
+    vec3 ns = surface_normal(h, d, p, pix_plane.ng, pix_plane.word, 0u, surf);
     vec3 tb, bt;
     onb(ns, tb, bt);
     vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
     Lobe lobe;
     if (!conductor_lobe(surf.c, wo, tb, bt, ns, lobe)) return 0.0;
-    uint mask;
-    return analytic_rings(lobe, offset_ray(p, ng), ns, ng, CV_EXTRA_RING_DIVISOR, mask);
+    return recorded_rings(lobe, ns);
 }
 
 // The control variate's BSDF-sample term at the primary hit, once the path's next trace
@@ -518,6 +565,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     vec3 o, d;
     pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
+    // A' of this sample's camera ray (for the extra camera rays' term below).
+    uint extra = prm.direct_light == DIRECT_ANALYTIC ? prm.cv_extra_rays : 0u;
+    float cv_a0 = extra > 0u ? pixel_plane_analytic(o, d) : 0.0;
 
     float L = 0.0;
     float T = 1.0;
@@ -525,7 +575,6 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // term c D / pdf, awaiting the light the next trace meets (cv_bsdf_weight).
     uint cv_mask = 0u;
     float cv_pending = 0.0;
-    float cv_a0 = 0.0;      // A' at this sample's primary hit (primary_analytic's; 0: none)
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
@@ -578,10 +627,6 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         // A (closed form, over the rings of cv_rings) and G's light-sample term.
         uint cv_rings = 0u;
         float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, 1u, cv_rings) : 0.0;
-        if (cv && prm.cv_extra_rays > 0u) {
-            uint coarse_rings;
-            cv_a0 = analytic_rings(lobe, origin, ns, ng, CV_EXTRA_RING_DIVISOR, coarse_rings);
-        }
         float cv_nee_val = 0.0;
 
         // Next-event estimation: a light by power, then a point on it (a spot light is
@@ -678,14 +723,15 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // pixel's mean of A(u) over its camera rays u estimated from this sample's ray and M
     // more (their own stratified sequence: sample index s M + j under another seed):
     // L + (sum_j A'(u_j) - M A'(u_0)) / (M + 1), zero mean for any M and any one
-    // function A' of the camera ray; A' is A over a coarser ring (a quarter of the cost),
-    // close enough to A that the difference's variance is left.
-    uint extra = prm.direct_light == DIRECT_ANALYTIC ? prm.cv_extra_rays : 0u;
+    // function A' of the camera ray; A' is pixel_plane_analytic's (no trace, the rings
+    // walked once per pixel), close enough to A on a face that the difference's variance
+    // is left.
     if (extra > 0u) {
         float sum_a = 0.0;
         for (uint j = 0u; j < extra; j++) {
             Sampler r = sampler_init(prm.sample_gen, pixel, s * extra + j, prm.seed ^ 0x5ca1ab1eu);
-            sum_a += primary_analytic(px, py, r);
+            pixel_ray(px, py, r, o, d);
+            sum_a += pixel_plane_analytic(o, d);
         }
         L += (sum_a - float(extra) * cv_a0) / float(extra + 1u);
     }
@@ -704,6 +750,7 @@ void main() {
     // Labels from this dispatch's first n x n samples (the caller makes sure it starts at
     // sample 0 and holds them): the annotation pass's thin-lens rays, traced once.
     uint label_count = min(pc.labels * pc.labels, min(pc.sample_count, LABEL_MAX_SAMPLES));
+    if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
     for (uint s = 0u; s < pc.sample_count; s++) {
         uint word;

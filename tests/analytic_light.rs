@@ -222,14 +222,14 @@ fn direct_light_parses_and_names_its_values() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("direct_light") && e.contains("analytic"), "{e}");
-    // analytic_rays: [1, 16] in scene files and jobs, named with its range when outside.
+    // analytic_rays: [1, 64] in scene files and jobs, named with its range when outside.
     assert_eq!(SceneConfig::default().render.analytic_rays, 1);
-    for bad in ["0", "17"] {
+    for bad in ["0", "65"] {
         let e = SceneConfig::parse(&format!("[render]\nanalytic_rays = {bad}\n"))
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("render.analytic_rays") && e.contains("[1, 16]"),
+            e.contains("render.analytic_rays") && e.contains("[1, 64]"),
             "{e}"
         );
         let e =
@@ -237,12 +237,12 @@ fn direct_light_parses_and_names_its_values() {
                 .unwrap_err()
                 .to_string();
         assert!(
-            e.contains("render.analytic_rays") && e.contains("16"),
+            e.contains("render.analytic_rays") && e.contains("64"),
             "{e}"
         );
     }
-    let j = synosis::dataset::Job::parse(&job("analytic_rays = 4"), "job", scenes).expect("job");
-    assert_eq!(j.render.analytic_rays, Some(4));
+    let j = synosis::dataset::Job::parse(&job("analytic_rays = 64"), "job", scenes).expect("job");
+    assert_eq!(j.render.analytic_rays, Some(64));
 }
 
 /// More camera rays for the control variate's closed form (`[render] analytic_rays`)
@@ -250,7 +250,9 @@ fn direct_light_parses_and_names_its_values() {
 /// A with fine grooves (20 µm texels, 0.2 mm period: about two periods under each of the
 /// 64 x 48 pixels), glossy. Over seeds, the mean over face A's inner pixels with 4 rays
 /// equals the sampled estimator's and the 1-ray control variate's within statistical
-/// error, and the pixel variance falls below the 1-ray one's.
+/// error, and so does the mean over all other pixels (edges, faces B and C, the table,
+/// where the extra rays' plane differs from their hits), and the pixel variance falls
+/// below the 1-ray one's.
 #[test]
 fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
     const SEEDS: u32 = 8;
@@ -266,8 +268,13 @@ fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
         cfg.set_resolution(64, 48).expect("size");
         cfg
     };
-    let run = |direct: &str, rays: u32| -> (Vec<f64>, Vec<Vec<f64>>) {
+    // Per seed: the mean over face A's inner pixels, the mean over every other pixel (the
+    // extra rays' closed form takes the plane of the pixel centre's hit: edges, other
+    // faces, the table and the background are where it differs from the hit's own), and
+    // the inner pixels.
+    let run = |direct: &str, rays: u32| -> (Vec<f64>, Vec<f64>, Vec<Vec<f64>>) {
         let mut means = Vec::new();
+        let mut rest_means = Vec::new();
         let mut images = Vec::new();
         for s in 0..SEEDS {
             let (img, face) = common::render_faces(&cfg(direct, rays, 500 + s), Backend::Software);
@@ -275,25 +282,38 @@ fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
             assert!(inner.len() > 400, "{} pixels of face A", inner.len());
             let px: Vec<f64> = inner.iter().map(|&i| img.data[i] as f64).collect();
             means.push(px.iter().sum::<f64>() / px.len() as f64);
+            let mut is_inner = vec![false; img.data.len()];
+            inner.iter().for_each(|&i| is_inner[i] = true);
+            let rest: Vec<f64> = (0..img.data.len())
+                .filter(|&i| !is_inner[i])
+                .map(|i| img.data[i] as f64)
+                .collect();
+            assert!(rest.len() > 1000, "{} other pixels", rest.len());
+            rest_means.push(rest.iter().sum::<f64>() / rest.len() as f64);
             images.push(px);
         }
-        (means, images)
+        (means, rest_means, images)
     };
-    let (ms, _) = run("sampled", 1);
-    let (m1, i1) = run("analytic", 1);
-    let (m4, i4) = run("analytic", 4);
-    let (a, b) = (mean_se(&m4), mean_se(&ms));
-    for (name, (mo, eo)) in [("sampled", b), ("analytic, 1 ray", mean_se(&m1))] {
-        let z = (a.0 - mo) / (a.1 * a.1 + eo * eo).sqrt();
-        eprintln!(
-            "4 rays {:.6} +- {:.1e}, {name} {mo:.6} +- {eo:.1e}, z {z:+.2}",
-            a.0, a.1
-        );
-        assert!(a.0 > 0.0, "a dark face tests nothing");
-        assert!(
-            z.abs() < 4.0,
-            "4 rays against {name}: the means differ by {z:.1} standard errors"
-        );
+    let (ms, rs, _) = run("sampled", 1);
+    let (m1, r1, i1) = run("analytic", 1);
+    let (m4, r4, i4) = run("analytic", 4);
+    for (part, m4, ms, m1) in [
+        ("face A", &m4, &ms, &m1),
+        ("the other pixels", &r4, &rs, &r1),
+    ] {
+        let (a, b) = (mean_se(m4), mean_se(ms));
+        for (name, (mo, eo)) in [("sampled", b), ("analytic, 1 ray", mean_se(m1))] {
+            let z = (a.0 - mo) / (a.1 * a.1 + eo * eo).sqrt();
+            eprintln!(
+                "{part}: 4 rays {:.6} +- {:.1e}, {name} {mo:.6} +- {eo:.1e}, z {z:+.2}",
+                a.0, a.1
+            );
+            assert!(a.0 > 0.0, "a dark {part} tests nothing");
+            assert!(
+                z.abs() < 4.0,
+                "{part}, 4 rays against {name}: the means differ by {z:.1} standard errors"
+            );
+        }
     }
     let (v1, v4) = (pixel_variance(&i1), pixel_variance(&i4));
     eprintln!(

@@ -72,27 +72,72 @@ float edge_z(vec3 a, vec3 b) {
     return s > 0.0 ? atan(s, dot(a, b)) * c.z / s : 0.0;
 }
 
-// A closed loop of directions (cosine space, any length) whose edges are summed as
-// edge_z: `sum` / (2 pi) is the clamped-cosine integral over the region it bounds when
-// every vertex is above the horizon (`above`).
+// Rings recorded as seen from one point (record_rings): the world vertices of their
+// boundary loops, for the extra camera rays of `[render] analytic_rays`, whose closed
+// forms (recorded_rings) take a pixel's rings as seen from one reference point and so
+// need the walk once per pixel, not once per ray. Up to REC_RINGS rings, each two loops
+// of at most REC_LOOP_VERTS vertices (a ring whose loops are longer is not recorded).
+#define REC_RINGS 2u
+#define REC_LOOP_VERTS 64u
+vec3 rec_w[2u * REC_RINGS * REC_LOOP_VERTS];
+uint rec_n[2u * REC_RINGS];   // vertices of loop i (ring i / 2, its lo loop first)
+float rec_le[REC_RINGS];      // the ring's radiance
+uint rec_rings = 0u;
+
+// Unit-free direction w from the shading point in the lobe's cosine space, or below its
+// horizon (z < 0, failing a loop's `above`) where w is below the shading point's shading
+// (ns) or geometric (ng) horizon, where E takes no light (its light sample needs both; G
+// would count what E cannot).
+vec3 lobe_point(Lobe l, vec3 ns, vec3 ng, vec3 w) {
+    return dot(w, ns) > 0.0 && dot(w, ng) > 0.0 ? lobe_local(l, w) : vec3(0.0, 0.0, -1.0);
+}
+
+// A closed loop of directions (world vectors from the shading point, any length) whose
+// edges are summed as edge_z in the lobe's cosine space: `sum` / (2 pi) is the
+// clamped-cosine integral over the region it bounds when every vertex is above the
+// horizons (`above`, lobe_point). With `rec` >= 0 the loop only records its world
+// vertices as recorded loop `rec` (`n` of them; more than REC_LOOP_VERTS: not recorded),
+// `above` then where each is above the geometric horizon (ng).
 struct Loop {
     vec3 first;
     vec3 prev;
     float sum;
     bool above;
+    int rec;
+    uint n;
 };
 
-void loop_start(out Loop lp, vec3 w) {
-    lp.first = w;
-    lp.prev = w;
+void loop_start(out Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w, int rec) {
+    lp.rec = rec;
+    lp.n = 1u;
     lp.sum = 0.0;
-    lp.above = w.z > 0.0;
+    if (rec >= 0) {
+        rec_w[uint(rec) * REC_LOOP_VERTS] = w;
+        lp.first = lp.prev = w;
+        lp.above = dot(w, ng) > 0.0;
+        return;
+    }
+    lp.first = lp.prev = lobe_point(l, ns, ng, w);
+    lp.above = lp.first.z > 0.0;
 }
 
-void loop_add(inout Loop lp, vec3 w) {
-    lp.sum += edge_z(lp.prev, w);
-    lp.prev = w;
-    lp.above = lp.above && w.z > 0.0;
+void loop_add(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
+    if (lp.rec >= 0) {
+        if (lp.n < REC_LOOP_VERTS) rec_w[uint(lp.rec) * REC_LOOP_VERTS + lp.n] = w;
+        lp.n++;
+        lp.above = lp.above && dot(w, ng) > 0.0;
+        return;
+    }
+    vec3 v = lobe_point(l, ns, ng, w);
+    lp.sum += edge_z(lp.prev, v);
+    lp.prev = v;
+    lp.above = lp.above && v.z > 0.0;
+}
+
+// The loop's last edge, back to its first vertex (a recorded loop closes when it is
+// summed: recorded_loop).
+void loop_close(inout Loop lp) {
+    if (lp.rec < 0) lp.sum += edge_z(lp.prev, lp.first);
 }
 
 // One ring (a tessellated torus, as src/scene/camera.rs `ring_light` makes it) as the
@@ -120,13 +165,9 @@ bool ring_faces(Ring g, vec2 v) {
 }
 
 // The tube vertex at angle cos, sin `v` of the section whose radial direction is `rad`
-// (at that angle from `rad` towards the axis, as ring_light places it), as a direction
-// from x in the lobe's cosine space; below its horizon (z < 0, failing the loop's
-// `above`) where it is below the shading point's shading or geometric horizon, where E
-// takes no light (its light sample needs both; G would count what E cannot).
-vec3 ring_point(Ring g, Lobe l, vec3 rad, vec2 v) {
-    vec3 w = g.d0 + rad * (g.big_r + g.r * v.x) + g.ax * (g.r * v.y);
-    return dot(w, g.ns) > 0.0 && dot(w, g.ng) > 0.0 ? lobe_local(l, w) : vec3(0.0, 0.0, -1.0);
+// (at that angle from `rad` towards the axis, as ring_light places it), from x.
+vec3 ring_vertex(Ring g, vec3 rad, vec2 v) {
+    return g.d0 + rad * (g.big_r + g.r * v.x) + g.ax * (g.r * v.y);
 }
 
 // One side of the facing run: its boundary loop and its tube vertex (cos, sin of its
@@ -163,7 +204,7 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
             if (lo ? !before : before) return true;
             s.v = rot_back(s.v, g.step);
         }
-        if (add) loop_add(s.lp, ring_point(g, l, rad, s.v));
+        if (add) loop_add(s.lp, g.ns, g.ng, l, ring_vertex(g, rad, s.v));
     }
     return false;
 }
@@ -185,8 +226,12 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
 // below the shading point's shading (ns) or geometric (ng) horizon: the ring's image is
 // then within all three (each a hemisphere, the image within 53 degrees).
 // With `divisor` > 1 the same over a coarser torus: the light's n sections around its
-// axis become n / divisor (at least 3), its tube keeps its m.
-float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out bool ok) {
+// axis become n / divisor (at least 3), its tube keeps its m. With `rec` >= 0 the walk
+// only records the two loops' world vertices as ring `rec` of the recorded rings (`ok`:
+// the walk found the boundary, its loops fit and lie above the geometric horizon ng; the
+// lobe and the shading horizon are not used).
+float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, int rec,
+                    out bool ok) {
     ok = false;
     uint n = uint(e.emit.z);
     Ring g;
@@ -225,8 +270,8 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
     hi.v = vec2(cos(th_hi), sin(th_hi));
     // (Rounding may leave the closed form a vertex off: the walk settles it.)
     if (!ring_side(lo, g, l, e1, true, false) || !ring_side(hi, g, l, e1, false, false)) return 0.0;
-    loop_start(lo.lp, ring_point(g, l, e1, lo.v));
-    loop_start(hi.lp, ring_point(g, l, e1, hi.v));
+    loop_start(lo.lp, ns, ng, l, ring_vertex(g, e1, lo.v), rec < 0 ? -1 : 2 * rec);
+    loop_start(hi.lp, ns, ng, l, ring_vertex(g, e1, hi.v), rec < 0 ? -1 : 2 * rec + 1);
     vec2 phi = vec2(1.0, 0.0);   // cos, sin of section i's angle
     vec3 rad = e1;
     for (uint i = 0u; i < n; i++) {
@@ -244,16 +289,23 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
                 return 0.0;
             }
         }
-        loop_add(lo.lp, ring_point(g, l, rad_next, lo.v));
-        loop_add(hi.lp, ring_point(g, l, rad_next, hi.v));
+        loop_add(lo.lp, ns, ng, l, ring_vertex(g, rad_next, lo.v));
+        loop_add(hi.lp, ns, ng, l, ring_vertex(g, rad_next, hi.v));
         phi = phi_next;
         rad = rad_next;
     }
     // Back at section 0: along it to segment 0's run boundary, and closed.
     g.a = a0;
     if (!ring_side(lo, g, l, e1, true, true) || !ring_side(hi, g, l, e1, false, true)) return 0.0;
-    loop_add(lo.lp, lo.lp.first);
-    loop_add(hi.lp, hi.lp.first);
+    loop_close(lo.lp);
+    loop_close(hi.lp);
+    if (rec >= 0) {
+        // Recorded: its vertices, if they fit.
+        rec_n[2 * rec] = lo.lp.n;
+        rec_n[2 * rec + 1] = hi.lp.n;
+        ok = lo.lp.above && hi.lp.above && lo.lp.n <= REC_LOOP_VERTS && hi.lp.n <= REC_LOOP_VERTS;
+        return 0.0;
+    }
     ok = lo.lp.above && hi.lp.above;
     return abs(lo.lp.sum - hi.lp.sum) * (0.5 / PI);
 }
@@ -309,10 +361,65 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
         LightBlock e = emitters[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;
-        float integral = ring_integral(e, l, x, ns, ng, divisor, ok);
+        float integral = ring_integral(e, l, x, ns, ng, divisor, -1, ok);
         if (!ok) continue;
         a += l.c * e.emit.x * integral;
         mask |= 1u << k;
+    }
+    return a;
+}
+
+// Records the rings the control variate may use at x (geometric normal ng; bit k of
+// analytic_rings' mask), over the coarser ring of `divisor`, as seen from x: the first
+// REC_RINGS of them whose loops fit (rec_rings of them; recorded_rings sums them).
+void record_rings(vec3 x, vec3 ng, uint divisor) {
+    rec_rings = 0u;
+    Lobe unused;   // the walk records only: no lobe is evaluated
+    unused.t1 = unused.t2 = unused.r = ng;
+    unused.a1 = unused.a2 = unused.c = 1.0;
+    for (uint k = 0u; k < min(prm.emitter_count, 32u) && rec_rings < REC_RINGS; k++) {
+        LightBlock e = emitters[k];
+        if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
+        bool ok;
+        ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ok);
+        if (ok) {
+            rec_le[rec_rings] = e.emit.x;
+            rec_rings++;
+        }
+    }
+}
+
+// Recorded loop i summed as ring_integral sums a loop for lobe l (shading normal ns),
+// closed; `above` as the loop's (record_rings kept only loops above the geometric
+// horizon). The lobe's widths are taken as reciprocals (a rounding of its own: A' needs
+// only to be one function of the camera ray).
+float recorded_loop(uint i, Lobe l, vec3 ns, out bool above) {
+    uint base = i * REC_LOOP_VERTS;
+    vec3 t1 = l.t1 * (1.0 / l.a1), t2 = l.t2 * (1.0 / l.a2);
+    vec3 w = rec_w[base];
+    vec3 first = dot(w, ns) > 0.0 ? vec3(dot(w, t1), dot(w, t2), dot(w, l.r)) : vec3(0.0, 0.0, -1.0);
+    vec3 prev = first;
+    float sum = 0.0;
+    above = first.z > 0.0;
+    for (uint j = 1u; j < rec_n[i]; j++) {
+        w = rec_w[base + j];
+        vec3 v = dot(w, ns) > 0.0 ? vec3(dot(w, t1), dot(w, t2), dot(w, l.r)) : vec3(0.0, 0.0, -1.0);
+        sum += edge_z(prev, v);
+        prev = v;
+        above = above && v.z > 0.0;
+    }
+    return sum + edge_z(prev, first);
+}
+
+// analytic_rings' closed form for lobe l over the recorded rings (as seen from the
+// point they were recorded at), each counted where its loops are above the horizons.
+float recorded_rings(Lobe l, vec3 ns) {
+    float a = 0.0;
+    for (uint r = 0u; r < rec_rings; r++) {
+        bool above_lo, above_hi;
+        float lo = recorded_loop(2u * r, l, ns, above_lo);
+        float hi = recorded_loop(2u * r + 1u, l, ns, above_hi);
+        if (above_lo && above_hi) a += l.c * rec_le[r] * abs(lo - hi) * (0.5 / PI);
     }
     return a;
 }

@@ -241,7 +241,7 @@ pub struct RenderSettings {
     /// "sampled".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub direct_light: Option<crate::scene::config::DirectLight>,
-    /// Camera rays per sample for the control variate's closed form, [1, 16] (scene
+    /// Camera rays per sample for the control variate's closed form, [1, 64] (scene
     /// files' `[render] analytic_rays`); default 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analytic_rays: Option<i64>,
@@ -930,7 +930,7 @@ impl Job {
             ));
         }
         if let Some(n) = r.analytic_rays {
-            self.int("render.analytic_rays", n, 1, 16)?;
+            self.int("render.analytic_rays", n, 1, 64)?;
         }
         self.check_viewpoints()?;
         crate::scene::lights::resolve_all(&self.lights).map_err(|e| DatasetError::Parse {

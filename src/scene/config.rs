@@ -873,7 +873,7 @@ pub struct RenderConfig {
     pub direct_light: DirectLight,
     /// With "analytic": camera rays per sample whose primary hit adds the control
     /// variate's closed form (the sample's own and `analytic_rays - 1` more, which trace
-    /// no further), [1, 16]; more of them average the sub-pixel texture's variation of the
+    /// no further), [1, 64]; more of them average the sub-pixel texture's variation of the
     /// direct light (docs/rendering.md, "Analytic direct light").
     pub analytic_rays: u32,
 }
@@ -1432,7 +1432,7 @@ impl SceneConfig {
                 });
             }
         }
-        range_u("render.analytic_rays", r.analytic_rays, 1, 16, "[1, 16]")?;
+        range_u("render.analytic_rays", r.analytic_rays, 1, 64, "[1, 64]")?;
         if let Some(m) = r.min_spp {
             if r.noise_target.is_none() {
                 return Err(ConfigError::Invalid {
