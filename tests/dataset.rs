@@ -1681,6 +1681,14 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
             "render.noise_estimate",
         ),
         (
+            emva.replace("spp = 1", "spp = 64\nbatch_spp = 0"),
+            "render.batch_spp",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nbatch_spp = 1025"),
+            "render.batch_spp",
+        ),
+        (
             emva.replace(
                 "spp = 1",
                 "spp = 64\nnoise_target = 1.0\nnoise_estimate = \"thirds\"",

@@ -163,6 +163,7 @@ fn face_textures_reach_the_image() {
             labels: Default::default(),
             direct_light: Default::default(),
             analytic_rays: 1,
+            batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
         };
         r.render(&req).unwrap()
     };
@@ -261,6 +262,7 @@ rim_width = 0.5
             labels: Default::default(),
             direct_light: Default::default(),
             analytic_rays: 1,
+            batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
         };
         let img = r.render(&req).unwrap();
         let label: Vec<u8> = img.class.clone();

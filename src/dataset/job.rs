@@ -245,6 +245,12 @@ pub struct RenderSettings {
     /// files' `[render] analytic_rays`); default 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analytic_rays: Option<i64>,
+    /// Samples per GPU submission, [1, 1024] (scene files' `[render] batch_spp`); default
+    /// 16. With `noise_target` the checks fall on batch ends, so a smaller batch lets an
+    /// image stop earlier; labels come from the path tracer's samples only when the
+    /// first batch holds 16 (else the annotation pass labels the image).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub batch_spp: Option<i64>,
 }
 
 /// `[render] min_spp` when not given (`render::noise::DEFAULT_MIN_SPP`).
@@ -931,6 +937,9 @@ impl Job {
         }
         if let Some(n) = r.analytic_rays {
             self.int("render.analytic_rays", n, 1, 64)?;
+        }
+        if let Some(n) = r.batch_spp {
+            self.int("render.batch_spp", n, 1, 1024)?;
         }
         self.check_viewpoints()?;
         crate::scene::lights::resolve_all(&self.lights).map_err(|e| DatasetError::Parse {

@@ -113,6 +113,8 @@ pub struct ImageRequest<'a> {
     /// Camera rays per sample for the control variate's closed form
     /// (`[render] analytic_rays`; default 1).
     pub analytic_rays: u32,
+    /// Samples per GPU submission (`[render] batch_spp`; default 16).
+    pub batch_spp: u32,
 }
 
 /// What the renderer returns, every buffer row-major with row 0 at the top.

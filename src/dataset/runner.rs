@@ -1271,6 +1271,10 @@ fn render_stage<'p>(
             .render
             .analytic_rays
             .map_or(crate::scene::config::DEFAULT_ANALYTIC_RAYS, |n| n as u32),
+        batch_spp: job
+            .render
+            .batch_spp
+            .map_or(crate::scene::config::DEFAULT_BATCH_SPP, |n| n as u32),
     };
     let fail = |message: String| DatasetError::Render {
         index: item.index,

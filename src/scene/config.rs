@@ -878,6 +878,9 @@ pub struct RenderConfig {
     pub analytic_rays: u32,
 }
 
+/// `[render] batch_spp` when not given (scene files and jobs).
+pub const DEFAULT_BATCH_SPP: u32 = 16;
+
 /// `[render] analytic_rays` when not given (scene files and jobs): the sample's own ray.
 pub const DEFAULT_ANALYTIC_RAYS: u32 = 1;
 
@@ -979,7 +982,7 @@ impl Default for RenderConfig {
             spp: 64,
             max_bounces: 8,
             seed: 0,
-            batch_spp: 16,
+            batch_spp: DEFAULT_BATCH_SPP,
             accel: AccelChoice::Auto,
             sampler: SamplerKind::Sobol,
             texture_filter: TextureFilter::None,
