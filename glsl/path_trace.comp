@@ -553,7 +553,7 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
     float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
     if (!(cos_l > 0.0)) return 0.0;
     float pdf_l = light.t * light.t / cos_l * light_area_pdf(light.prim, o, n);
-    return emitters[k].emit.x * power_heuristic(pdf, pdf_l);
+    return emitters[k].emit.x * power_heuristic(pdf, pdf_l) / float(max(prm.bsdf_samples, 1u));
 }
 
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
@@ -577,6 +577,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     float cv_pending = 0.0;
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
+    float prev_nb = 1.0;     // BSDF samples taken at the ray's origin for its direct light
     for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
         Hit h = trace(o, d, 0.0, 3.0e38);
         if (cv_pending != 0.0) {
@@ -603,7 +604,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 float w = 1.0;
                 if (prev_pdf > 0.0) {
                     float pdf_light = h.t * h.t / cos_l * light_area_pdf(h.prim, o, prev_n);
-                    w = power_heuristic(prev_pdf, pdf_light);
+                    w = power_heuristic(prev_pdf, pdf_light) / prev_nb;
                 }
                 L += T * tri_radiance(h.prim) * w;
             }
@@ -630,8 +631,16 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         float cv_nee_val = 0.0;
 
         // Next-event estimation: a light by power, then a point on it (a spot light is
-        // a point: no MIS, it cannot be hit).
-        if (prm.emitter_count > 0u) {
+        // a point: no MIS, it cannot be hit). At the camera ray's first hit
+        // `[render] light_samples` = K of them and `bsdf_samples` = M BSDF directions
+        // (below), each strategy's samples averaged under the one-sample MIS weights
+        // (which sum to 1 whatever K and M: unbiased; the counts are not put into the
+        // heuristic, which measured worse where the light sampler is the better one).
+        uint nl = depth == 0u ? max(prm.light_samples, 1u) : 1u;
+        float fnl = float(nl);
+        uint nb = depth == 0u ? max(prm.bsdf_samples, 1u) : 1u;
+        float fnb = float(nb);
+        for (uint k = 0u; k < nl && prm.emitter_count > 0u; k++) {
             float ue = sample_1d(rng);
             uint ei = choose_emitter(ue);
             LightBlock e = emitters[ei];
@@ -647,7 +656,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                     float pdf_b;
                     float f = surface_eval(surf, wo, wi, pdf_b);
                     if (f > 0.0 && !trace_blocked(origin, wi_w, dist)) {
-                        L += T * f * I / (dist2 * emitter_pdf(ei));
+                        L += T * f * I / (dist2 * emitter_pdf(ei) * fnl);
                     }
                 }
             } else {
@@ -672,16 +681,16 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 float pdf_light = dist2 / cos_l * area_pdf;
                 if (cv_light) {
                     // The control variate's light sample: MIS weight times c D Le / pdf.
-                    cv_nee_val = pdf_light > 0.0
+                    cv_nee_val += pdf_light > 0.0
                         ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
-                            * e.emit.x / pdf_light
+                            * e.emit.x / (pdf_light * fnl)
                         : 0.0;
                 }
                 if (lit && f > 0.0) {
                     // Visible: nothing up to the sampled point, or a light triangle no
                     // nearer than it (up to rounding).
                     if (trace_light_visible(origin, wi_w, dist * 1.001, dist * 0.999)) {
-                        L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / pdf_light;
+                        L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
                     }
                 }
             }
@@ -699,11 +708,36 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             L += cv_a - cv_nee_val;
             cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
         }
+        // More BSDF samples for the direct light alone (`[render] bsdf_samples` = K at
+        // the camera ray's first hit): each of M directions (the path's own and M - 1
+        // more) adds the light it meets with its MIS weight over M, and the control
+        // variate's term likewise; only the path's own direction goes on.
+        for (uint j = 1u; j < nb && prm.emitter_count > 0u; j++) {
+            vec3 uj = vec3(sample_1d(rng), sample_2d(rng));
+            vec3 wj;
+            float weight_j, pdf_j;
+            if (!surface_sample(surf, wo, uj, wj, weight_j, pdf_j)) continue;
+            vec3 dj = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
+            // The first light on the ray with occluders ignored; then, only where it faces
+            // the ray above the surface, whether the object hides it (the answer the
+            // closest hit would give, as a light sample's shadow test).
+            Hit lj = trace_lights(origin, dj);
+            if (lj.prim == NO_HIT) continue;
+            float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
+            if (cos_j > 0.0 && dot(dj, ng) > 0.0 && trace_light_visible(origin, dj, 3.0e38, lj.t)) {
+                float pdf_lj = lj.t * lj.t / cos_j * light_area_pdf(lj.prim, origin, ng);
+                L += T * weight_j * tri_radiance(lj.prim) * power_heuristic(pdf_j, pdf_lj) / fnb;
+            }
+            if (cv_rings != 0u) {
+                L -= cv_bsdf_weight(origin, dj, pdf_j, ng, lj, cv_rings) * lobe.c * lobe_d(lobe, dj) / pdf_j;
+            }
+        }
         if (!sampled) break;
         // The next ray (also where a pending control-variate term is resolved when the
         // path stops here).
         prev_pdf = pdf;
         prev_n = ng;
+        prev_nb = fnb;
         o = origin;
         d = d_next;
         T *= weight;

@@ -163,6 +163,8 @@ fn face_textures_reach_the_image() {
             labels: Default::default(),
             direct_light: Default::default(),
             analytic_rays: 1,
+            light_samples: 1,
+            bsdf_samples: 1,
             batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
         };
         r.render(&req).unwrap()
@@ -262,6 +264,8 @@ rim_width = 0.5
             labels: Default::default(),
             direct_light: Default::default(),
             analytic_rays: 1,
+            light_samples: 1,
+            bsdf_samples: 1,
             batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
         };
         let img = r.render(&req).unwrap();

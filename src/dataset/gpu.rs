@@ -164,6 +164,8 @@ impl ImageRenderer for GpuRenderer {
         cfg.render.labels = req.labels;
         cfg.render.direct_light = req.direct_light;
         cfg.render.analytic_rays = req.analytic_rays;
+        cfg.render.light_samples = req.light_samples;
+        cfg.render.bsdf_samples = req.bsdf_samples;
         cfg.render.batch_spp = req.batch_spp;
         if !req.lights.is_empty() {
             // The job's lights replace the default ring.

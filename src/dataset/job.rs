@@ -245,6 +245,14 @@ pub struct RenderSettings {
     /// files' `[render] analytic_rays`); default 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analytic_rays: Option<i64>,
+    /// Light samples at the camera ray's first hit, [1, 64] (scene files' `[render]
+    /// light_samples`); default 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_samples: Option<i64>,
+    /// BSDF samples for the direct light at the camera ray's first hit, [1, 64] (scene
+    /// files' `[render] bsdf_samples`); default 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bsdf_samples: Option<i64>,
     /// Samples per GPU submission, [1, 1024] (scene files' `[render] batch_spp`); default
     /// 16. With `noise_target` the checks fall on batch ends, so a smaller batch lets an
     /// image stop earlier; labels come from the path tracer's samples only when the
@@ -937,6 +945,12 @@ impl Job {
         }
         if let Some(n) = r.analytic_rays {
             self.int("render.analytic_rays", n, 1, 64)?;
+        }
+        if let Some(n) = r.light_samples {
+            self.int("render.light_samples", n, 1, 64)?;
+        }
+        if let Some(n) = r.bsdf_samples {
+            self.int("render.bsdf_samples", n, 1, 64)?;
         }
         if let Some(n) = r.batch_spp {
             self.int("render.batch_spp", n, 1, 1024)?;

@@ -113,6 +113,10 @@ pub struct ImageRequest<'a> {
     /// Camera rays per sample for the control variate's closed form
     /// (`[render] analytic_rays`; default 1).
     pub analytic_rays: u32,
+    /// Light samples at the camera ray's first hit (`[render] light_samples`; default 1).
+    pub light_samples: u32,
+    /// BSDF samples for the direct light there (`[render] bsdf_samples`; default 1).
+    pub bsdf_samples: u32,
     /// Samples per GPU submission (`[render] batch_spp`; default 16).
     pub batch_spp: u32,
 }

@@ -1271,6 +1271,14 @@ fn render_stage<'p>(
             .render
             .analytic_rays
             .map_or(crate::scene::config::DEFAULT_ANALYTIC_RAYS, |n| n as u32),
+        light_samples: job
+            .render
+            .light_samples
+            .map_or(crate::scene::config::DEFAULT_LIGHT_SAMPLES, |n| n as u32),
+        bsdf_samples: job
+            .render
+            .bsdf_samples
+            .map_or(crate::scene::config::DEFAULT_LIGHT_SAMPLES, |n| n as u32),
         batch_spp: job
             .render
             .batch_spp

@@ -50,6 +50,10 @@ pub struct RenderSettings {
     /// Camera rays per sample for the control variate's closed form
     /// (`[render] analytic_rays`).
     pub analytic_rays: u32,
+    /// Light samples at the camera ray's first hit (`[render] light_samples`).
+    pub light_samples: u32,
+    /// BSDF samples for the direct light there (`[render] bsdf_samples`).
+    pub bsdf_samples: u32,
 }
 
 impl RenderSettings {
@@ -66,6 +70,8 @@ impl RenderSettings {
             labels: r.labels,
             direct_light: r.direct_light,
             analytic_rays: r.analytic_rays,
+            light_samples: r.light_samples,
+            bsdf_samples: r.bsdf_samples,
         }
     }
 }

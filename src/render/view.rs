@@ -389,6 +389,8 @@ fn path_params(
         filter_scale: s.texture_filter_scale,
         direct_light: s.direct_light as u32,
         cv_extra_rays: s.analytic_rays.max(1) - 1,
+        light_samples: s.light_samples.max(1),
+        bsdf_samples: s.bsdf_samples.max(1),
         ..Default::default()
     }
 }

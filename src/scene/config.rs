@@ -876,7 +876,22 @@ pub struct RenderConfig {
     /// no further), [1, 64]; more of them average the sub-pixel texture's variation of the
     /// direct light (docs/rendering.md, "Analytic direct light").
     pub analytic_rays: u32,
+    /// Light samples (each with its shadow ray) at the camera ray's first hit, [1, 64];
+    /// deeper vertices take one. More of them lower the noise of shadows and of the
+    /// light's sampled part where a pixel sees a partly shadowed light (docs/rendering.md,
+    /// "More light and BSDF samples
+    /// at the first hit").
+    pub light_samples: u32,
+    /// BSDF samples for the direct light at the camera ray's first hit, [1, 64] (the
+    /// path's own direction and `bsdf_samples - 1` more, each traced to the light it
+    /// meets; only the path's own goes on). More of them lower the noise of a glossy
+    /// reflection of a partly hidden light (docs/rendering.md, "More light and BSDF
+    /// samples at the first hit").
+    pub bsdf_samples: u32,
 }
+
+/// `[render] light_samples` and `bsdf_samples` when not given (scene files and jobs).
+pub const DEFAULT_LIGHT_SAMPLES: u32 = 1;
 
 /// `[render] batch_spp` when not given (scene files and jobs).
 pub const DEFAULT_BATCH_SPP: u32 = 16;
@@ -993,6 +1008,8 @@ impl Default for RenderConfig {
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
             analytic_rays: DEFAULT_ANALYTIC_RAYS,
+            light_samples: DEFAULT_LIGHT_SAMPLES,
+            bsdf_samples: DEFAULT_LIGHT_SAMPLES,
         }
     }
 }
@@ -1436,6 +1453,8 @@ impl SceneConfig {
             }
         }
         range_u("render.analytic_rays", r.analytic_rays, 1, 64, "[1, 64]")?;
+        range_u("render.light_samples", r.light_samples, 1, 64, "[1, 64]")?;
+        range_u("render.bsdf_samples", r.bsdf_samples, 1, 64, "[1, 64]")?;
         if let Some(m) = r.min_spp {
             if r.noise_target.is_none() {
                 return Err(ConfigError::Invalid {
