@@ -879,8 +879,7 @@ pub struct RenderConfig {
     /// Light samples (each with its shadow ray) at the camera ray's first hit, [1, 64];
     /// deeper vertices take one. More of them lower the noise of shadows and of the
     /// light's sampled part where a pixel sees a partly shadowed light (docs/rendering.md,
-    /// "More light and BSDF samples
-    /// at the first hit").
+    /// "More light and BSDF samples at the first hit").
     pub light_samples: u32,
     /// BSDF samples for the direct light at the camera ray's first hit, [1, 64] (the
     /// path's own direction and `bsdf_samples - 1` more, each traced to the light it
