@@ -541,6 +541,13 @@ float pixel_plane_analytic(vec3 o, vec3 d) {
     return recorded_rings(lobe, ns);
 }
 
+// The MIS weight of a BSDF sample (solid-angle pdf `pdf`, from o with geometric normal
+// n) whose ray meets the light triangle `prim` at distance t, facing it with cosine
+// cos_l > 0: the power heuristic against the pdf NEE would have had for that point.
+float bsdf_mis_weight(uint prim, float t, float cos_l, vec3 o, vec3 n, float pdf) {
+    return power_heuristic(pdf, t * t / cos_l * light_area_pdf(prim, o, n));
+}
+
 // The control variate's BSDF-sample term at the primary hit, once the path's next trace
 // has told `light`, the first light triangle on the ray o, d with occluders ignored (or
 // a miss): its radiance times its MIS weight as E's own (BSDF pdf `pdf`, shading
@@ -552,8 +559,8 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
     if (k >= 32u || (mask & (1u << k)) == 0u) return 0.0;
     float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
     if (!(cos_l > 0.0)) return 0.0;
-    float pdf_l = light.t * light.t / cos_l * light_area_pdf(light.prim, o, n);
-    return emitters[k].emit.x * power_heuristic(pdf, pdf_l) / float(max(prm.bsdf_samples, 1u));
+    return emitters[k].emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
+        / float(max(prm.bsdf_samples, 1u));
 }
 
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
@@ -603,8 +610,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             if (cos_l > 0.0) {
                 float w = 1.0;
                 if (prev_pdf > 0.0) {
-                    float pdf_light = h.t * h.t / cos_l * light_area_pdf(h.prim, o, prev_n);
-                    w = power_heuristic(prev_pdf, pdf_light) / prev_nb;
+                    w = bsdf_mis_weight(h.prim, h.t, cos_l, o, prev_n, prev_pdf) / prev_nb;
                 }
                 L += T * tri_radiance(h.prim) * w;
             }
@@ -725,8 +731,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             if (lj.prim == NO_HIT) continue;
             float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
             if (cos_j > 0.0 && dot(dj, ng) > 0.0 && trace_light_visible(origin, dj, 3.0e38, lj.t)) {
-                float pdf_lj = lj.t * lj.t / cos_j * light_area_pdf(lj.prim, origin, ng);
-                L += T * weight_j * tri_radiance(lj.prim) * power_heuristic(pdf_j, pdf_lj) / fnb;
+                L += T * weight_j * tri_radiance(lj.prim)
+                    * bsdf_mis_weight(lj.prim, lj.t, cos_j, origin, ng, pdf_j) / fnb;
             }
             if (cv_rings != 0u) {
                 L -= cv_bsdf_weight(origin, dj, pdf_j, ng, lj, cv_rings) * lobe.c * lobe_d(lobe, dj) / pdf_j;
