@@ -42,6 +42,9 @@ layout(std430, set = 0, binding = PT_NOISE_SUMS) buffer NoiseSums { float noise_
 layout(std430, set = 0, binding = PT_LABEL_WORDS) readonly buffer LabelWords { uint label_words[]; };
 layout(std430, set = 0, binding = PT_LABEL_IDS) writeonly buffer LabelIds { uint label_ids[]; };
 layout(std430, set = 0, binding = PT_LABEL_COVERAGE) writeonly buffer LabelCoverage { float label_coverage_out[]; };
+// With pc.pixel_count != 0 the pixels this dispatch samples (y * width + x), TILE x TILE
+// a workgroup (`[render] adaptive_radius`); otherwise a placeholder never read.
+layout(std430, set = 0, binding = PT_PIXEL_LIST) readonly buffer PixelList { uint pixel_list[]; };
 #include "common/material.glsl"
 
 // Slope maps, one header per slot: slot 0 (table, light) never has a map, slot r + 1 is
@@ -779,9 +782,18 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
 }
 
 void main() {
-    uvec2 pix = tile_pixel(pc.tiles);
-    uint px = pix.x, py = pix.y;
-    if (px >= prm.width || py >= prm.height) return;
+    uint px, py;
+    if (pc.pixel_count == 0u) {
+        uvec2 pix = tile_pixel(pc.tiles);
+        px = pix.x;
+        py = pix.y;
+        if (px >= prm.width || py >= prm.height) return;
+    } else {
+        uint e = (gl_WorkGroupID.x + pc.tiles.group_base) * (TILE * TILE) + gl_LocalInvocationIndex;
+        if (e >= pc.pixel_count) return;
+        px = pixel_list[e] % prm.width;
+        py = pixel_list[e] / prm.width;
+    }
     uint i = py * prm.width + px;
     float sum = 0.0;
     float sq = 0.0;

@@ -50,6 +50,7 @@ fn stop_with(
         target,
         min_spp,
         estimator,
+        adaptive_radius: None,
     }
 }
 
@@ -219,4 +220,77 @@ fn the_noise_estimate_is_within_a_factor_two_of_the_measured_error() {
         sobol_q[1],
         sobol_q[0]
     );
+}
+
+/// `[render] adaptive_radius`: each pixel stops when it has its share of the target's
+/// samples. Every pixel's value is, bit for bit, that pixel in a fixed-spp render of its
+/// own samples (the list dispatch samples the same sample indices), the labels are the
+/// fixed render's, the criterion is met, and the error measured against an independent
+/// reference is that of the image-wide stop at fewer samples in all.
+#[test]
+fn adaptive_pixels_each_stop_at_their_own_samples() {
+    let cfg = scene_config(7, SamplerKind::Sobol);
+    let gpu = Gpu::new(&cfg);
+    let scene = &gpu.scene;
+    let probe = gpu.render(&cfg, 64, Some(&stop(scene, 1e-9, 8)));
+    let target = probe.noise.expect("estimate").ratio * 1.05;
+    let whole = gpu.render(&cfg, 512, Some(&stop(scene, target, 8)));
+    let adaptive_stop = NoiseStop {
+        adaptive_radius: Some(1),
+        ..stop(scene, target, 8)
+    };
+    let f = gpu.render(&cfg, 512, Some(&adaptive_stop));
+    let est = f.noise.expect("estimate");
+    let counts = f.pixel_spp.clone().expect("some pixels stopped early");
+    eprintln!(
+        "target {target:.4}: image-wide stop at {} spp; adaptive: mean {:.2}, most {} spp, ratio {:.4}; checks {:?}",
+        whole.spp,
+        f.mean_spp(),
+        f.spp,
+        est.ratio,
+        f.noise_checks
+            .iter()
+            .map(|c| (c.spp, c.mean_spp, c.ratio))
+            .collect::<Vec<_>>()
+    );
+    assert!(est.ratio <= target, "{}", est.ratio);
+    assert_eq!(est.spp, f.spp);
+    assert!((est.mean_spp - f.mean_spp()).abs() < 1e-9);
+    assert!(counts.iter().all(|&c| c >= 8 && c <= f.spp && c % 8 == 0), "{counts:?}");
+    assert!(counts.iter().any(|&c| c < f.spp), "{counts:?}");
+    assert!(
+        f.mean_spp() < whole.spp as f64,
+        "adaptive mean {:.2} spp against the image-wide {}",
+        f.mean_spp(),
+        whole.spp
+    );
+    // Bit for bit the fixed-spp renders of each pixel's own samples.
+    let mut distinct = counts.clone();
+    distinct.sort_unstable();
+    distinct.dedup();
+    for &c in &distinct {
+        let fixed = gpu.render(&cfg, c, None);
+        let wrong = (0..counts.len())
+            .filter(|&i| counts[i] == c)
+            .filter(|&i| f.radiance.data[i].to_bits() != fixed.radiance.data[i].to_bits())
+            .count();
+        assert_eq!(wrong, 0, "{wrong} pixels of {c} spp differ from the {c}-spp render");
+        assert_eq!(f.annotation, fixed.annotation);
+    }
+    // The error against an independent reference: no worse than the image-wide stop's
+    // (within the noise of one image), and no visible mean shift from pixels that stop
+    // on a low estimate (the bias the neighbourhood's variance keeps small).
+    let reference = gpu.render(&scene_config(1234, SamplerKind::Sobol), 1024, None);
+    let r = &reference.radiance.data;
+    let m_adaptive = measured_rms_dn(&adaptive_stop, &f, r, est.exposure_s);
+    let m_whole = measured_rms_dn(&adaptive_stop, &whole, r, est.exposure_s);
+    let face = &f.annotation.as_ref().unwrap().face;
+    let object: Vec<usize> = (0..r.len()).filter(|&i| face[i] != 0).collect();
+    let mean = |v: &[f32]| object.iter().map(|&i| v[i] as f64).sum::<f64>() / object.len() as f64;
+    let shift = mean(&f.radiance.data) / mean(r) - 1.0;
+    eprintln!(
+        "measured rms error: adaptive {m_adaptive:.4} DN, image-wide {m_whole:.4} DN; object mean {shift:+.5} relative to the reference"
+    );
+    assert!(m_adaptive <= 1.3 * m_whole, "{m_adaptive} {m_whole}");
+    assert!(shift.abs() < 0.01, "{shift}");
 }

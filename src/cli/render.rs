@@ -140,6 +140,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 .min_spp
                 .unwrap_or(synosis::render::noise::DEFAULT_MIN_SPP),
             estimator: cfg.render.noise_estimate.unwrap_or_default(),
+            adaptive_radius: cfg.render.adaptive_radius,
         }),
         _ => None,
     };
@@ -155,8 +156,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     for e in &frame.noise_checks {
         eprintln!(
-            "noise check: {} spp, render noise / camera noise {:.3}",
-            e.spp, e.ratio
+            "noise check: {} spp (mean {:.1}), render noise / camera noise {:.3}",
+            e.spp, e.mean_spp, e.ratio
         );
     }
     if let Some(e) = &frame.noise {

@@ -248,5 +248,6 @@ pub fn noise_stop(
         target,
         min_spp: job.render.first_check_spp(),
         estimator: job.render.noise_estimate.unwrap_or_default(),
+        adaptive_radius: job.render.adaptive_radius.map(|r| r as u32),
     }))
 }

@@ -231,6 +231,11 @@ pub struct RenderSettings {
     /// (default) or "samples" (docs/dataset.md, "Samples chosen from a noise target").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_estimate: Option<crate::scene::config::NoiseEstimator>,
+    /// Samples per pixel by the pixel's own noise (with `noise_target`), [0, 16]: each
+    /// pixel's variance averaged over the (2 r + 1)^2 pixels around it (docs/dataset.md,
+    /// "Samples per pixel"); none: every pixel takes the image's samples.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive_radius: Option<i64>,
     /// Where the labels come from: "auto" (default: the path tracer's own samples under
     /// a thin lens, the annotation pass under a pinhole), "pass" or "samples"
     /// (docs/dataset.md, "Labels from the path tracer's samples").
@@ -933,6 +938,16 @@ impl Job {
                 ));
             }
             self.int("render.min_spp", m, 2, r.spp.max(2))?;
+        }
+        if let Some(a) = r.adaptive_radius {
+            if r.noise_target.is_none() {
+                return Err(self.field(
+                    "render.adaptive_radius",
+                    a,
+                    "stops each pixel by its share of `render.noise_target`: give that too, or remove it",
+                ));
+            }
+            self.int("render.adaptive_radius", a, 0, 16)?;
         }
         if let Some(e) = r.noise_estimate
             && r.noise_target.is_none()

@@ -325,6 +325,10 @@ pub struct ManifestEntry {
     /// (the last is `spp`, `noise_ratio`): the estimated error per spp.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub noise_checks: Vec<(u32, f64)>,
+    /// With `[render] adaptive_radius`: the mean samples per pixel (`spp` is then the
+    /// most any pixel took).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_spp: Option<f64>,
     pub noise_sigma: Option<f64>,
     /// The camera's intrinsics and lens at the image's resolution (OpenCV camera matrix
     /// and distortion; the pose is `viewpoint` / `pose`).
@@ -1082,6 +1086,8 @@ struct RenderedItem<'p> {
     spp: u32,
     /// The noise criterion's checks, (spp, ratio) in order (with `noise_target`).
     noise_checks: Vec<(u32, f64)>,
+    /// Mean samples per pixel (with `[render] adaptive_radius`).
+    mean_spp: Option<f64>,
 }
 
 /// State kept between images by the stage that makes their inputs: the current
@@ -1304,6 +1310,10 @@ fn render_stage<'p>(
         renderer: renderer.describe(),
         spp,
         noise_checks: checks.iter().map(|e| (e.spp, e.ratio)).collect(),
+        mean_spp: match (req.noise.is_some_and(|n| n.adaptive_radius.is_some()), checks.last()) {
+            (true, Some(e)) => Some(e.mean_spp),
+            _ => None,
+        },
     })
 }
 
@@ -1326,6 +1336,7 @@ fn write_stage(
         renderer,
         spp,
         noise_checks,
+        mean_spp,
     } = rendered;
     let job = &prep.job;
     let inst: &InstancePlan = &prep.plan.instances[item.instance];
@@ -1388,6 +1399,7 @@ fn write_stage(
         renderer,
         noise_ratio: noise_checks.last().map(|c| c.1),
         noise_checks,
+        mean_spp,
         noise_sigma,
         camera: Some(camera.clone()),
         exposure_ev: exposed.exposure_ev,

@@ -54,6 +54,45 @@ pub struct NoiseStop {
     pub min_spp: u32,
     /// How a pixel's variance is estimated (`[render] noise_estimate`).
     pub estimator: NoiseEstimator,
+    /// `[render] adaptive_radius`: after each check the pixels whose share of the
+    /// samples is reached stop ([`CameraNoise::pixel_samples_wanted`], each pixel's
+    /// variance averaged over the (2 r + 1)^2 pixels around it); None: every pixel takes
+    /// the same samples.
+    pub adaptive_radius: Option<u32>,
+}
+
+/// Samples per pixel so far: the same for every pixel, or each pixel's own (`[render]
+/// adaptive_radius`).
+#[derive(Clone, Copy, Debug)]
+pub enum PixelSamples<'a> {
+    All(u32),
+    Each(&'a [u32]),
+}
+
+impl PixelSamples<'_> {
+    /// Pixel i's samples.
+    pub fn of(&self, i: usize) -> u32 {
+        match self {
+            PixelSamples::All(n) => *n,
+            PixelSamples::Each(counts) => counts[i],
+        }
+    }
+
+    /// The mean over the image's pixels.
+    pub fn mean(&self) -> f64 {
+        match self {
+            PixelSamples::All(n) => *n as f64,
+            PixelSamples::Each(counts) => {
+                counts.iter().map(|&c| c as f64).sum::<f64>() / counts.len().max(1) as f64
+            }
+        }
+    }
+}
+
+impl From<u32> for PixelSamples<'_> {
+    fn from(n: u32) -> Self {
+        PixelSamples::All(n)
+    }
 }
 
 /// Samples before the first check when `min_spp` is not given (`[render] min_spp` of
@@ -75,8 +114,11 @@ pub const MIN_CHECK_STEP_DIVISOR: u32 = 64;
 /// One evaluation of the criterion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseEstimate {
-    /// Samples per pixel the estimate is of.
+    /// Samples per pixel the estimate is of (the most any pixel had, with
+    /// `[render] adaptive_radius`).
     pub spp: u32,
+    /// Their mean over the image's pixels (`spp` unless adaptive).
+    pub mean_spp: f64,
     /// rms render noise over rms camera noise, over the counted pixels.
     pub ratio: f64,
     /// rms render noise (standard error of the mean) in sensor codes (DN).
@@ -147,6 +189,14 @@ fn pixel_variance(estimator: NoiseEstimator, sum: &[f32], noise: &[f32], n: u32,
     }
 }
 
+/// The mean image: each pixel's sum over its samples (none: 0).
+pub fn mean_image(sum: &[f32], n: PixelSamples<'_>) -> Vec<f32> {
+    sum.iter()
+        .enumerate()
+        .map(|(i, v)| v * (1.0 / n.of(i).max(1) as f32))
+        .collect()
+}
+
 /// Floats a pixel the path tracer keeps for `estimator` (its `NoiseSums` binding).
 pub fn noise_floats_per_pixel(estimator: NoiseEstimator) -> usize {
     match estimator {
@@ -156,25 +206,28 @@ pub fn noise_floats_per_pixel(estimator: NoiseEstimator) -> usize {
 }
 
 impl CameraNoise {
-    /// The criterion after `n` samples. `sum`, `noise`: the path tracer's per-pixel sums
-    /// (radiance; `estimator`'s, [`noise_floats_per_pixel`] a pixel); `exposure_mask`:
-    /// the pixels auto exposure looks at (the inspected faces, as the
-    /// sensor step); `object_mask`: the pixels the rms is taken over (all when it selects
-    /// none). The mean image is the one [`super::View::read`] would return at `n`.
-    pub fn estimate(
+    /// The criterion after `n` samples (a pixel's own with [`PixelSamples::Each`]).
+    /// `sum`, `noise`: the path tracer's per-pixel sums (radiance; `estimator`'s,
+    /// [`noise_floats_per_pixel`] a pixel); `exposure_mask`: the pixels auto exposure
+    /// looks at (the inspected faces, as the sensor step); `object_mask`: the pixels the
+    /// rms is taken over (all when it selects none). The mean image is the one
+    /// [`super::View::read`] would return at `n`.
+    pub fn estimate<'a>(
         &self,
         estimator: NoiseEstimator,
         sum: &[f32],
         noise: &[f32],
-        n: u32,
+        n: impl Into<PixelSamples<'a>>,
         exposure_mask: &[bool],
         object_mask: &[bool],
     ) -> Result<NoiseEstimate, SensorError> {
+        let n = n.into();
         let px = self.resp.electrons_per_s.len();
         if sum.len() != px
             || noise.len() != px * noise_floats_per_pixel(estimator)
             || exposure_mask.len() != px
             || object_mask.len() != px
+            || matches!(n, PixelSamples::Each(c) if c.len() != px)
         {
             return Err(SensorError::Invalid(format!(
                 "noise estimate: {} / {} sums and {} / {} mask values for {px} pixels",
@@ -184,8 +237,7 @@ impl CameraNoise {
                 object_mask.len()
             )));
         }
-        let inv = 1.0 / n.max(1) as f32;
-        let mean: Vec<f32> = sum.iter().map(|v| v * inv).collect();
+        let mean = mean_image(sum, n);
         let t = exposure_time_s(&self.resp, &mean, Some(exposure_mask), &self.sensor)?
             * self.exposure_factor;
         let all = !object_mask.iter().any(|&m| m);
@@ -202,7 +254,7 @@ impl CameraNoise {
             if mu >= full {
                 continue;
             }
-            let var_l = pixel_variance(estimator, sum, noise, n, i);
+            let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
             render += (k * e_per_l).powi(2) * var_l;
             camera += camera_variance_dn(&self.sensor, mu);
             pixels += 1;
@@ -217,7 +269,11 @@ impl CameraNoise {
             (r, c, r / c)
         };
         Ok(NoiseEstimate {
-            spp: n,
+            spp: match n {
+                PixelSamples::All(n) => n,
+                PixelSamples::Each(c) => c.iter().copied().max().unwrap_or(0),
+            },
+            mean_spp: n.mean(),
             ratio,
             render_rms_dn,
             camera_rms_dn,
@@ -225,6 +281,135 @@ impl CameraNoise {
             exposure_s: t,
         })
     }
+}
+
+impl CameraNoise {
+    /// `[render] adaptive_radius`: the samples each pixel should end with so that the
+    /// criterion meets `target` at the fewest samples in all, from the sums after `n`
+    /// (each pixel's own) at the exposure `exposure_s` of that check's estimate.
+    ///
+    /// With s_i a pixel's variance per sample in codes (its mean's variance times its
+    /// samples, as the estimate weighs it; 0 where the mean is at or above saturation),
+    /// the samples n_i that minimise sum n_i subject to sum over the counted pixels of
+    /// s_i / n_i = target^2 sum c_i (c_i the camera's variance: the criterion met) are
+    /// n_i = sqrt(s_i) S / (target^2 sum c_i), S = sum over the counted pixels of
+    /// sqrt(s_i) (Lagrange; the pixels the criterion does not count get the same
+    /// marginal rule). A pixel already has its samples (`n`, never taken back): where
+    /// its share is below them it keeps them, its variance s_i / n_i spent from the
+    /// budget, and the others share the rest (water filling). **Approximation (neighbours share a variance):** one pixel's
+    /// estimate has one or few degrees of freedom, and a pixel whose few samples missed a
+    /// rare bright path would stop with a low value; s_i is therefore the mean over the
+    /// (2 `radius` + 1)^2 pixels around it (clipped at the image's edges, `width` pixels
+    /// a row), which the stop depends on far more than on the pixel's own samples. The
+    /// bias this leaves is measured, not zero (docs/dataset.md, "Samples per pixel").
+    #[allow(clippy::too_many_arguments)]
+    pub fn pixel_samples_wanted<'a>(
+        &self,
+        estimator: NoiseEstimator,
+        sum: &[f32],
+        noise: &[f32],
+        n: impl Into<PixelSamples<'a>>,
+        exposure_s: f64,
+        object_mask: &[bool],
+        width: usize,
+        target: f64,
+        radius: u32,
+    ) -> Vec<f64> {
+        let n = n.into();
+        let px = sum.len();
+        let mean = mean_image(sum, n);
+        let all = !object_mask.iter().any(|&m| m);
+        let k = self.sensor.gain_dn_per_electron;
+        let full = saturation_electrons(&self.sensor);
+        let mut per_sample = vec![0.0f64; px];
+        let mut unknown = vec![false; px];
+        let mut counted = vec![false; px];
+        let mut camera = 0.0f64;
+        for i in 0..px {
+            let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
+            let mu = mean[i].max(0.0) as f64 * e_per_l;
+            if mu >= full {
+                continue;
+            }
+            let v = (k * e_per_l).powi(2)
+                * pixel_variance(estimator, sum, noise, n.of(i), i)
+                * n.of(i) as f64;
+            if v.is_finite() {
+                per_sample[i] = v;
+            } else {
+                unknown[i] = true;
+            }
+            if all || object_mask[i] {
+                counted[i] = true;
+                camera += camera_variance_dn(&self.sensor, mu);
+            }
+        }
+        let smooth = box_mean(&per_sample, width.max(1), radius as usize);
+        let roots: Vec<f64> = smooth.iter().map(|v| v.max(0.0).sqrt()).collect();
+        let budget = target * target * camera;
+        // Pixels whose share is at most the samples they have keep those (fixed): their
+        // variance is spent, the rest of the budget is shared by the others; repeat
+        // until no more become fixed (each round only adds fixed pixels).
+        let mut fixed = vec![false; px];
+        let scale = loop {
+            let (mut spent, mut free) = (0.0f64, 0.0f64);
+            for i in (0..px).filter(|&i| counted[i] && !unknown[i]) {
+                if fixed[i] {
+                    spent += smooth[i] / n.of(i).max(1) as f64;
+                } else {
+                    free += roots[i];
+                }
+            }
+            let scale = if budget > spent {
+                free / (budget - spent)
+            } else {
+                f64::INFINITY
+            };
+            let mut more = false;
+            for i in 0..px {
+                if !fixed[i] && !unknown[i] && roots[i] * scale <= n.of(i) as f64 {
+                    fixed[i] = true;
+                    more = true;
+                }
+            }
+            if !more {
+                break scale;
+            }
+        };
+        (0..px)
+            .map(|i| {
+                if unknown[i] {
+                    f64::INFINITY
+                } else if roots[i] > 0.0 {
+                    roots[i] * scale
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+}
+
+/// The mean of `v` (an image `width` values a row) over the (2 r + 1)^2 window around
+/// each value, clipped at the image's edges (two passes of running sums).
+pub fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
+    let height = v.len() / width;
+    let pass = |src: &[f64], len: usize, at: &dyn Fn(usize, usize) -> usize, lines: usize| {
+        let mut out = vec![0.0; src.len()];
+        let mut prefix = vec![0.0f64; len + 1];
+        for line in 0..lines {
+            for j in 0..len {
+                prefix[j + 1] = prefix[j] + src[at(line, j)];
+            }
+            for j in 0..len {
+                let (lo, hi) = (j.saturating_sub(r), (j + r + 1).min(len));
+                out[at(line, j)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+            }
+        }
+        out
+    };
+    let rows = pass(v, width, &|y, x| y * width + x, height);
+    pass(&rows, height, &|x, y| y * width + x, width)
 }
 
 impl NoiseStop {
@@ -242,7 +427,14 @@ impl NoiseStop {
     /// falls faster there than the prediction assumes. The render checks at the first
     /// batch end at or after it.
     pub fn next_check(&self, done: u32, ratio: f64) -> u32 {
-        let predicted = (done as f64 * (ratio / self.target).powi(2)).ceil();
+        self.next_check_at(done, done as f64 * (ratio / self.target).powi(2))
+    }
+
+    /// [`NoiseStop::next_check`] for a check predicted at `predicted` samples (with
+    /// `adaptive_radius`: the fewest any still-sampling pixel wants), within the same
+    /// bounds.
+    pub fn next_check_at(&self, done: u32, predicted: f64) -> u32 {
+        let predicted = predicted.ceil();
         let lo = done as f64 + (done.div_ceil(MIN_CHECK_STEP_DIVISOR)).max(1) as f64;
         let mut hi = done as f64 * MAX_CHECK_GROWTH as f64;
         if self.estimator == NoiseEstimator::Halves {
@@ -440,6 +632,93 @@ mod tests {
     }
 
     #[test]
+    fn box_mean_averages_the_window_clipped_at_the_edges() {
+        // A 3 x 2 image.
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        assert_eq!(box_mean(&v, 3, 0), v.to_vec());
+        let m = box_mean(&v, 3, 1);
+        assert_eq!(m[0], 3.0, "1 2 4 5");
+        assert_eq!(m[1], 3.5, "all six");
+        assert_eq!(m[5], 4.0, "2 3 5 6");
+        assert_eq!(box_mean(&v, 3, 5), vec![3.5; 6]);
+    }
+
+    #[test]
+    fn wanted_samples_follow_the_root_of_the_variance_and_meet_the_target() {
+        // Five pixels of 2 samples x - d, x + d: the mean's variance d^2, a sample's 2 d^2;
+        // the last one saturated (its code clips: no noise of either kind).
+        let sensor = sensor();
+        let cam = CameraNoise {
+            resp: Responsivity::uniform(5, 1, 100.0),
+            sensor: sensor.clone(),
+            exposure_factor: 1.0,
+        };
+        let x = [3.0f32, 3.0, 3.0, 3.0, 1e5];
+        let d = [0.0f32, 1.0, 2.0, 4.0, 1.0];
+        let sum: Vec<f32> = x.iter().map(|x| 2.0 * x).collect();
+        let sq: Vec<f32> = x.iter().zip(&d).map(|(x, d)| 2.0 * (x * x + d * d)).collect();
+        let all = [true; 5];
+        let samples = NoiseEstimator::Samples;
+        let est = cam.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
+        assert_eq!(est.pixels, 4, "the saturated pixel is not counted");
+        let k_e = sensor.gain_dn_per_electron * 100.0 * est.exposure_s;
+        let camera: f64 = (0..4)
+            .map(|i| camera_variance_dn(&sensor, x[i] as f64 * 100.0 * est.exposure_s))
+            .sum();
+        let per_sample = |i: usize| k_e * k_e * 2.0 * (d[i] as f64).powi(2);
+        let wanted = |target: f64, radius: u32| {
+            cam.pixel_samples_wanted(samples, &sum, &sq, 2, est.exposure_s, &all, 5, target, radius)
+        };
+        // The render variance with those samples (a pixel keeps the 2 it has).
+        let render = |want: &[f64]| (1..4).map(|i| per_sample(i) / want[i].max(2.0)).sum::<f64>();
+        let target = (render(&[2.0; 5]) / camera).sqrt() / 8.0;   // 64 x fewer variance
+        let want = wanted(target, 0);
+        assert_eq!((want[0], want[4]), (0.0, 0.0), "no spread, saturated");
+        assert!(want[1] > 2.0, "{want:?}");
+        assert!((want[2] / want[1] - 2.0).abs() < 1e-9, "{want:?}");
+        assert!((want[3] / want[1] - 4.0).abs() < 1e-9, "{want:?}");
+        // With those samples the render noise is the target times the camera's.
+        assert!((render(&want) / camera - target * target).abs() < 1e-9 * target * target);
+        // A target pixel 1 meets with its 2 samples: it keeps them, pixels 2 and 3
+        // share the rest (still 1 : 2), the target met.
+        let target = (render(&[2.0; 5]) / camera).sqrt() * 0.7;
+        let want = wanted(target, 0);
+        assert!(want[1] <= 2.0 && want[2] > 2.0, "{want:?}");
+        assert!((want[3] / want[2] - 2.0).abs() < 1e-9, "{want:?}");
+        assert!((render(&want) / camera - target * target).abs() < 1e-9 * target * target);
+        // Met already: nobody wants more.
+        let met = wanted((render(&[2.0; 5]) / camera).sqrt() * 1.01, 0);
+        assert!(met.iter().all(|&w| w <= 2.0), "{met:?}");
+        let target = (render(&[2.0; 5]) / camera).sqrt() / 8.0;
+        // Averaged over the neighbours (radius 1), pixel 0 takes its neighbours' share.
+        let smooth = wanted(target, 1);
+        assert!(smooth[0] > 0.0 && smooth[4] > 0.0, "{smooth:?}");
+        // Per-pixel counts: pixel 1 with 8 samples, four x - d and four x + d: a sample's
+        // variance 8 d^2 / 7 (pixel 2's: 2 (2 d)^2, d = 1).
+        let mut sum8 = sum.clone();
+        let mut sq8 = sq.clone();
+        sum8[1] *= 4.0;
+        sq8[1] *= 4.0;
+        let counts = [2, 8, 2, 2, 2];
+        let each = PixelSamples::Each(&counts);
+        let est8 = cam.estimate(samples, &sum8, &sq8, each, &all, &all).unwrap();
+        assert_eq!((est8.spp, est8.mean_spp), (8, 16.0 / 5.0));
+        let want8 = cam.pixel_samples_wanted(
+            samples,
+            &sum8,
+            &sq8,
+            each,
+            est8.exposure_s,
+            &all,
+            5,
+            target,
+            0,
+        );
+        let ratio = (8.0f64 / 7.0).sqrt() / (2.0 * 2.0f64.sqrt());
+        assert!((want8[1] / want8[2] - ratio).abs() < 1e-6, "{want8:?}");
+    }
+
+    #[test]
     fn checks_follow_the_prediction_within_bounds() {
         let stop = NoiseStop {
             camera: CameraNoise {
@@ -450,6 +729,7 @@ mod tests {
             target: 1.0,
             min_spp: 16,
             estimator: NoiseEstimator::Samples,
+            adaptive_radius: None,
         };
         assert_eq!(stop.first_check(1000), 16);
         assert_eq!(stop.first_check(8), 8);

@@ -7,10 +7,10 @@ use std::sync::Arc;
 use super::annotate::Annotation;
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
-use super::noise::{NoiseEstimate, NoiseStop};
+use super::noise::{NoiseEstimate, NoiseStop, PixelSamples};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
-use super::view::View;
+use super::view::{View, tile_order};
 use crate::graph::Graph;
 use crate::scene::assemble::ViewSetup;
 use crate::scene::mesh::is_inspected;
@@ -59,8 +59,12 @@ pub struct FrameOptions<'a> {
 pub struct Frame {
     pub radiance: Radiance,
     pub annotation: Option<Annotation>,
-    /// Samples per pixel rendered (`spp`, or fewer when a noise target stopped it).
+    /// Samples per pixel rendered (`spp`, or fewer when a noise target stopped it; with
+    /// `[render] adaptive_radius` the most any pixel took).
     pub spp: u32,
+    /// With `[render] adaptive_radius`, each pixel's own samples when not all took
+    /// `spp` (row by row); None: every pixel took `spp`.
+    pub pixel_spp: Option<Vec<u32>>,
     /// The noise criterion's last estimate, at `spp` (with a noise target only).
     pub noise: Option<NoiseEstimate>,
     /// Every estimate made, in order (the last is `noise`): the error per spp.
@@ -68,6 +72,16 @@ pub struct Frame {
     /// The annotation came from the path tracer's own first n x n samples (`[render]
     /// labels`), not from the annotation pass; false without an annotation.
     pub labels_from_samples: bool,
+}
+
+impl Frame {
+    /// Mean samples per pixel (`spp` unless adaptive).
+    pub fn mean_spp(&self) -> f64 {
+        match &self.pixel_spp {
+            Some(c) => PixelSamples::Each(c).mean(),
+            None => self.spp as f64,
+        }
+    }
 }
 
 /// Renders one view of `scene`; `progress(done_spp)` after each batch (one graph each).
@@ -78,6 +92,11 @@ pub struct Frame {
 /// at most the target, or at `spp`. The batches are those of a fixed-spp render, so the
 /// image equals a render of the chosen spp byte for byte. The decision depends on float
 /// sums: another device may stop at another batch.
+///
+/// With `adaptive_radius` in the criterion, each check that does not stop the render
+/// also stops the pixels that have the samples their share of the target wants
+/// ([`super::noise::CameraNoise::pixel_samples_wanted`]); the next batches sample only
+/// the others (`View::set_pixels`), each pixel's mean over its own samples.
 pub fn render_frame(
     tracer: &PathTracer,
     scene: &GpuScene,
@@ -86,7 +105,7 @@ pub fn render_frame(
     opts: FrameOptions<'_>,
     mut progress: impl FnMut(u32),
 ) -> Result<Frame, RenderError> {
-    let view = View::with_variance(
+    let mut view = View::with_variance(
         tracer,
         scene,
         setup,
@@ -96,17 +115,25 @@ pub fn render_frame(
         opts.profiler,
     )?;
     let (spp, batch) = (settings.spp, settings.batch_spp.max(1));
+    let (width, height) = (setup.camera.width, setup.camera.height);
     let mut done = 0u32;
     let mut gpu_ms = 0.0;
     let mut next_check = opts.noise.map(|n| n.first_check(spp));
     // (exposure mask, object mask) from the annotation of the first batch.
     let mut masks: Option<(Vec<bool>, Vec<bool>)> = None;
     let mut checks: Vec<NoiseEstimate> = Vec::new();
+    // `[render] adaptive_radius`: the samples each pixel stopped at (0: still sampling),
+    // and the pixels still sampling in tile order (None: all of them).
+    let adaptive = opts.noise.and_then(|n| n.adaptive_radius);
+    let mut stopped = vec![0u32; if adaptive.is_some() { (width * height) as usize } else { 0 }];
+    let mut sampling: Option<Vec<u32>> = None;
     while done < spp {
         let count = batch.min(spp - done);
-        let mut g = Graph::new(tracer.context(), "path trace");
-        view.record_batch(tracer, &mut g, done, count);
-        let timings = g.execute(opts.profiler)?;
+        let timings = {
+            let mut g = Graph::new(tracer.context(), "path trace");
+            view.record_batch(tracer, &mut g, done, count);
+            g.execute(opts.profiler)?
+        };
         gpu_ms += timings
             .iter()
             .map(|t| t.gpu_ms)
@@ -117,18 +144,60 @@ pub fn render_frame(
         if let (Some(stop), Some(at)) = (opts.noise, next_check)
             && (done >= at || done == spp)
         {
-            let est = crate::vk::timed(opts.profiler, "noise estimate", || {
-                noise_estimate(&view, stop, done, &mut masks)
+            let counts = pixel_counts(&stopped, done);
+            let samples = match &counts {
+                Some(c) => PixelSamples::Each(c),
+                None => PixelSamples::All(done),
+            };
+            let (est, sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
+                noise_estimate(&view, stop, samples, &mut masks)
             })?;
             checks.push(est);
             if est.ratio <= stop.target {
                 break;
             }
             next_check = Some(stop.next_check(done, est.ratio));
+            if let Some(radius) = adaptive {
+                let (sum, noise) = sums;
+                let object = &masks.as_ref().expect("filled by the estimate").1;
+                let want = stop.camera.pixel_samples_wanted(
+                    stop.estimator,
+                    &sum,
+                    &noise,
+                    samples,
+                    est.exposure_s,
+                    object,
+                    width as usize,
+                    stop.target,
+                    radius,
+                );
+                let order = sampling
+                    .take()
+                    .unwrap_or_else(|| tile_order(width, height));
+                let (keep, stop_now): (Vec<u32>, Vec<u32>) =
+                    order.into_iter().partition(|&i| want[i as usize] > done as f64);
+                for i in stop_now {
+                    stopped[i as usize] = done;
+                }
+                if keep.is_empty() {
+                    break;
+                }
+                let fewest = keep
+                    .iter()
+                    .map(|&i| want[i as usize])
+                    .fold(f64::INFINITY, f64::min);
+                next_check = Some(stop.next_check_at(done, fewest));
+                view.set_pixels(tracer, Some(&keep))?;
+                sampling = Some(keep);
+            }
         }
     }
-    let (data, annotation) = view.read(done)?;
-    let (width, height) = (setup.camera.width, setup.camera.height);
+    let counts = pixel_counts(&stopped, done);
+    let samples = match &counts {
+        Some(c) => PixelSamples::Each(c),
+        None => PixelSamples::All(done),
+    };
+    let (data, annotation) = view.read(samples)?;
     let radiance = Radiance {
         width,
         height,
@@ -139,21 +208,35 @@ pub fn render_frame(
         radiance,
         annotation,
         spp: done,
+        pixel_spp: counts,
         noise: checks.last().copied(),
         noise_checks: checks,
         labels_from_samples: view.labels_from_samples(),
     })
 }
 
-/// The noise criterion after `done` samples; `masks` (auto exposure's pixels: the
-/// inspected faces 1..=3; the rms's: the object, face != 0) from the view's annotation,
-/// read once (every pixel without an annotation).
+/// Each pixel's samples when some stopped before `done` (`stopped`: the samples a pixel
+/// stopped at, 0 for one still sampling, empty when the render is not adaptive): None
+/// when every pixel has `done`.
+fn pixel_counts(stopped: &[u32], done: u32) -> Option<Vec<u32>> {
+    if stopped.iter().all(|&s| s == 0) {
+        return None;
+    }
+    Some(stopped.iter().map(|&s| if s == 0 { done } else { s }).collect())
+}
+
+/// Per-pixel sums as [`View::read_sums`] reads them: radiance, and the noise estimate's.
+type Sums = (Vec<f32>, Vec<f32>);
+
+/// The noise criterion after `done` samples, and the sums it was made from; `masks`
+/// (auto exposure's pixels: the inspected faces 1..=3; the rms's: the object,
+/// face != 0) from the view's annotation, read once (every pixel without an annotation).
 fn noise_estimate(
     view: &View,
     stop: &NoiseStop,
-    done: u32,
+    done: PixelSamples<'_>,
     masks: &mut Option<(Vec<bool>, Vec<bool>)>,
-) -> Result<NoiseEstimate, RenderError> {
+) -> Result<(NoiseEstimate, Sums), RenderError> {
     let (sum, noise) = view.read_sums()?;
     let noise = noise.expect("a view with a noise target keeps noise sums");
     if masks.is_none() {
@@ -166,9 +249,10 @@ fn noise_estimate(
         });
     }
     let (exposure, object) = masks.as_ref().expect("just filled");
-    Ok(stop
+    let est = stop
         .camera
-        .estimate(stop.estimator, &sum, &noise, done, exposure, object)?)
+        .estimate(stop.estimator, &sum, &noise, done, exposure, object)?;
+    Ok((est, (sum, noise)))
 }
 
 /// Renders a whole assembled scene once: builds the path tracer and the GPU scene for

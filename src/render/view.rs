@@ -7,7 +7,7 @@ use ash::vk;
 use super::RenderError;
 use super::annotate::{Annotation, AnnotationTargets, record_annotate};
 use super::gpu_scene::GpuScene;
-use super::noise::{NoiseEstimator, noise_floats_per_pixel};
+use super::noise::{NoiseEstimator, PixelSamples, mean_image, noise_floats_per_pixel};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
@@ -96,6 +96,9 @@ pub struct View<'s> {
     /// One-word stand-ins for the path tracer's label targets when it does not label
     /// (a binding may not be empty; the shader never writes them).
     label_placeholders: (Buffer, Buffer),
+    /// The pixels the next batches sample ([`View::set_pixels`], `[render]
+    /// adaptive_radius`) and how many; (a one-word placeholder, 0): the whole image.
+    pixel_list: (Buffer, u32),
     camera: Camera,
     tiling: Tiling,
     /// (sampler kind, seed) of the path tracer, which the thin-lens annotation follows.
@@ -208,6 +211,7 @@ impl<'s> View<'s> {
             annotation,
             labels_from_samples,
             label_placeholders,
+            pixel_list: (placeholder("pixel list (unused)")?, 0),
             camera: *cam,
             tiling: Tiling::new(width, height, ctx.info.max_workgroup_count[0]),
             sampling: (settings.sampler as u32, settings.seed),
@@ -220,9 +224,36 @@ impl<'s> View<'s> {
         self.labels_from_samples
     }
 
-    /// Adds samples `start .. start + count` to `g`; the first batch (start 0) clears the
-    /// accumulation and labels the pixels: from its own first n x n samples when the view
-    /// labels from samples and the batch holds them, else by the annotation pass.
+    /// From the next batch on, sample only `pixels` (indices y * width + x, in the order
+    /// given: TILE x TILE consecutive ones make a workgroup, so neighbours should follow
+    /// each other); every pixel of the image again when `pixels` is None. A batch after
+    /// the first must give every listed pixel the same samples so far (the list only
+    /// shrinks: `[render] adaptive_radius`).
+    pub fn set_pixels(
+        &mut self,
+        tracer: &PathTracer,
+        pixels: Option<&[u32]>,
+    ) -> Result<(), RenderError> {
+        let (ctx, storage) = (&tracer.ctx, vk::BufferUsageFlags::STORAGE_BUFFER);
+        self.pixel_list = match pixels {
+            Some(list) if !list.is_empty() => (
+                Buffer::from_slice(ctx, "pixel list", list, storage)?,
+                list.len() as u32,
+            ),
+            // An empty list samples nothing: the caller stops instead.
+            _ => (
+                Buffer::new(ctx, "pixel list (unused)", 4, storage, MemoryKind::Device)?,
+                0,
+            ),
+        };
+        Ok(())
+    }
+
+    /// Adds samples `start .. start + count` to `g` (of the pixels of
+    /// [`View::set_pixels`]; the first batch must be of the whole image); the first batch
+    /// (start 0) clears the accumulation and labels the pixels: from its own first n x n
+    /// samples when the view labels from samples and the batch holds them, else by the
+    /// annotation pass.
     pub fn record_batch<'a>(
         &'a self,
         tracer: &'a PathTracer,
@@ -290,13 +321,20 @@ impl<'s> View<'s> {
                 g.import(&self.label_placeholders.1),
             )
         });
-        for (tiles, groups) in self.tiling.dispatches() {
+        let list = g.import(&self.pixel_list.0);
+        let pixel_count = if start == 0 { 0 } else { self.pixel_list.1 };
+        let dispatches: Vec<(TileBlock, u32)> = if pixel_count == 0 {
+            self.tiling.dispatches().collect()
+        } else {
+            list_dispatches(pixel_count, self.tiling.max_groups)
+        };
+        for (tiles, groups) in dispatches {
             let push = PathPush {
                 sample_start: start,
                 sample_count: count,
                 labels: label_grid,
+                pixel_count,
                 tiles,
-                ..Default::default()
             };
             refs.bind(g.dispatch("path trace", &tracer.path, [groups, 1, 1]))
                 .read(B::Geometry.at(off), &geo)
@@ -320,6 +358,7 @@ impl<'s> View<'s> {
                 .read(B::LabelWords.at(off), &labels)
                 .write(B::LabelIds.at(off), &mut ids)
                 .write(B::LabelCoverage.at(off), &mut cov)
+                .read(B::PixelList.at(off), &list)
                 .push(&push)
                 .submit();
         }
@@ -345,15 +384,48 @@ impl<'s> View<'s> {
         }
     }
 
-    /// Mean radiance per pixel after `spp` samples, and the annotation if asked for.
-    pub fn read(&self, spp: u32) -> Result<(Vec<f32>, Option<Annotation>), RenderError> {
+    /// Mean radiance per pixel after `spp` samples (each pixel's own with
+    /// [`PixelSamples::Each`]), and the annotation if asked for.
+    pub fn read<'a>(
+        &self,
+        spp: impl Into<PixelSamples<'a>>,
+    ) -> Result<(Vec<f32>, Option<Annotation>), RenderError> {
         let sum: Vec<f32> = self.accum.read()?;
-        let inv = 1.0 / spp as f32;
-        Ok((
-            sum.iter().map(|v| v * inv).collect(),
-            self.read_annotation()?,
-        ))
+        Ok((mean_image(&sum, spp.into()), self.read_annotation()?))
     }
+}
+
+/// The pixels of a `width` x `height` image tile by tile (TILE x TILE, rows of tiles),
+/// row by row within a tile, as y * width + x: the order of a pixel list
+/// ([`View::set_pixels`]) that keeps a workgroup's pixels together.
+pub fn tile_order(width: u32, height: u32) -> Vec<u32> {
+    let mut order = Vec::with_capacity((width * height) as usize);
+    for ty in (0..height).step_by(TILE as usize) {
+        for tx in (0..width).step_by(TILE as usize) {
+            for y in ty..(ty + TILE).min(height) {
+                for x in tx..(tx + TILE).min(width) {
+                    order.push(y * width + x);
+                }
+            }
+        }
+    }
+    order
+}
+
+/// (block, workgroup count) of each dispatch over a pixel list of `pixels` entries,
+/// TILE x TILE a workgroup, at most `max_groups` workgroups a dispatch.
+fn list_dispatches(pixels: u32, max_groups: u32) -> Vec<(TileBlock, u32)> {
+    let groups = pixels.div_ceil(TILE * TILE);
+    (0..groups)
+        .step_by(max_groups.max(1) as usize)
+        .map(|base| {
+            let block = TileBlock {
+                group_base: base,
+                ..Default::default()
+            };
+            (block, max_groups.max(1).min(groups - base))
+        })
+        .collect()
 }
 
 /// The path tracer's parameter block for one view.

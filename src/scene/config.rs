@@ -863,6 +863,11 @@ pub struct RenderConfig {
     /// How the noise check estimates a pixel's render noise (with `noise_target`):
     /// "halves" (default) or "samples" ([`NoiseEstimator`]).
     pub noise_estimate: Option<NoiseEstimator>,
+    /// Samples per pixel by the pixel's own noise (with `noise_target`), [0, 16]: after
+    /// each check the pixels that have their share of the target stop, each pixel's
+    /// variance taken as the mean over the (2 r + 1)^2 pixels around it. None: every
+    /// pixel takes the same samples. docs/dataset.md, "Samples per pixel".
+    pub adaptive_radius: Option<u32>,
     /// Where the labels (class, instance, face, coverage) come from: "auto" (default),
     /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
     /// camera samples); [`LabelSource`].
@@ -1004,6 +1009,7 @@ impl Default for RenderConfig {
             noise_target: None,
             min_spp: None,
             noise_estimate: None,
+            adaptive_radius: None,
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
             analytic_rays: DEFAULT_ANALYTIC_RAYS,
@@ -1462,6 +1468,15 @@ impl SceneConfig {
                 });
             }
             range_u("render.min_spp", m, 2, r.spp.max(2), "[2, render.spp]")?;
+        }
+        if let Some(a) = r.adaptive_radius {
+            if r.noise_target.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "render.adaptive_radius",
+                    message: "stops each pixel by its share of render.noise_target: give that too, or remove it".into(),
+                });
+            }
+            range_u("render.adaptive_radius", a, 0, 16, "[0, 16]")?;
         }
         if r.noise_estimate.is_some() && r.noise_target.is_none() {
             return Err(ConfigError::Invalid {
