@@ -1641,6 +1641,11 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         job.render.noise_estimate,
         Some(synosis::scene::config::NoiseEstimator::Samples)
     );
+    let adaptive = target.replace("min_spp = 16", "min_spp = 16\nadaptive_radius = 4");
+    let job = dataset::prepare_text(&adaptive, "job", tmp.path())
+        .unwrap()
+        .job;
+    assert_eq!(job.render.adaptive_radius, Some(4));
     let cases: Vec<(String, &str)> = vec![
         (
             with("[sensor]\nexposure = 1.0\nbit_depth = 12"),
@@ -1679,6 +1684,17 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         (
             emva.replace("spp = 1", "spp = 64\nnoise_estimate = \"halves\""),
             "render.noise_estimate",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nadaptive_radius = 4"),
+            "render.adaptive_radius",
+        ),
+        (
+            emva.replace(
+                "spp = 1",
+                "spp = 64\nnoise_target = 1.0\nadaptive_radius = 17",
+            ),
+            "render.adaptive_radius",
         ),
         (
             emva.replace("spp = 1", "spp = 64\nbatch_spp = 0"),

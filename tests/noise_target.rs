@@ -256,7 +256,10 @@ fn adaptive_pixels_each_stop_at_their_own_samples() {
     assert!(est.ratio <= target, "{}", est.ratio);
     assert_eq!(est.spp, f.spp);
     assert!((est.mean_spp - f.mean_spp()).abs() < 1e-9);
-    assert!(counts.iter().all(|&c| c >= 8 && c <= f.spp && c % 8 == 0), "{counts:?}");
+    assert!(
+        counts.iter().all(|&c| c >= 8 && c <= f.spp && c % 8 == 0),
+        "{counts:?}"
+    );
     assert!(counts.iter().any(|&c| c < f.spp), "{counts:?}");
     assert!(
         f.mean_spp() < whole.spp as f64,
@@ -274,7 +277,10 @@ fn adaptive_pixels_each_stop_at_their_own_samples() {
             .filter(|&i| counts[i] == c)
             .filter(|&i| f.radiance.data[i].to_bits() != fixed.radiance.data[i].to_bits())
             .count();
-        assert_eq!(wrong, 0, "{wrong} pixels of {c} spp differ from the {c}-spp render");
+        assert_eq!(
+            wrong, 0,
+            "{wrong} pixels of {c} spp differ from the {c}-spp render"
+        );
         assert_eq!(f.annotation, fixed.annotation);
     }
     // The error against an independent reference: no worse than the image-wide stop's

@@ -1310,7 +1310,10 @@ fn render_stage<'p>(
         renderer: renderer.describe(),
         spp,
         noise_checks: checks.iter().map(|e| (e.spp, e.ratio)).collect(),
-        mean_spp: match (req.noise.is_some_and(|n| n.adaptive_radius.is_some()), checks.last()) {
+        mean_spp: match (
+            req.noise.is_some_and(|n| n.adaptive_radius.is_some()),
+            checks.last(),
+        ) {
             (true, Some(e)) => Some(e.mean_spp),
             _ => None,
         },

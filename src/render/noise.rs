@@ -656,7 +656,11 @@ mod tests {
         let x = [3.0f32, 3.0, 3.0, 3.0, 1e5];
         let d = [0.0f32, 1.0, 2.0, 4.0, 1.0];
         let sum: Vec<f32> = x.iter().map(|x| 2.0 * x).collect();
-        let sq: Vec<f32> = x.iter().zip(&d).map(|(x, d)| 2.0 * (x * x + d * d)).collect();
+        let sq: Vec<f32> = x
+            .iter()
+            .zip(&d)
+            .map(|(x, d)| 2.0 * (x * x + d * d))
+            .collect();
         let all = [true; 5];
         let samples = NoiseEstimator::Samples;
         let est = cam.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
@@ -667,11 +671,25 @@ mod tests {
             .sum();
         let per_sample = |i: usize| k_e * k_e * 2.0 * (d[i] as f64).powi(2);
         let wanted = |target: f64, radius: u32| {
-            cam.pixel_samples_wanted(samples, &sum, &sq, 2, est.exposure_s, &all, 5, target, radius)
+            cam.pixel_samples_wanted(
+                samples,
+                &sum,
+                &sq,
+                2,
+                est.exposure_s,
+                &all,
+                5,
+                target,
+                radius,
+            )
         };
         // The render variance with those samples (a pixel keeps the 2 it has).
-        let render = |want: &[f64]| (1..4).map(|i| per_sample(i) / want[i].max(2.0)).sum::<f64>();
-        let target = (render(&[2.0; 5]) / camera).sqrt() / 8.0;   // 64 x fewer variance
+        let render = |want: &[f64]| {
+            (1..4)
+                .map(|i| per_sample(i) / want[i].max(2.0))
+                .sum::<f64>()
+        };
+        let target = (render(&[2.0; 5]) / camera).sqrt() / 8.0; // 64 x fewer variance
         let want = wanted(target, 0);
         assert_eq!((want[0], want[4]), (0.0, 0.0), "no spread, saturated");
         assert!(want[1] > 2.0, "{want:?}");
@@ -701,7 +719,9 @@ mod tests {
         sq8[1] *= 4.0;
         let counts = [2, 8, 2, 2, 2];
         let each = PixelSamples::Each(&counts);
-        let est8 = cam.estimate(samples, &sum8, &sq8, each, &all, &all).unwrap();
+        let est8 = cam
+            .estimate(samples, &sum8, &sq8, each, &all, &all)
+            .unwrap();
         assert_eq!((est8.spp, est8.mean_spp), (8, 16.0 / 5.0));
         let want8 = cam.pixel_samples_wanted(
             samples,

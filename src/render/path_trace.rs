@@ -125,7 +125,14 @@ pub fn render_frame(
     // `[render] adaptive_radius`: the samples each pixel stopped at (0: still sampling),
     // and the pixels still sampling in tile order (None: all of them).
     let adaptive = opts.noise.and_then(|n| n.adaptive_radius);
-    let mut stopped = vec![0u32; if adaptive.is_some() { (width * height) as usize } else { 0 }];
+    let mut stopped = vec![
+        0u32;
+        if adaptive.is_some() {
+            (width * height) as usize
+        } else {
+            0
+        }
+    ];
     let mut sampling: Option<Vec<u32>> = None;
     while done < spp {
         let count = batch.min(spp - done);
@@ -171,11 +178,10 @@ pub fn render_frame(
                     stop.target,
                     radius,
                 );
-                let order = sampling
-                    .take()
-                    .unwrap_or_else(|| tile_order(width, height));
-                let (keep, stop_now): (Vec<u32>, Vec<u32>) =
-                    order.into_iter().partition(|&i| want[i as usize] > done as f64);
+                let order = sampling.take().unwrap_or_else(|| tile_order(width, height));
+                let (keep, stop_now): (Vec<u32>, Vec<u32>) = order
+                    .into_iter()
+                    .partition(|&i| want[i as usize] > done as f64);
                 for i in stop_now {
                     stopped[i as usize] = done;
                 }
@@ -222,7 +228,12 @@ fn pixel_counts(stopped: &[u32], done: u32) -> Option<Vec<u32>> {
     if stopped.iter().all(|&s| s == 0) {
         return None;
     }
-    Some(stopped.iter().map(|&s| if s == 0 { done } else { s }).collect())
+    Some(
+        stopped
+            .iter()
+            .map(|&s| if s == 0 { done } else { s })
+            .collect(),
+    )
 }
 
 /// Per-pixel sums as [`View::read_sums`] reads them: radiance, and the noise estimate's.

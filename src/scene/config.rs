@@ -1609,6 +1609,18 @@ mod tests {
         );
         let e = with_target("pairs").unwrap_err().to_string();
         assert!(e.contains("halves") && e.contains("samples"), "{e}");
+        // `adaptive_radius` likewise, within [0, 16].
+        let adaptive = |r: i32, target: &str| {
+            SceneConfig::parse(&format!(
+                "[render]\n{target}adaptive_radius = {r}\n[camera]\nf_number = 8.0\n[sensor]\n"
+            ))
+        };
+        let target = "noise_target = 2.0\n";
+        assert_eq!(adaptive(4, target).unwrap().render.adaptive_radius, Some(4));
+        for (r, t) in [(17, target), (4, "")] {
+            let e = adaptive(r, t).unwrap_err().to_string();
+            assert!(e.contains("render.adaptive_radius"), "{e}");
+        }
     }
 
     #[test]
