@@ -281,9 +281,7 @@ impl CameraNoise {
             exposure_s: t,
         })
     }
-}
 
-impl CameraNoise {
     /// `[render] adaptive_radius`: the samples each pixel should end with so that the
     /// criterion meets `target` at the fewest samples in all, from the sums after `n`
     /// (each pixel's own) at the exposure `exposure_s` of that check's estimate.
@@ -296,12 +294,14 @@ impl CameraNoise {
     /// sqrt(s_i) (Lagrange; the pixels the criterion does not count get the same
     /// marginal rule). A pixel already has its samples (`n`, never taken back): where
     /// its share is below them it keeps them, its variance s_i / n_i spent from the
-    /// budget, and the others share the rest (water filling). **Approximation (neighbours share a variance):** one pixel's
-    /// estimate has one or few degrees of freedom, and a pixel whose few samples missed a
-    /// rare bright path would stop with a low value; s_i is therefore the mean over the
-    /// (2 `radius` + 1)^2 pixels around it (clipped at the image's edges, `width` pixels
-    /// a row), which the stop depends on far more than on the pixel's own samples. The
-    /// bias this leaves is measured, not zero (docs/dataset.md, "Samples per pixel").
+    /// budget, and the others share the rest (water filling).
+    ///
+    /// **Approximation (neighbours share a variance):** one pixel's estimate has one or
+    /// few degrees of freedom, and a pixel whose few samples missed a rare bright path
+    /// would stop with a low value; s_i is therefore the mean over the (2 `radius` + 1)^2
+    /// pixels around it (clipped at the image's edges, `width` pixels a row), which the
+    /// stop depends on far more than on the pixel's own samples. The bias this leaves is
+    /// measured, not zero (docs/dataset.md, "Samples per pixel").
     #[allow(clippy::too_many_arguments)]
     pub fn pixel_samples_wanted<'a>(
         &self,
