@@ -68,6 +68,7 @@ impl ImageRenderer for OrthoLabelTestDouble {
             face: vec![0; n],
             coverage: vec![0.0; n],
             object: vec![0; n],
+            pixel_spp: None,
         };
         for t in 0..mesh.triangles.len() {
             if mesh.area_normal(t).dot(d) <= 0.0 {

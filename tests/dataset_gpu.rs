@@ -464,4 +464,48 @@ fn a_noise_target_picks_each_images_spp() {
         entries.iter().any(|e| e.spp < 256),
         "no image stopped before the maximum"
     );
+    assert!(entries.iter().all(|e| e.mean_spp.is_none()));
+
+    // With `adaptive_radius` each pixel stops at its own samples: spp.png holds them, its
+    // mean the manifest's `mean_spp`, its most the image's `spp`.
+    // (A lower target and smaller batches than above: checks after the first.)
+    let target = 1.0;
+    let adaptive = text
+        .replace("noise_target = 4", "noise_target = 1.0\nbatch_spp = 8")
+        .replace("min_spp = 8", "min_spp = 8\nadaptive_radius = 2");
+    let prep = dataset::prepare_text(&adaptive, "smoke", scenes).unwrap();
+    let out = tmp.path().join("adaptive");
+    let opts = RunOptions {
+        shard: Shard { index: 0, count: 4 },
+        ..Default::default()
+    };
+    dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap();
+    let entries = dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
+    let mut some_stopped = false;
+    for e in &entries {
+        let mean = e.mean_spp.expect("mean_spp recorded");
+        let ratio = e.noise_ratio.expect("noise_ratio recorded");
+        eprintln!(
+            "{}: most {} spp, mean {mean:.2}, noise ratio {ratio:.3}",
+            e.id, e.spp
+        );
+        assert!(e.spp == 256 || ratio <= target, "{}: {ratio}", e.id);
+        let png = out.join("images").join(&e.id).join("spp.png");
+        if !png.exists() {
+            assert_eq!(mean, e.spp as f64, "{}: every pixel took spp", e.id);
+            continue;
+        }
+        assert!(e.files.contains_key("spp.png"));
+        let img = image::open(&png).unwrap().into_luma16();
+        let counts: Vec<u32> = img.pixels().map(|p| p.0[0] as u32).collect();
+        let png_mean = counts.iter().sum::<u32>() as f64 / counts.len() as f64;
+        assert!((png_mean - mean).abs() < 1e-9, "{png_mean} {mean}");
+        assert_eq!(counts.iter().max(), Some(&e.spp));
+        assert!(
+            counts.iter().all(|&c| c >= 8 && c % 8 == 0),
+            "at batch ends"
+        );
+        some_stopped |= counts.iter().any(|&c| c < e.spp);
+    }
+    assert!(some_stopped, "no pixel stopped before its image");
 }

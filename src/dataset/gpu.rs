@@ -243,6 +243,7 @@ impl ImageRenderer for GpuRenderer {
             face,
             coverage: ann.coverage,
             object: object_mask,
+            pixel_spp: frame.pixel_spp,
         })
     }
 }

@@ -138,6 +138,9 @@ pub struct RenderedImage {
     pub coverage: Vec<f32>,
     /// 1 where the first hit is the object, 0 for the table or nothing.
     pub object: Vec<u8>,
+    /// With `[render] adaptive_radius`, each pixel's own samples when not all took the
+    /// image's spp (written as spp.png); None: every pixel took them.
+    pub pixel_spp: Option<Vec<u32>>,
 }
 
 impl RenderedImage {
@@ -178,6 +181,20 @@ impl RenderedImage {
         }
         if let Some(p) = self.coverage.iter().position(|c| !(0.0..=1.0).contains(c)) {
             return Err(format!("coverage at pixel {p} is {}", self.coverage[p]));
+        }
+        if let Some(counts) = &self.pixel_spp {
+            if counts.len() != n {
+                return Err(format!(
+                    "pixel_spp has {} values for {n} pixels",
+                    counts.len()
+                ));
+            }
+            if let Some(p) = counts.iter().position(|&c| c == 0 || c > req.spp) {
+                return Err(format!(
+                    "pixel {p} took {} samples, allowed [1, {}]",
+                    counts[p], req.spp
+                ));
+            }
         }
         Ok(())
     }

@@ -1522,6 +1522,14 @@ fn write_raw(dir: &Path, img: &RenderedImage) -> Result<BTreeMap<String, String>
         "coverage.png".into(),
         files::write_gray16(&dir.join("coverage.png"), w, h, &cov)?,
     );
+    if let Some(counts) = &img.pixel_spp {
+        // `[render] adaptive_radius`: each pixel's samples (at most 65535 shown).
+        let spp: Vec<u16> = counts.iter().map(|&c| c.min(65535) as u16).collect();
+        m.insert(
+            "spp.png".into(),
+            files::write_gray16(&dir.join("spp.png"), w, h, &spp)?,
+        );
+    }
     Ok(m)
 }
 
@@ -1593,6 +1601,7 @@ fn read_raw_frame(
         face,
         coverage: Vec::new(),
         object: object.iter().map(|&o| (o != 0) as u8).collect(),
+        pixel_spp: None,
     };
     raw_frame(job, &e.finish, e.seed, camera, &img)
         .map_err(|m| DatasetError::layout(dir, format!("[sensor]: {m}")))
