@@ -69,7 +69,12 @@ pub enum PixelSamples<'a> {
     Each(&'a [u32]),
 }
 
-impl PixelSamples<'_> {
+impl<'a> PixelSamples<'a> {
+    /// Each pixel's own `counts` where given, else `all` for every pixel.
+    pub fn new(counts: Option<&'a [u32]>, all: u32) -> Self {
+        counts.map_or(PixelSamples::All(all), PixelSamples::Each)
+    }
+
     /// Pixel i's samples.
     pub fn of(&self, i: usize) -> u32 {
         match self {

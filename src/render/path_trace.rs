@@ -77,10 +77,7 @@ pub struct Frame {
 impl Frame {
     /// Mean samples per pixel (`spp` unless adaptive).
     pub fn mean_spp(&self) -> f64 {
-        match &self.pixel_spp {
-            Some(c) => PixelSamples::Each(c).mean(),
-            None => self.spp as f64,
-        }
+        PixelSamples::new(self.pixel_spp.as_deref(), self.spp).mean()
     }
 }
 
@@ -125,14 +122,12 @@ pub fn render_frame(
     // `[render] adaptive_radius`: the samples each pixel stopped at (0: still sampling),
     // and the pixels still sampling in tile order (None: all of them).
     let adaptive = opts.noise.and_then(|n| n.adaptive_radius);
-    let mut stopped = vec![
-        0u32;
-        if adaptive.is_some() {
-            (width * height) as usize
-        } else {
-            0
-        }
-    ];
+    let tracked = if adaptive.is_some() {
+        width * height
+    } else {
+        0
+    };
+    let mut stopped = vec![0u32; tracked as usize];
     let mut sampling: Option<Vec<u32>> = None;
     while done < spp {
         let count = batch.min(spp - done);
@@ -152,10 +147,7 @@ pub fn render_frame(
             && (done >= at || done == spp)
         {
             let counts = pixel_counts(&stopped, done);
-            let samples = match &counts {
-                Some(c) => PixelSamples::Each(c),
-                None => PixelSamples::All(done),
-            };
+            let samples = PixelSamples::new(counts.as_deref(), done);
             let (est, sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
                 noise_estimate(&view, stop, samples, &mut masks)
             })?;
@@ -199,10 +191,7 @@ pub fn render_frame(
         }
     }
     let counts = pixel_counts(&stopped, done);
-    let samples = match &counts {
-        Some(c) => PixelSamples::Each(c),
-        None => PixelSamples::All(done),
-    };
+    let samples = PixelSamples::new(counts.as_deref(), done);
     let (data, annotation) = view.read(samples)?;
     let radiance = Radiance {
         width,

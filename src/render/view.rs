@@ -45,18 +45,25 @@ impl Tiling {
 
     /// (tile block, workgroup count) of each dispatch, in order.
     pub fn dispatches(&self) -> impl Iterator<Item = (TileBlock, u32)> + '_ {
-        (0..self.tiles)
-            .step_by(self.max_groups as usize)
-            .map(|base| {
-                let block = TileBlock {
-                    tiles_x: self.tiles_x,
-                    mult: self.mult,
-                    group_base: base,
-                    tile_count: self.tiles,
-                };
-                (block, self.max_groups.min(self.tiles - base))
-            })
+        group_chunks(self.tiles, self.max_groups).map(|(base, count)| {
+            let block = TileBlock {
+                tiles_x: self.tiles_x,
+                mult: self.mult,
+                group_base: base,
+                tile_count: self.tiles,
+            };
+            (block, count)
+        })
     }
+}
+
+/// `groups` workgroups cut into dispatches of at most `max_groups`: (first group,
+/// count) of each, in order.
+fn group_chunks(groups: u32, max_groups: u32) -> impl Iterator<Item = (u32, u32)> {
+    let max = max_groups.max(1);
+    (0..groups)
+        .step_by(max as usize)
+        .map(move |base| (base, max.min(groups - base)))
 }
 
 /// The camera as the shaders take it.
@@ -415,15 +422,13 @@ pub fn tile_order(width: u32, height: u32) -> Vec<u32> {
 /// (block, workgroup count) of each dispatch over a pixel list of `pixels` entries,
 /// TILE x TILE a workgroup, at most `max_groups` workgroups a dispatch.
 fn list_dispatches(pixels: u32, max_groups: u32) -> Vec<(TileBlock, u32)> {
-    let groups = pixels.div_ceil(TILE * TILE);
-    (0..groups)
-        .step_by(max_groups.max(1) as usize)
-        .map(|base| {
+    group_chunks(pixels.div_ceil(TILE * TILE), max_groups)
+        .map(|(base, count)| {
             let block = TileBlock {
                 group_base: base,
                 ..Default::default()
             };
-            (block, max_groups.max(1).min(groups - base))
+            (block, count)
         })
         .collect()
 }
