@@ -52,15 +52,18 @@ uint owen_scramble(uint x, uint seed) {
 uint sobol0(uint i) { return bitfieldReverse(i); }
 
 // Second Sobol dimension (primitive polynomial x + 1): direction numbers v_k with
-// v_0 = 2^31 and v_k = v_{k-1} ^ (v_{k-1} >> 1).
+// v_0 = 2^31 and v_k = v_{k-1} ^ (v_{k-1} >> 1), so bit 31 - j of v_k is C(k, j) mod 2,
+// 1 where the bits of j are among k's (Lucas). Bit 31 - j of the sum over i's bits k is
+// then the parity of i's bits k whose bits include j's: the superset transform over
+// GF(2) of i's bits read as a function of the 5-bit k, done in five shift-and-xor
+// steps, not a loop over i's 32 bits (the same values as the loop).
 uint sobol1(uint i) {
-    uint r = 0u;
-    uint v = 0x80000000u;
-    for (; i != 0u; i >>= 1) {
-        if ((i & 1u) != 0u) r ^= v;
-        v ^= v >> 1;
-    }
-    return r;
+    i ^= (i >> 1) & 0x55555555u;
+    i ^= (i >> 2) & 0x33333333u;
+    i ^= (i >> 4) & 0x0f0f0f0fu;
+    i ^= (i >> 8) & 0x00ff00ffu;
+    i ^= (i >> 16) & 0x0000ffffu;
+    return bitfieldReverse(i);
 }
 
 float u32_to_unit(uint x) { return float(x >> 8) * (1.0 / 16777216.0); }
