@@ -485,6 +485,9 @@ struct PixelPlane {
     uint prim;
     uint word;
     Surface surf;
+    vec3 a;       // its triangle's first corner,
+    vec3 ba;      // and the rows taking p - a to barycentrics in its plane (plane_bary)
+    vec3 ca;
 };
 PixelPlane pix_plane;
 
@@ -509,16 +512,15 @@ void pixel_plane_init(uint px, uint py) {
     pix_plane.prim = h.prim;
     pix_plane.word = word;
     pix_plane.surf = surf;
-    record_rings(offset_ray(pix_plane.p, ng), ng, CV_EXTRA_RING_DIVISOR);
-}
-
-// Barycentrics (of the 2nd and 3rd corner) of p in t's plane, beyond its edges too.
-vec2 plane_bary(Tri t, vec3 p) {
-    vec3 e1 = t.b.xyz - t.a.xyz, e2 = t.c.xyz - t.a.xyz, v = p - t.a.xyz;
+    // Barycentrics in t's plane, beyond its edges too: p - a against the dual basis of
+    // its edges e1, e2 (what plane_bary solved per point).
+    vec3 e1 = t.b.xyz - t.a.xyz, e2 = t.c.xyz - t.a.xyz;
     float d00 = dot(e1, e1), d01 = dot(e1, e2), d11 = dot(e2, e2);
-    float d20 = dot(v, e1), d21 = dot(v, e2);
-    float den = d00 * d11 - d01 * d01;
-    return vec2(d11 * d20 - d01 * d21, d00 * d21 - d01 * d20) / den;
+    float inv = 1.0 / (d00 * d11 - d01 * d01);
+    pix_plane.a = t.a.xyz;
+    pix_plane.ba = (d11 * e1 - d01 * e2) * inv;
+    pix_plane.ca = (d00 * e2 - d01 * e1) * inv;
+    record_rings(offset_ray(pix_plane.p, ng), ng, CV_EXTRA_RING_DIVISOR);
 }
 
 // A' of the camera ray o, d (pixel_plane_init's pixel); 0 where the pixel has no
@@ -532,7 +534,8 @@ float pixel_plane_analytic(vec3 o, vec3 d) {
     if (!(h.t > 0.0)) return 0.0;
     vec3 p = o + h.t * d;
     h.prim = pix_plane.prim;
-    h.bary = plane_bary(fetch_tri(h.prim), p);
+    vec3 v = p - pix_plane.a;
+    h.bary = vec2(dot(v, pix_plane.ba), dot(v, pix_plane.ca));
     h.inst = 0u;
     Surface surf = pix_plane.surf;
     vec3 ns = surface_normal(h, d, p, pix_plane.ng, pix_plane.word, 0u, surf);
@@ -804,6 +807,7 @@ void main() {
     uint label_count = min(pc.labels * pc.labels, min(pc.sample_count, LABEL_MAX_SAMPLES));
     if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
+    seg_memo_clear();
     for (uint s = 0u; s < pc.sample_count; s++) {
         uint word;
         bool label = s < label_count;

@@ -389,26 +389,45 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
     }
 }
 
+// One edge of the clamped-cosine polygon integral between unit a and b, over 2 pi:
+// angle / sin(angle) from a rational fit in cos(angle) (Hill's, of the LTC reference
+// code; relative error below 2e-6 over (0, pi), measured), no atan: what the extra
+// camera rays' closed form takes (edge_z is kept where A must equal E[G]).
+float edge_z_unit(vec3 a, vec3 b) {
+    float x = dot(a, b);
+    float y = abs(x);
+    float v = (0.8543985 + (0.4965155 + 0.0145206 * y) * y) / (3.4175940 + (4.1616724 + y) * y);
+    float ts = x > 0.0 ? v : 0.5 * inversesqrt(max(1.0 - x * x, 1e-7)) - v;
+    return (a.x * b.y - a.y * b.x) * ts;
+}
+
+// Recorded vertex w in the cosine space of lobe l (reciprocal widths rt1, rt2), unit
+// length; below its horizon (z < 0) where w is below the shading horizon ns.
+vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r, vec3 ns) {
+    if (!(dot(w, ns) > 0.0)) return vec3(0.0, 0.0, -1.0);
+    vec3 v = vec3(dot(w, rt1), dot(w, rt2), dot(w, r));
+    return v * inversesqrt(dot(v, v));
+}
+
 // Recorded loop i summed as ring_integral sums a loop for lobe l (shading normal ns),
-// closed; `above` as the loop's (record_rings kept only loops above the geometric
-// horizon). The lobe's widths are taken as reciprocals (a rounding of its own: A' needs
-// only to be one function of the camera ray).
+// closed, over 2 pi; `above` as the loop's (record_rings kept only loops above the
+// geometric horizon). The lobe's widths are taken as reciprocals and the edges from
+// edge_z_unit (roundings of their own: A' needs only to be one function of the camera
+// ray).
 float recorded_loop(uint i, Lobe l, vec3 ns, out bool above) {
     uint base = i * REC_LOOP_VERTS;
     vec3 t1 = l.t1 * (1.0 / l.a1), t2 = l.t2 * (1.0 / l.a2);
-    vec3 w = rec_w[base];
-    vec3 first = dot(w, ns) > 0.0 ? vec3(dot(w, t1), dot(w, t2), dot(w, l.r)) : vec3(0.0, 0.0, -1.0);
+    vec3 first = recorded_point(rec_w[base], t1, t2, l.r, ns);
     vec3 prev = first;
     float sum = 0.0;
     above = first.z > 0.0;
     for (uint j = 1u; j < rec_n[i]; j++) {
-        w = rec_w[base + j];
-        vec3 v = dot(w, ns) > 0.0 ? vec3(dot(w, t1), dot(w, t2), dot(w, l.r)) : vec3(0.0, 0.0, -1.0);
-        sum += edge_z(prev, v);
+        vec3 v = recorded_point(rec_w[base + j], t1, t2, l.r, ns);
+        sum += edge_z_unit(prev, v);
         prev = v;
         above = above && v.z > 0.0;
     }
-    return sum + edge_z(prev, first);
+    return sum + edge_z_unit(prev, first);
 }
 
 // analytic_rings' closed form for lobe l over the recorded rings (as seen from the
@@ -419,7 +438,7 @@ float recorded_rings(Lobe l, vec3 ns) {
         bool above_lo, above_hi;
         float lo = recorded_loop(2u * r, l, ns, above_lo);
         float hi = recorded_loop(2u * r + 1u, l, ns, above_hi);
-        if (above_lo && above_hi) a += l.c * rec_le[r] * abs(lo - hi) * (0.5 / PI);
+        if (above_lo && above_hi) a += l.c * rec_le[r] * abs(lo - hi);
     }
     return a;
 }

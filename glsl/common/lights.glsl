@@ -68,6 +68,34 @@ float segment_weight(uint base, uint segment_tris, vec3 x, vec3 n) {
     return sum;
 }
 
+// The last facing segment sum light_area_pdf took (segment_weight of the segment whose
+// first triangle is `base`, from x with normal n): the BSDF directions of one shading
+// point (the path's own and those of `[render] bsdf_samples`, each asked for its MIS
+// weight once for the estimate and once for the control variate) mostly meet one ring
+// segment under a narrow lobe, so one sum of its 32 weights serves them all. The same
+// function of the same numbers: the same pdf bit for bit. seg_memo_clear empties it.
+struct SegmentMemo {
+    uint base;   // first triangle of the segment; NO_SEGMENT: empty
+    vec3 x;
+    vec3 n;
+    float wsum;
+};
+const uint NO_SEGMENT = 0xffffffffu;
+SegmentMemo seg_memo;
+
+void seg_memo_clear() { seg_memo.base = NO_SEGMENT; }
+
+// segment_weight through the memo.
+float segment_weight_memo(uint base, uint segment_tris, vec3 x, vec3 n) {
+    if (seg_memo.base == base && seg_memo.x == x && seg_memo.n == n) return seg_memo.wsum;
+    float wsum = segment_weight(base, segment_tris, x, n);
+    seg_memo.base = base;
+    seg_memo.x = x;
+    seg_memo.n = n;
+    seg_memo.wsum = wsum;
+    return wsum;
+}
+
 // Area pdf of a point on light triangle `tri`, as chosen from x with normal n: the
 // probability of choosing its emitter times the area pdf within it.
 float light_area_pdf(uint tri, vec3 x, vec3 n) {
@@ -82,7 +110,7 @@ float light_area_pdf(uint tri, vec3 x, vec3 n) {
     uint seg = k / segment_tris;
     if (seg >= segments) return 0.0;
     uint base = prm.light_first + e.shape.x + seg * segment_tris;
-    float wsum = segment_weight(base, segment_tris, x, n);
+    float wsum = segment_weight_memo(base, segment_tris, x, n);
     float area = 0.5 * length(tri_normal(fetch_tri(tri)));
     return wsum > 0.0 ? light_weight(tri, x, n) / (wsum * float(segments) * area) * sel : 0.0;
 }
