@@ -215,11 +215,12 @@ const float TRIPLANAR_MIN_WEIGHT = 1e-3;
 // plane, summed with weights |n_k|^4 / sum of the smooth normal ns.
 vec3 triplanar_normal(uint slot, MapHeader m, vec3 p, vec3 ng, vec3 ns) {
     if (dot(ns, ng) <= 0.0) return ng;
-    vec3 e[3];
-    e[0] = m.axis_x.xyz;
-    e[2] = m.axis_up.xyz;
-    e[1] = cross(e[2], e[0]);
-    vec3 local = vec3(dot(ns, e[0]), dot(ns, e[1]), dot(ns, e[2]));
+    // The frame as three vectors picked by selects, no array: a loop indexing a local
+    // array with its counter is unrolled by the compiler (three copies of slopes_at).
+    vec3 e0 = m.axis_x.xyz;
+    vec3 e2 = m.axis_up.xyz;
+    vec3 e1 = cross(e2, e0);
+    vec3 local = vec3(dot(ns, e0), dot(ns, e1), dot(ns, e2));
     vec3 w = abs(local);
     w = (w * w) * (w * w);
     float sum = w.x + w.y + w.z;
@@ -228,15 +229,17 @@ vec3 triplanar_normal(uint slot, MapHeader m, vec3 p, vec3 ng, vec3 ns) {
     vec2 place = curved_maps[slot].place.xy;
     vec3 delta = vec3(0.0);
     for (uint k = 0u; k < 3u; k++) {
-        if (w[k] < TRIPLANAR_MIN_WEIGHT) continue;
-        vec3 ax = e[(k + 1u) % 3u] * (local[k] >= 0.0 ? 1.0 : -1.0);
-        vec3 up = e[(k + 2u) % 3u];
+        float wk = k == 0u ? w.x : k == 1u ? w.y : w.z;
+        float lk = k == 0u ? local.x : k == 1u ? local.y : local.z;
+        if (wk < TRIPLANAR_MIN_WEIGHT) continue;
+        vec3 ax = (k == 0u ? e1 : k == 1u ? e2 : e0) * (lk >= 0.0 ? 1.0 : -1.0);
+        vec3 up = k == 0u ? e2 : k == 1u ? e0 : e1;
         vec2 s = slopes_at(m, vec2(dot(d, ax) - place.x, dot(d, up) - place.y));
         float len = length(s);
         if (len > MAX_SLOPE) s *= MAX_SLOPE / len;
         ax -= dot(ax, ng) * ng;
         up -= dot(up, ng) * ng;
-        delta += w[k] * (-s.x * ax + s.y * up);
+        delta += wk * (-s.x * ax + s.y * up);
     }
     if (delta == vec3(0.0)) return ng;
     return normalize(ng + delta);
@@ -359,16 +362,28 @@ vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
     float l = min(lambda, float(top));
     uint k = uint(floor(l));
     float f = l - float(k);
-    vec2 ma = m0;
-    float va = 0.0;
-    if (k > 0u && !lean_level(slot, p, k, ma, va)) return m0;
+    // Levels k (level 0: m0) and, unless f = 0, k + 1 (clamped), by one call of
+    // lean_level in a loop: the shader compiles one copy of it.
+    vec2 ma = m0, mb = vec2(0.0);
+    float va = 0.0, vb = 0.0;
+    for (uint step = 0u; step < 2u; step++) {
+        if (step == 0u && k == 0u) continue;
+        if (step == 1u && f == 0.0) break;
+        vec2 mk;
+        float vk;
+        if (!lean_level(slot, p, step == 0u ? k : min(k + 1u, top), mk, vk)) return m0;
+        if (step == 0u) {
+            ma = mk;
+            va = vk;
+        } else {
+            mb = mk;
+            vb = vk;
+        }
+    }
     if (f == 0.0) {
         var = va;
         return ma;
     }
-    vec2 mb;
-    float vb;
-    if (!lean_level(slot, p, min(k + 1u, top), mb, vb)) return m0;
     vec2 mm = mix(ma, mb, f);
     vec2 ea = ma - mm, eb = mb - mm;
     var = (1.0 - f) * (va + dot(ea, ea)) + f * (vb + dot(eb, eb));
@@ -578,9 +593,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     vec3 o, d;
     pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
-    // A' of this sample's camera ray (for the extra camera rays' term below).
+    // This sample's camera ray, kept for its A' (the extra camera rays' term below).
     uint extra = prm.direct_light == DIRECT_ANALYTIC ? prm.cv_extra_rays : 0u;
-    float cv_a0 = extra > 0u ? pixel_plane_analytic(o, d) : 0.0;
+    vec3 o0 = o, d0 = d;
 
     float L = 0.0;
     float T = 1.0;
@@ -591,16 +606,21 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     float prev_nb = 1.0;     // BSDF samples taken at the ray's origin for its direct light
-    for (uint depth = 0u; depth <= prm.max_bounces; depth++) {
-        Hit h = trace(o, d, 0.0, 3.0e38);
+    // The path stopped with a control-variate term pending: one more trip through the
+    // loop's trace, for the light alone (every trace of the path is that one call: the
+    // shader compiles one traversal for it).
+    bool stop = false;
+    for (uint depth = 0u; depth <= prm.max_bounces || stop; depth++) {
+        // The ray's closest hit; with a control-variate term pending also the first light
+        // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped.
+        uint kind = stop ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
+        TraceResult tq = trace_query(kind, o, d, 0.0, 3.0e38, 0.0);
+        Hit h = tq.h;
         if (cv_pending != 0.0) {
-            // The first light on the ray with occluders ignored: the hit itself unless
-            // something else is in front.
-            bool at_light = h.prim == NO_HIT || (mat_word(h.prim) & 0xffu) == MAT_LIGHT;
-            L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, at_light ? h : trace_lights(o, d),
-                                cv_mask) * cv_pending;
+            L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, tq.light, cv_mask) * cv_pending;
             cv_pending = 0.0;
         }
+        if (stop) break;
         if (want_label && depth == 0u && h.prim != NO_HIT
                 && h.prim < uint(label_words.length())) {
             label_word = label_words[h.prim];
@@ -657,6 +677,12 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             uint ei = choose_emitter(ue);
             LightBlock e = emitters[ei];
             vec2 ul = sample_2d(rng);
+            // The sample's shadow ray (one trace for both kinds of light, below) and what
+            // it adds where nothing blocks it.
+            uint shadow = TQ_BLOCKED;
+            vec3 shadow_d = vec3(0.0);
+            float shadow_max = 0.0, shadow_light = 0.0, add = 0.0;
+            bool test = false;
             if (e.shape.z == LIGHT_SPOT) {
                 vec3 to = e.pos.xyz - origin;
                 float dist2 = dot(to, to);
@@ -667,8 +693,11 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                     float pdf_b;
                     float f = surface_eval(surf, wo, wi, pdf_b);
-                    if (f > 0.0 && !trace_blocked(origin, wi_w, dist)) {
-                        L += T * f * I / (dist2 * emitter_pdf(ei) * fnl);
+                    if (f > 0.0) {
+                        test = true;
+                        shadow_d = wi_w;
+                        shadow_max = dist;
+                        add = T * f * I / (dist2 * emitter_pdf(ei) * fnl);
                     }
                 }
             } else {
@@ -701,10 +730,16 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 if (lit && f > 0.0) {
                     // Visible: nothing up to the sampled point, or a light triangle no
                     // nearer than it (up to rounding).
-                    if (trace_light_visible(origin, wi_w, dist * 1.001, dist * 0.999)) {
-                        L += T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
-                    }
+                    test = true;
+                    shadow = TQ_LIGHT_VISIBLE;
+                    shadow_d = wi_w;
+                    shadow_max = dist * 1.001;
+                    shadow_light = dist * 0.999;
+                    add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
                 }
+            }
+            if (test && !trace_query(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light).blocked) {
+                L += add;
             }
         }
 
@@ -730,13 +765,14 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
             float weight_j, pdf_j;
             if (!surface_sample(surf, wo, uj, wj, weight_j, pdf_j)) continue;
             vec3 dj = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
-            // The first light on the ray with occluders ignored; then, only where it faces
-            // the ray above the surface, whether the object hides it (the answer the
-            // closest hit would give, as a light sample's shadow test).
-            Hit lj = trace_lights(origin, dj);
+            // The first light on the ray with occluders ignored, and whether the object
+            // hides it (the answer the closest hit would give, as a light sample's shadow
+            // test), counted where that light faces the ray above the surface.
+            TraceResult seen = trace_query(TQ_LIGHT_SEEN, origin, dj, 0.0, 3.0e38, 0.0);
+            Hit lj = seen.light;
             if (lj.prim == NO_HIT) continue;
             float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
-            if (cos_j > 0.0 && dot(dj, ng) > 0.0 && trace_light_visible(origin, dj, 3.0e38, lj.t)) {
+            if (cos_j > 0.0 && dot(dj, ng) > 0.0 && !seen.blocked) {
                 L += T * weight_j * tri_radiance(lj.prim)
                     * bsdf_mis_weight(lj.prim, lj.t, cos_j, origin, ng, pdf_j) / fnb;
             }
@@ -753,17 +789,19 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
         o = origin;
         d = d_next;
         T *= weight;
-        if (!(T > 0.0)) break;
-        if (depth >= 3u) {
+        bool end = !(T > 0.0);
+        if (!end && depth >= 3u) {
             float q = min(T, 0.95);
             if (sample_1d(rng) >= q) break;
             T /= q;
         }
-        if (dot(d, ng) <= 0.0) break;   // reflected into the surface by a shading normal
-    }
-    // A primary BSDF sample whose path stopped before its next trace.
-    if (cv_pending != 0.0) {
-        L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, trace_lights(o, d), cv_mask) * cv_pending;
+        end = end || dot(d, ng) <= 0.0;   // reflected into the surface by a shading normal
+        // A primary BSDF sample whose path stops before its next trace: that trace
+        // still resolves the control variate's pending term.
+        if (end) {
+            if (cv_pending == 0.0) break;
+            stop = true;
+        }
     }
     // More camera rays for the closed form alone (`[render] analytic_rays` = M + 1): the
     // pixel's mean of A(u) over its camera rays u estimated from this sample's ray and M
@@ -772,12 +810,23 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // function A' of the camera ray; A' is pixel_plane_analytic's (no trace, the rings
     // walked once per pixel), close enough to A on a face that the difference's variance
     // is left.
+    // A'(u_0) is the loop's first step (one call of pixel_plane_analytic in the shader:
+    // lavapipe compiles each call's inlined copy, and this one is large).
     if (extra > 0u) {
-        float sum_a = 0.0;
-        for (uint j = 0u; j < extra; j++) {
-            Sampler r = sampler_init(prm.sample_gen, pixel, s * extra + j, prm.seed ^ 0x5ca1ab1eu);
-            pixel_ray(px, py, r, o, d);
-            sum_a += pixel_plane_analytic(o, d);
+        float sum_a = 0.0, cv_a0 = 0.0;
+        for (uint j = 0u; j <= extra; j++) {
+            o = o0;
+            d = d0;
+            if (j > 0u) {
+                Sampler r = sampler_init(prm.sample_gen, pixel, s * extra + j - 1u, prm.seed ^ 0x5ca1ab1eu);
+                pixel_ray(px, py, r, o, d);
+            }
+            float a = pixel_plane_analytic(o, d);
+            if (j == 0u) {
+                cv_a0 = a;
+            } else {
+                sum_a += a;
+            }
         }
         L += (sum_a - float(extra) * cv_a0) / float(extra + 1u);
     }

@@ -6,7 +6,8 @@
 //                      (bindings 0, 1) and the second level's (bindings 2, 3)
 //   TRACE_SOFTWARE_WIDE - the same with compressed wide BVHs (obvhs CWBVH, eight
 //                      children a node, src/trace/software_bvh.rs)
-// Both return the closest hit over both levels, triangles numbered in one index space.
+// Both answer trace_query (a closest hit, the first light, shadow tests: TQ_* below) and
+// trace (the closest hit over both levels), triangles numbered in one index space.
 // Passes put their own bindings from TRACE_BINDING_COUNT on.
 #ifndef TRACE_GLSL
 #define TRACE_GLSL
@@ -32,16 +33,39 @@ Hit hit_none(float tmax) {
     return h;
 }
 
+// What one trace_query traces: at most two traversals (one per level, or one ray query
+// over both), run by one loop, so a shader compiles one traversal per call site
+// (lavapipe inlines every call: with a traversal per level and query the path tracer's
+// LLVM compile took minutes longer).
+const uint TQ_CLOSEST = 0u;        // h: the closest hit over both levels (trace)
+const uint TQ_LIGHT_CLOSEST = 1u;  // light: the first light on the ray, occluders ignored;
+                                   // h: the closest hit over both levels
+const uint TQ_LIGHTS = 2u;         // h and light: the first light, occluders ignored
+const uint TQ_LIGHT_VISIBLE = 3u;  // a light sample's shadow test: blocked where the
+                                   // closest hit within tmax is not a light triangle at
+                                   // t_light or farther; light: the first light
+const uint TQ_LIGHT_SEEN = 4u;     // light: the first light, occluders ignored (up to tmax);
+                                   // blocked: none, or the object hides it
+const uint TQ_BLOCKED = 5u;        // blocked: anything, object or light, within tmax
+
+struct TraceResult {
+    Hit h;
+    Hit light;
+    bool blocked;
+};
+
 #if defined(TRACE_RAY_QUERY)
 #extension GL_EXT_ray_query : require
 #define TRACE_BINDING_COUNT 1
 layout(set = 0, binding = 0) uniform accelerationStructureEXT trace_tlas;
 
-// The closest hit among the instances whose mask meets `mask`.
-Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask) {
+// One ray query over the instances whose mask meets `mask`: the closest hit, or with
+// `any` the first found.
+Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask, bool any) {
     Hit h = hit_none(tmax);
     rayQueryEXT rq;
-    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT, mask, o, tmin, d, tmax);
+    uint flags = gl_RayFlagsOpaqueEXT | (any ? gl_RayFlagsTerminateOnFirstHitEXT : 0u);
+    rayQueryInitializeEXT(rq, trace_tlas, flags, mask, o, tmin, d, tmax);
     while (rayQueryProceedEXT(rq)) {}
     if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
         h.t = rayQueryGetIntersectionTEXT(rq, true);
@@ -53,32 +77,40 @@ Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask) {
     return h;
 }
 
-Hit trace(vec3 o, vec3 d, float tmin, float tmax) { return trace_masked(o, d, tmin, tmax, 0xffu); }
-
-// The closest hit among the view's lights alone (the second level; instance mask 0x02,
-// src/trace/mod.rs), occluders ignored.
-Hit trace_lights(vec3 o, vec3 d) { return trace_masked(o, d, 0.0, 3.0e38, 0x02u); }
-
-// Whether any triangle of the instances whose mask meets `mask` lies on the ray within
-// [0, tmax]: the query ends at its first hit.
-bool trace_any_masked(vec3 o, vec3 d, float tmax, uint mask) {
-    rayQueryEXT rq;
-    rayQueryInitializeEXT(rq, trace_tlas, gl_RayFlagsOpaqueEXT | gl_RayFlagsTerminateOnFirstHitEXT,
-                          mask, o, 0.0, d, tmax);
-    while (rayQueryProceedEXT(rq)) {}
-    return rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT;
+// The query `kind` (TQ_*) of ray o + t d, t in [tmin, tmax]. The view's lights are the
+// instances of mask 0x02 (src/trace/mod.rs), the object's 0x01. A shadow test: the
+// lights' closest hit first, then a query of the object that ends at its first hit up
+// to there.
+TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light) {
+    TraceResult res;
+    res.blocked = false;
+    res.light = hit_none(3.0e38);
+    bool one = kind == TQ_CLOSEST || kind == TQ_BLOCKED;
+    uint mask = one ? 0xffu : 0x02u;
+    bool any = kind == TQ_BLOCKED;
+    float bound = tmax;
+    Hit h;
+    for (uint step = 0u; step < 2u; step++) {
+        h = trace_masked(o, d, tmin, bound, mask, any);
+        if (one || step == 1u) break;
+        res.light = h;
+        if (kind == TQ_LIGHTS) break;
+        if (kind == TQ_LIGHT_CLOSEST) {
+            mask = 0xffu;   // then the closest hit over both, as TQ_CLOSEST
+            continue;
+        }
+        if (kind == TQ_LIGHT_SEEN ? h.prim == NO_HIT : h.prim != NO_HIT && h.t < t_light) {
+            res.blocked = true;
+            break;
+        }
+        mask = 0x01u;
+        any = true;
+        bound = h.prim != NO_HIT ? h.t : tmax;
+    }
+    if (any) res.blocked = res.blocked || h.prim != NO_HIT;
+    res.h = h;
+    return res;
 }
-
-// trace_light_visible (below), with the ray query: the lights' closest hit, then an
-// occlusion query against the object (mask 0x01) up to it.
-bool trace_light_visible(vec3 o, vec3 d, float tmax, float t_light) {
-    Hit l = trace_masked(o, d, 0.0, tmax, 0x02u);
-    if (l.prim != NO_HIT && l.t < t_light) return false;
-    return !trace_any_masked(o, d, l.prim != NO_HIT ? l.t : tmax, 0x01u);
-}
-
-// Whether any triangle, object or light, lies on the ray within [0, tmax].
-bool trace_blocked(vec3 o, vec3 d, float tmax) { return trace_any_masked(o, d, tmax, 0xffu); }
 
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
@@ -162,22 +194,6 @@ TraceRay trace_setup(vec3 o, vec3 d) {
 }
 
 
-#define TRACE_NODES trace_nodes
-#define TRACE_TRIS trace_tris
-#define TRACE_LEAF trace_leaf_0
-#define TRACE_BVH trace_bvh_0
-#define TRACE_INST 0u
-#include "trace_bvh.glsl"
-#undef TRACE_NODES
-#undef TRACE_TRIS
-#undef TRACE_LEAF
-#undef TRACE_BVH
-#undef TRACE_INST
-#define TRACE_NODES trace_nodes2
-#define TRACE_TRIS trace_tris2
-#define TRACE_LEAF trace_leaf_1
-#define TRACE_BVH trace_bvh_1
-#define TRACE_INST 1u
 #include "trace_bvh.glsl"
 
 // The traversal's view of ray (o, d): reciprocal direction for the slab tests (zero
@@ -188,58 +204,63 @@ void trace_prepare(vec3 o, vec3 d, out vec3 inv_d, out TraceRay tr) {
     tr = trace_setup(o, d);
 }
 
-Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
+// The query `kind` (TQ_*) of ray o + t d, t in [tmin, tmax]: one traversal written once,
+// run for the object (level 0) and the view's lights (level 1) in the order the query
+// needs. The closest hit: the object, then the lights beyond tmax's bound of what it
+// found (TQ_LIGHT_CLOSEST: the lights first, then the object within the light found;
+// at equal distance the lower triangle index wins either way, so both orders give the
+// same hit). A shadow test: the lights' closest hit first (the small second level); then
+// the object traversal stops at its first hit up to there (inclusive: an object triangle
+// wins a tie, its index is lower), or up to tmax (exclusive, as the closest hit's)
+// without one: the answer the closest hit would give, without finding the closest
+// occluder.
+TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light) {
+    vec3 inv_d;
+    TraceRay tr;
+    trace_prepare(o, d, inv_d, tr);
+    TraceResult res;
+    res.blocked = false;
+    res.light = hit_none(3.0e38);
+    uint level = kind == TQ_CLOSEST || kind == TQ_BLOCKED ? 0u : 1u;
+    bool any = kind == TQ_BLOCKED;
     Hit h = hit_none(tmax);
-    vec3 inv_d;
-    TraceRay tr;
-    trace_prepare(o, d, inv_d, tr);
-    trace_bvh_0(o, inv_d, tr, tmin, h, false);
-    trace_bvh_1(o, inv_d, tr, tmin, h, false);
-    return h;
-}
-
-// The closest hit among the view's lights alone (the second level), occluders ignored.
-Hit trace_lights(vec3 o, vec3 d) {
-    Hit h = hit_none(3.0e38);
-    vec3 inv_d;
-    TraceRay tr;
-    trace_prepare(o, d, inv_d, tr);
-    trace_bvh_1(o, inv_d, tr, 0.0, h, false);
-    return h;
-}
-
-// Whether the closest hit of trace(o, d, 0, tmax) would be nothing, or a light triangle
-// at t_light or farther: a light sample's shadow test, exactly as that closest hit
-// decides it, without finding the closest occluder. The lights' closest hit first (the
-// small second level); then the object traversal stops at its first hit up to there
-// (inclusive: an object triangle wins a tie, its index is lower), or up to tmax
-// (exclusive, as trace's) without one.
-bool trace_light_visible(vec3 o, vec3 d, float tmax, float t_light) {
-    vec3 inv_d;
-    TraceRay tr;
-    trace_prepare(o, d, inv_d, tr);
-    Hit l = hit_none(tmax);
-    trace_bvh_1(o, inv_d, tr, 0.0, l, false);
-    if (l.prim != NO_HIT && l.t < t_light) return false;
-    // A hit is taken when t < h.t: the next float up makes the bound inclusive.
-    Hit h = hit_none(l.prim != NO_HIT ? uintBitsToFloat(floatBitsToUint(l.t) + 1u) : tmax);
-    trace_bvh_0(o, inv_d, tr, 0.0, h, true);
-    return h.prim == NO_HIT;
-}
-
-// Whether trace(o, d, 0, tmax) would hit anything (object or light): stops at the first
-// hit found.
-bool trace_blocked(vec3 o, vec3 d, float tmax) {
-    vec3 inv_d;
-    TraceRay tr;
-    trace_prepare(o, d, inv_d, tr);
-    Hit h = hit_none(tmax);
-    trace_bvh_0(o, inv_d, tr, 0.0, h, true);
-    if (h.prim == NO_HIT) trace_bvh_1(o, inv_d, tr, 0.0, h, true);
-    return h.prim != NO_HIT;
+    for (uint step = 0u; step < 2u; step++) {
+        trace_bvh(level, o, inv_d, tr, tmin, h, any);
+        if (step == 1u) break;
+        if (kind == TQ_CLOSEST) {
+            level = 1u;
+        } else if (kind == TQ_BLOCKED) {
+            if (h.prim != NO_HIT) break;
+            level = 1u;
+        } else if (kind == TQ_LIGHT_CLOSEST) {
+            res.light = h;
+            level = 0u;   // bounded by the light found (h)
+        } else if (kind == TQ_LIGHTS) {
+            res.light = h;
+            break;
+        } else {   // TQ_LIGHT_VISIBLE, TQ_LIGHT_SEEN
+            res.light = h;
+            if (kind == TQ_LIGHT_SEEN ? h.prim == NO_HIT : h.prim != NO_HIT && h.t < t_light) {
+                res.blocked = true;
+                break;
+            }
+            // A hit is taken when t < h.t: the next float up makes the bound inclusive.
+            h = hit_none(h.prim != NO_HIT ? uintBitsToFloat(floatBitsToUint(h.t) + 1u) : tmax);
+            level = 0u;
+            any = true;
+        }
+    }
+    if (any) res.blocked = res.blocked || h.prim != NO_HIT;
+    res.h = h;
+    return res;
 }
 #else
 #error "define TRACE_RAY_QUERY or TRACE_SOFTWARE"
 #endif
+
+// The closest hit over both levels.
+Hit trace(vec3 o, vec3 d, float tmin, float tmax) {
+    return trace_query(TQ_CLOSEST, o, d, tmin, tmax, 0.0).h;
+}
 
 #endif

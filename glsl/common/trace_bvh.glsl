@@ -1,9 +1,21 @@
-// One BVH level's traversal, included once per level by trace.glsl with
-// TRACE_NODES / TRACE_TRIS (its buffers), TRACE_LEAF / TRACE_BVH (function names) and
-// TRACE_INST (the level's instance index) defined. No include guard on purpose.
-void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
+// The BVH traversal of either level (`level` 0: the object, bindings 0 and 1; 1: the
+// view's second level, bindings 2 and 3), included by trace.glsl. One function for both
+// levels, the level a value: a shader compiles one traversal per call site of
+// trace_query (lavapipe inlines every call; two per level and query cost it minutes of
+// LLVM compile).
+BvhTri trace_tri(uint level, uint i) {
+    if (level == 0u) return trace_tris[i];
+    return trace_tris2[i];
+}
+
+TRACE_NODE trace_node(uint level, uint i) {
+    if (level == 0u) return trace_nodes[i];
+    return trace_nodes2[i];
+}
+
+void trace_leaf(uint level, uint first, uint count, TraceRay r, float tmin, inout Hit h) {
     for (uint i = first; i < first + count; ++i) {
-        BvhTri tri = TRACE_TRIS[i];
+        BvhTri tri = trace_tri(level, i);
         precise vec3 a = tri.v0.xyz - r.o;
         precise vec3 b = tri.v1.xyz - r.o;
         precise vec3 c = tri.v2.xyz - r.o;
@@ -29,7 +41,7 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
         h.t = take ? t : h.t;
         h.prim = take ? prim : h.prim;
         h.bary = take ? vec2(v / det, w / det) : h.bary;
-        h.inst = take ? TRACE_INST : h.inst;
+        h.inst = take ? level : h.inst;
     }
 }
 
@@ -39,8 +51,8 @@ void TRACE_LEAF(uint first, uint count, TraceRay r, float tmin, inout Hit h) {
 // and the node's inner-child mask in the low byte); hit leaves' triangles are a mask of
 // up to 24 bits from a first triangle. Children are visited in the order the builder
 // arranged for the ray's octant (trace_wide_half, glsl/common/trace.glsl). With `any`
-// (a constant at every call) it stops at the first hit found: an occlusion test.
-void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
+// it stops at the first hit found: an occlusion test.
+void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
     uint oct_inv = (inv_d.x < 0.0 ? 0u : 4u) | (inv_d.y < 0.0 ? 0u : 2u) | (inv_d.z < 0.0 ? 0u : 1u);
     uvec2 stack[TRACE_WIDE_STACK + 1];   // the last: a spare slot written when full
     int sp = 0;
@@ -50,7 +62,7 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool an
         while (tris.y != 0u) {
             int b = findMSB(tris.y);
             tris.y &= ~(1u << uint(b));
-            TRACE_LEAF(tris.x + uint(b), 1u, tr, tmin, h);
+            trace_leaf(level, tris.x + uint(b), 1u, tr, tmin, h);
         }
         if (any && h.prim != NO_HIT) break;
         if ((group.y & 0xff000000u) != 0u) {
@@ -63,7 +75,7 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool an
             sp += (group.y & 0xff000000u) != 0u && sp < TRACE_WIDE_STACK ? 1 : 0;
             uint slot = (bit - 24u) ^ oct_inv;
             uint node = group.x + uint(bitCount(hits & ~(0xffffffffu << slot)));
-            WideNode n = TRACE_NODES[node];
+            WideNode n = trace_node(level, node);
             vec3 nmin = uintBitsToFloat(n.head.xyz);
             uint ew = n.head.w;
             vec3 cell = uintBitsToFloat(uvec3(ew & 0xffu, (ew >> 8u) & 0xffu, (ew >> 16u) & 0xffu) << 23u);
@@ -86,9 +98,8 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool an
     }
 }
 #else
-// Closest hit in a child-pair BVH2; with `any` (a constant at every call) the first hit
-// found: an occlusion test.
-void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
+// Closest hit in a child-pair BVH2; with `any` the first hit found: an occlusion test.
+void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
     // Each pushed node keeps its entry distance, so a node farther than a hit found
     // meanwhile is dropped on pop without loading it.
     uint stack[TRACE_STACK];
@@ -96,14 +107,14 @@ void TRACE_BVH(vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool an
     int sp = 0;
     uint node = 0u;
     while (true) {
-        BvhNode n = TRACE_NODES[node];
+        BvhNode n = trace_node(level, node);
         float nl, nr;
         bool hl = trace_box(n.l_min.xyz, n.l_max.xyz, o, inv_d, tmin, h.t, nl);
         bool hr = trace_box(n.r_min.xyz, n.r_max.xyz, o, inv_d, tmin, h.t, nr);
         uint lc = floatBitsToUint(n.l_max.w);
         uint rc = floatBitsToUint(n.r_max.w);
-        if (hl && lc > 0u) { TRACE_LEAF(floatBitsToUint(n.l_min.w), lc, tr, tmin, h); hl = false; }
-        if (hr && rc > 0u) { TRACE_LEAF(floatBitsToUint(n.r_min.w), rc, tr, tmin, h); hr = false; }
+        if (hl && lc > 0u) { trace_leaf(level, floatBitsToUint(n.l_min.w), lc, tr, tmin, h); hl = false; }
+        if (hr && rc > 0u) { trace_leaf(level, floatBitsToUint(n.r_min.w), rc, tr, tmin, h); hr = false; }
         if (any && h.prim != NO_HIT) break;
         uint li = floatBitsToUint(n.l_min.w);
         uint ri = floatBitsToUint(n.r_min.w);

@@ -21,7 +21,7 @@ use crate::vk::{
 };
 
 /// Ray-query instance masks (glsl/common/trace.glsl): `trace` takes every instance,
-/// `trace_lights` only the view's lights.
+/// `trace_query`'s light queries only the view's lights.
 const MASK_OBJECT: u8 = 0x01;
 const MASK_LIGHTS: u8 = 0x02;
 
