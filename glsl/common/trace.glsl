@@ -206,10 +206,10 @@ void trace_prepare(vec3 o, vec3 d, out vec3 inv_d, out TraceRay tr) {
 
 // The query `kind` (TQ_*) of ray o + t d, t in [tmin, tmax]: one traversal written once,
 // run for the object (level 0) and the view's lights (level 1) in the order the query
-// needs. The closest hit: the object, then the lights beyond tmax's bound of what it
-// found (TQ_LIGHT_CLOSEST: the lights first, then the object within the light found;
-// at equal distance the lower triangle index wins either way, so both orders give the
-// same hit). A shadow test: the lights' closest hit first (the small second level); then
+// needs. The closest hit: the object, then the lights nearer than the object's hit
+// (TQ_LIGHT_CLOSEST: the lights first, then the object nearer than the light's hit; at
+// equal distance the lower triangle index wins either way, so both orders give the same
+// hit). A shadow test: the lights' closest hit first (the small second level); then
 // the object traversal stops at its first hit up to there (inclusive: an object triangle
 // wins a tie, its index is lower), or up to tmax (exclusive, as the closest hit's)
 // without one: the answer the closest hit would give, without finding the closest
