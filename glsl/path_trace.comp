@@ -490,7 +490,7 @@ vec3 hit_point(Tri t, vec2 bary) {
 // A' of a camera ray is then, with no trace: the ray meets the reference triangle's
 // plane at p; the shading normal there (the reference triangle's map, material and
 // frame, extrapolated beyond its edges) and the lobe as the path tracer builds them at a
-// primary hit; the lobe's closed form over the recorded rings (recorded_rings). One fixed
+// primary hit; the lobe's closed form over the recorded rings (recorded_rings2). One fixed
 // function of the camera ray per pixel, which is all the extra-ray term needs to stay
 // unbiased; on a face it follows the texture under the pixel as A does (A' ignores what
 // lies off the reference plane: edges, defects, other faces, where it only helps less).
@@ -538,28 +538,30 @@ void pixel_plane_init(uint px, uint py) {
     record_rings(offset_ray(pix_plane.p, ng), ng, CV_EXTRA_RING_DIVISOR);
 }
 
-// A' of the camera ray o, d (pixel_plane_init's pixel); 0 where the pixel has no
-// recorded ring or the ray does not meet the reference plane in front of the camera.
-float pixel_plane_analytic(vec3 o, vec3 d) {
-    if (rec_rings == 0u) return 0.0;
+// The lobe and shading normal of A' for the camera ray o, d (pixel_plane_init's pixel);
+// false (A' = 0) where the pixel has no recorded ring or the ray does not meet the
+// reference plane in front of the camera.
+bool pixel_plane_lobe(vec3 o, vec3 d, out Lobe lobe, out vec3 ns) {
+    ns = pix_plane.ng;
+    lobe.t1 = lobe.t2 = lobe.r = ns;
+    lobe.a1 = lobe.a2 = lobe.c = 1.0;
+    if (rec_rings == 0u) return false;
     float dn = dot(d, pix_plane.ng);
-    if (!(dn < 0.0)) return 0.0;
+    if (!(dn < 0.0)) return false;
     Hit h;
     h.t = dot(pix_plane.p - o, pix_plane.ng) / dn;
-    if (!(h.t > 0.0)) return 0.0;
+    if (!(h.t > 0.0)) return false;
     vec3 p = o + h.t * d;
     h.prim = pix_plane.prim;
     vec3 v = p - pix_plane.a;
     h.bary = vec2(dot(v, pix_plane.ba), dot(v, pix_plane.ca));
     h.inst = 0u;
     Surface surf = pix_plane.surf;
-    vec3 ns = surface_normal(h, d, p, pix_plane.ng, pix_plane.word, 0u, surf);
+    ns = surface_normal(h, d, p, pix_plane.ng, pix_plane.word, 0u, surf);
     vec3 tb, bt;
     onb(ns, tb, bt);
     vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
-    Lobe lobe;
-    if (!conductor_lobe(surf.c, wo, tb, bt, ns, lobe)) return 0.0;
-    return recorded_rings(lobe, ns);
+    return conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
 }
 
 // The MIS weight of a BSDF sample (solid-angle pdf `pdf`, from o with geometric normal
@@ -807,13 +809,20 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // pixel's mean of A(u) over its camera rays u estimated from this sample's ray and M
     // more (their own stratified sequence: sample index s M + j under another seed):
     // L + (sum_j A'(u_j) - M A'(u_0)) / (M + 1), zero mean for any M and any one
-    // function A' of the camera ray; A' is pixel_plane_analytic's (no trace, the rings
-    // walked once per pixel), close enough to A on a face that the difference's variance
-    // is left.
-    // A'(u_0) is the loop's first step (one call of pixel_plane_analytic in the shader:
+    // function A' of the camera ray; A' is pixel_plane_lobe's lobe over the recorded
+    // rings (no trace, the rings walked once per pixel), close enough to A on a face that
+    // the difference's variance is left.
+    // A'(u_0) is the loop's first step (one call of pixel_plane_lobe in the shader:
     // lavapipe compiles each call's inlined copy, and this one is large).
+    // The rays go in pairs (0 and 1, 2 and 3, ...) whose two lobes share one pass over
+    // the recorded loops (recorded_rings2: each vertex read once); the first of a pair
+    // waits for the second, a last ray without a partner goes alone. The same sums in
+    // the same order as one ray at a time.
     if (extra > 0u) {
         float sum_a = 0.0, cv_a0 = 0.0;
+        Lobe first_lobe;
+        vec3 first_ns = vec3(0.0, 0.0, 1.0);
+        bool first_ok = false;
         for (uint j = 0u; j <= extra; j++) {
             o = o0;
             d = d0;
@@ -821,12 +830,25 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 Sampler r = sampler_init(prm.sample_gen, pixel, s * extra + j - 1u, prm.seed ^ 0x5ca1ab1eu);
                 pixel_ray(px, py, r, o, d);
             }
-            float a = pixel_plane_analytic(o, d);
-            if (j == 0u) {
-                cv_a0 = a;
-            } else {
-                sum_a += a;
+            Lobe lobe;
+            vec3 ns;
+            bool ok = pixel_plane_lobe(o, d, lobe, ns);
+            bool pair = (j & 1u) == 1u;
+            if (!pair && j < extra) {
+                first_lobe = lobe;
+                first_ns = ns;
+                first_ok = ok;
+                continue;
             }
+            vec2 a = recorded_rings2(pair ? first_lobe : lobe, pair ? first_ns : ns, lobe, ns);
+            float a_first = (pair ? first_ok : ok) ? a.x : 0.0;
+            uint j_first = pair ? j - 1u : j;
+            if (j_first == 0u) {
+                cv_a0 = a_first;
+            } else {
+                sum_a += a_first;
+            }
+            if (pair) sum_a += ok ? a.y : 0.0;
         }
         L += (sum_a - float(extra) * cv_a0) / float(extra + 1u);
     }

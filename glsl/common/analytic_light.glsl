@@ -74,7 +74,7 @@ float edge_z(vec3 a, vec3 b) {
 
 // Rings recorded as seen from one point (record_rings): the world vertices of their
 // boundary loops, for the extra camera rays of `[render] analytic_rays`, whose closed
-// forms (recorded_rings) take a pixel's rings as seen from one reference point and so
+// forms (recorded_rings2) take a pixel's rings as seen from one reference point and so
 // need the walk once per pixel, not once per ray. Up to REC_RINGS rings, each two loops
 // of at most REC_LOOP_VERTS vertices (a ring whose loops are longer is not recorded).
 #define REC_RINGS 2u
@@ -135,7 +135,7 @@ void loop_add(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
 }
 
 // The loop's last edge, back to its first vertex (a recorded loop closes when it is
-// summed: recorded_loop).
+// summed: recorded_loop2).
 void loop_close(inout Loop lp) {
     if (lp.rec < 0) lp.sum += edge_z(lp.prev, lp.first);
 }
@@ -371,7 +371,7 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
 
 // Records the rings the control variate may use at x (geometric normal ng; bit k of
 // analytic_rings' mask), over the coarser ring of `divisor`, as seen from x: the first
-// REC_RINGS of them whose loops fit (rec_rings of them; recorded_rings sums them).
+// REC_RINGS of them whose loops fit (rec_rings of them; recorded_rings2 sums them).
 void record_rings(vec3 x, vec3 ng, uint divisor) {
     rec_rings = 0u;
     Lobe unused;   // the walk records only: no lobe is evaluated
@@ -409,37 +409,54 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r, vec3 ns) {
     return v * inversesqrt(dot(v, v));
 }
 
-// Recorded loop i summed as ring_integral sums a loop for lobe l (shading normal ns),
-// closed, over 2 pi; `above` as the loop's (record_rings kept only loops above the
-// geometric horizon). The lobe's widths are taken as reciprocals and the edges from
-// edge_z_unit (roundings of their own: A' needs only to be one function of the camera
-// ray).
-float recorded_loop(uint i, Lobe l, vec3 ns, out bool above) {
+// Recorded loop i summed as ring_integral sums a loop, for two lobes at once (the extra
+// camera rays go in pairs): lobes l0 and l1 (shading normals ns0, ns1), closed, over
+// 2 pi; `above` as the loop's for each (record_rings kept only loops above the geometric
+// horizon). The lobes' widths are taken as reciprocals and the edges from edge_z_unit
+// (roundings of their own: A' needs only to be one function of the camera ray). Each
+// vertex is read once for both lobes (a private array's read is a per-lane gather on
+// lavapipe) and the two sums give the loop's body independent work; each sum is what a
+// pass of its own would give, bit for bit. Pairs measured 0.92x the path tracing of one
+// ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
+// rays' edge sums in pairs").
+vec2 recorded_loop2(uint i, Lobe l0, vec3 ns0, Lobe l1, vec3 ns1, out bvec2 above) {
     uint base = i * REC_LOOP_VERTS;
-    vec3 t1 = l.t1 * (1.0 / l.a1), t2 = l.t2 * (1.0 / l.a2);
-    vec3 first = recorded_point(rec_w[base], t1, t2, l.r, ns);
-    vec3 prev = first;
-    float sum = 0.0;
-    above = first.z > 0.0;
+    vec3 t10 = l0.t1 * (1.0 / l0.a1), t20 = l0.t2 * (1.0 / l0.a2);
+    vec3 t11 = l1.t1 * (1.0 / l1.a1), t21 = l1.t2 * (1.0 / l1.a2);
+    vec3 w = rec_w[base];
+    vec3 first0 = recorded_point(w, t10, t20, l0.r, ns0);
+    vec3 first1 = recorded_point(w, t11, t21, l1.r, ns1);
+    vec3 prev0 = first0, prev1 = first1;
+    float sum0 = 0.0, sum1 = 0.0;
+    bool ab0 = first0.z > 0.0, ab1 = first1.z > 0.0;
     for (uint j = 1u; j < rec_n[i]; j++) {
-        vec3 v = recorded_point(rec_w[base + j], t1, t2, l.r, ns);
-        sum += edge_z_unit(prev, v);
-        prev = v;
-        above = above && v.z > 0.0;
+        w = rec_w[base + j];
+        vec3 v0 = recorded_point(w, t10, t20, l0.r, ns0);
+        vec3 v1 = recorded_point(w, t11, t21, l1.r, ns1);
+        sum0 += edge_z_unit(prev0, v0);
+        sum1 += edge_z_unit(prev1, v1);
+        prev0 = v0;
+        prev1 = v1;
+        ab0 = ab0 && v0.z > 0.0;
+        ab1 = ab1 && v1.z > 0.0;
     }
-    return sum + edge_z_unit(prev, first);
+    above = bvec2(ab0, ab1);
+    return vec2(sum0 + edge_z_unit(prev0, first0), sum1 + edge_z_unit(prev1, first1));
 }
 
-// analytic_rings' closed form for lobe l over the recorded rings (as seen from the
-// point they were recorded at), each counted where its loops are above the horizons.
-float recorded_rings(Lobe l, vec3 ns) {
-    float a = 0.0;
+// analytic_rings' closed form for lobes l0 and l1 over the recorded rings (as seen from
+// the point they were recorded at), each ring counted where its loops are above the
+// horizons.
+vec2 recorded_rings2(Lobe l0, vec3 ns0, Lobe l1, vec3 ns1) {
+    vec2 a = vec2(0.0);
     for (uint r = 0u; r < rec_rings; r++) {
-        bool above_lo, above_hi;
-        float lo = recorded_loop(2u * r, l, ns, above_lo);
-        float hi = recorded_loop(2u * r + 1u, l, ns, above_hi);
-        if (above_lo && above_hi) a += l.c * rec_le[r] * abs(lo - hi);
+        bvec2 above_lo, above_hi;
+        vec2 lo = recorded_loop2(2u * r, l0, ns0, l1, ns1, above_lo);
+        vec2 hi = recorded_loop2(2u * r + 1u, l0, ns0, l1, ns1, above_hi);
+        if (above_lo.x && above_hi.x) a.x += l0.c * rec_le[r] * abs(lo.x - hi.x);
+        if (above_lo.y && above_hi.y) a.y += l1.c * rec_le[r] * abs(lo.y - hi.y);
     }
     return a;
 }
+
 #endif
