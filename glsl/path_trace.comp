@@ -816,8 +816,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
     // lavapipe compiles each call's inlined copy, and this one is large).
     // The rays go in pairs (0 and 1, 2 and 3, ...) whose two lobes share one pass over
     // the recorded loops (recorded_rings2: each vertex read once); the first of a pair
-    // waits for the second, a last ray without a partner goes alone. The same sums in
-    // the same order as one ray at a time.
+    // waits for the second; a last ray without a partner (an odd count) fills both slots
+    // and keeps the first. The same sums in the same order as one ray at a time.
     if (extra > 0u) {
         float sum_a = 0.0, cv_a0 = 0.0;
         Lobe first_lobe;

@@ -416,8 +416,8 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r, vec3 ns) {
 // (roundings of their own: A' needs only to be one function of the camera ray). Each
 // vertex is read once for both lobes (a private array's read is a per-lane gather on
 // lavapipe) and the two sums give the loop's body independent work; each sum is what a
-// pass of its own would give, bit for bit. Pairs measured 0.92x the path tracing of one
-// ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
+// pass of its own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
+// of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
 // rays' edge sums in pairs").
 vec2 recorded_loop2(uint i, Lobe l0, vec3 ns0, Lobe l1, vec3 ns1, out bvec2 above) {
     uint base = i * REC_LOOP_VERTS;
@@ -458,5 +458,4 @@ vec2 recorded_rings2(Lobe l0, vec3 ns0, Lobe l1, vec3 ns1) {
     }
     return a;
 }
-
 #endif
