@@ -588,8 +588,10 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
 
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
 // nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
-// label_of_ray; 0 without (no label read on samples that do not label).
-float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out uint label_word) {
+// label_of_ray; 0 without (no label read on samples that do not label). `label_only`:
+// the sample is traced for its label alone (its camera ray's first hit, then 0 returned).
+float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, bool label_only,
+                      out uint label_word) {
     label_word = 0u;
     Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
     vec3 o, d;
@@ -627,6 +629,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, out
                 && h.prim < uint(label_words.length())) {
             label_word = label_words[h.prim];
         }
+        if (label_only) return 0.0;
         if (h.prim == NO_HIT) break;   // no environment light
         Tri t = fetch_tri(h.prim);
         uint mat = mat_word(h.prim) & 0xffu;
@@ -873,17 +876,21 @@ void main() {
     float sq = 0.0;
     vec2 halves = prm.noise_sums == NOISE_HALVES
         ? vec2(noise_sums[2u * i], noise_sums[2u * i + 1u]) : vec2(0.0);
-    // Labels from this dispatch's first n x n samples (the caller makes sure it starts at
-    // sample 0 and holds them): the annotation pass's thin-lens rays, traced once.
-    uint label_count = min(pc.labels * pc.labels, min(pc.sample_count, LABEL_MAX_SAMPLES));
+    // Labels from the first n x n samples (the caller makes sure this dispatch starts at
+    // sample 0): the annotation pass's thin-lens rays, traced once. Those past this
+    // batch's samples are traced for their labels alone (camera ray and first hit, as
+    // the pass would), so a first batch of fewer samples needs no pass either.
+    uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
     if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();
-    for (uint s = 0u; s < pc.sample_count; s++) {
+    for (uint s = 0u; s < max(pc.sample_count, label_count); s++) {
         uint word;
         bool label = s < label_count;
-        float r = radiance_sample(i, px, py, pc.sample_start + s, label, word);
+        bool label_only = s >= pc.sample_count;
+        float r = radiance_sample(i, px, py, pc.sample_start + s, label, label_only, word);
         if (label) words[s] = word;
+        if (label_only) continue;
         sum += r;
         sq += r * r;
         if (prm.noise_sums == NOISE_HALVES) {

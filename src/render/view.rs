@@ -186,11 +186,8 @@ impl<'s> View<'s> {
             Some(grid) => Some((AnnotationTargets::new(ctx, width, height)?, grid)),
             None => None,
         };
-        let first_batch = settings.batch_spp.max(1).min(settings.spp);
-        let labels_from_samples = annotate_grid.is_some_and(|grid| {
-            let lens = cam.lens_radius_mm > 0.0;
-            settings.labels.from_samples(grid, lens, first_batch)
-        });
+        let labels_from_samples =
+            annotate_grid.is_some_and(|_| settings.labels.from_samples(cam.lens_radius_mm > 0.0));
         let placeholder = |name| Buffer::new(ctx, name, 4, storage, MemoryKind::Device);
         let label_placeholders = (
             placeholder("label ids (unused)")?,
@@ -299,7 +296,7 @@ impl<'s> View<'s> {
             if let Some((t, grid)) = &self.annotation {
                 let n = (*grid).clamp(1, 16);
                 let (mut ids, mut cov) = (g.import(&t.ids), g.import(&t.coverage));
-                if self.labels_from_samples && count >= n * n {
+                if self.labels_from_samples {
                     label_grid = n;
                     targets = Some((ids, cov));
                 } else {

@@ -940,8 +940,7 @@ pub enum NoiseEstimator {
 pub enum LabelSource {
     /// "samples" under a thin lens, where they are the very rays the pass traces (labels
     /// byte-identical, one trace fewer per ray); "pass" under a pinhole, whose centre ray
-    /// and stratified grid are not the path tracer's jittered samples. Both only where
-    /// "samples" can take them (see [`LabelSource::from_samples`]).
+    /// and stratified grid are not the path tracer's jittered samples.
     #[default]
     Auto,
     /// The annotation pass (glsl/annotate.comp): a second trace of n x n + 1 rays per
@@ -950,23 +949,21 @@ pub enum LabelSource {
     Pass,
     /// The path tracer's first n x n samples of each pixel: the label word of each
     /// primary hit, resolved as the pass resolves its thin-lens rays (majority word, ties
-    /// to the earliest sample; coverage = share hitting a defect). Needs the first batch
-    /// to hold n x n samples (`min(batch_spp, spp) >= n^2`); else the pass runs.
+    /// to the earliest sample; coverage = share hitting a defect). Where the first batch
+    /// holds fewer than n x n samples (`min(batch_spp, spp) < n^2`), the path tracer's
+    /// first batch traces the rest of them for their labels alone (camera ray and first
+    /// hit, no shading), still in place of the pass.
     Samples,
 }
 
 impl LabelSource {
-    /// Whether a render labels from its samples: `grid` n (clamped to [1, 16], as the
-    /// pass clamps it) coverage samples per pixel side, a thin lens or not, `first_batch`
-    /// samples in the first batch (min(batch_spp, spp)). "samples" and "auto" fall back
-    /// to the pass when the first batch holds fewer than n^2 samples.
-    pub fn from_samples(self, grid: u32, thin_lens: bool, first_batch: u32) -> bool {
-        let n = grid.clamp(1, 16);
-        let enough = first_batch >= n * n;
+    /// Whether a render labels from its samples (a thin lens or not) rather than the
+    /// annotation pass.
+    pub fn from_samples(self, thin_lens: bool) -> bool {
         match self {
             LabelSource::Pass => false,
-            LabelSource::Samples => enough,
-            LabelSource::Auto => thin_lens && enough,
+            LabelSource::Samples => true,
+            LabelSource::Auto => thin_lens,
         }
     }
 }
