@@ -64,6 +64,11 @@ impl Renderer {
     }
 }
 
+/// The floats' bit patterns, for byte-for-byte comparisons.
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|c| c.to_bits()).collect()
+}
+
 fn pixels(a: &Annotation, instance: u16) -> usize {
     a.instance.iter().filter(|&&i| i == instance).count()
 }
@@ -99,7 +104,6 @@ fn thin_lens_labels_from_samples_equal_the_pass_and_the_image_is_unchanged() {
         assert_eq!(a.class, b.class, "{}: class", backend.name());
         assert_eq!(a.instance, b.instance, "{}: instance", backend.name());
         assert_eq!(a.face, b.face, "{}: face", backend.name());
-        let bits = |v: &[f32]| v.iter().map(|c| c.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&a.coverage), bits(&b.coverage), "{}", backend.name());
         assert_eq!(Some(&b), auto.annotation.as_ref());
         for f in [&samples, &auto] {
@@ -119,7 +123,6 @@ fn thin_lens_labels_from_samples_equal_the_pass_and_the_image_is_unchanged() {
 /// still come from its samples, equal to the pass's bit for bit under the thin lens, and
 /// the image is the same bytes.
 fn short_first_batch(r: &Renderer, backend: Backend) {
-    let bits = |v: &[f32]| v.iter().map(|c| c.to_bits()).collect::<Vec<_>>();
     for (spp, batch) in [(8, 16), (32, 4)] {
         let with = |labels| {
             let mut cfg = config(Some(4.0), spp, labels);
@@ -184,19 +187,7 @@ fn pinhole_labels_from_samples_agree_with_the_pass_away_from_label_edges() {
             backend.name()
         );
         assert!(interior > w * h / 2);
-        assert_eq!(
-            pass.radiance
-                .data
-                .iter()
-                .map(|v| v.to_bits())
-                .collect::<Vec<_>>(),
-            samples
-                .radiance
-                .data
-                .iter()
-                .map(|v| v.to_bits())
-                .collect::<Vec<_>>()
-        );
+        assert_eq!(bits(&pass.radiance.data), bits(&samples.radiance.data));
     }
 }
 
