@@ -256,8 +256,8 @@ impl<'s> View<'s> {
     /// Adds samples `start .. start + count` to `g` (of the pixels of
     /// [`View::set_pixels`]; the first batch must be of the whole image); the first batch
     /// (start 0) clears the accumulation and labels the pixels: from its own first n x n
-    /// samples when the view labels from samples and the batch holds them, else by the
-    /// annotation pass.
+    /// samples when the view labels from samples (those past `count` traced for their
+    /// labels alone), else by the annotation pass.
     pub fn record_batch<'a>(
         &'a self,
         tracer: &'a PathTracer,
