@@ -1,6 +1,7 @@
 #version 460
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
-// Traces a list of rays and writes the closest hit of each (tests and benchmarks).
+// Traces a list of rays and writes the closest hit of each (tests and benchmarks), each
+// ray with a hint of its own where the push constant asks for it.
 #include "common/trace.glsl"
 #include "interface.glsl"
 #include "common/scramble.glsl"
@@ -10,6 +11,9 @@ layout(local_size_x = 64) in;
 struct RayIn { vec4 o_tmin; vec4 d_tmax; };
 layout(std430, set = 0, binding = HT_RAYS) readonly buffer Rays { RayIn rays[]; };
 layout(std430, set = 0, binding = HT_HITS) writeonly buffer Hits { vec4 hits[]; };
+// With pc.hinted: each ray's closest-hit hint (corners; original index as bits in a.w,
+// NO_HIT none), which must not change the hit (tests).
+layout(std430, set = 0, binding = HT_HINTS) readonly buffer Hints { Tri hints[]; };
 
 layout(push_constant) uniform Push { HitsPush pc; };
 
@@ -18,6 +22,14 @@ void main() {
     uint i = g * 64u + gl_LocalInvocationID.x;
     if (i >= pc.count) return;
     RayIn r = rays[i];
-    Hit h = trace(r.o_tmin.xyz, r.d_tmax.xyz, r.o_tmin.w, r.d_tmax.w);
+    TraceHint hint = trace_no_hint();
+    if (pc.hinted != 0u) {
+        hint.a = hints[i].a.xyz;
+        hint.b = hints[i].b.xyz;
+        hint.c = hints[i].c.xyz;
+        hint.prim = floatBitsToUint(hints[i].a.w);
+    }
+    Hit h = trace_query_hinted(TQ_CLOSEST, r.o_tmin.xyz, r.d_tmax.xyz, r.o_tmin.w, r.d_tmax.w,
+                               0.0, hint).h;
     hits[i] = vec4(h.prim == NO_HIT ? -1.0 : h.t, uintBitsToFloat(h.prim), h.bary);
 }

@@ -505,15 +505,26 @@ struct PixelPlane {
     vec3 ca;
 };
 PixelPlane pix_plane;
+// The object triangle the pixel's centre ray meets first (pixel_plane_init), the hint of
+// its camera rays' closest-hit queries (trace_query_hinted: the same hits, found with
+// less traversal); prim NO_HIT: none.
+TraceHint pix_hint;
 
 // Sets the pixel's reference point and records its rings (none where the centre ray
 // meets no conductor).
 void pixel_plane_init(uint px, uint py) {
     rec_rings = 0u;
+    pix_hint = trace_no_hint();
     vec3 o, d;
     camera_ray(prm.cam, vec2(px, py) + 0.5, vec2(prm.width, prm.height), vec2(0.5), o, d);
     Hit h = trace(o, d, 0.0, 3.0e38);
     if (h.prim == NO_HIT) return;
+    if (h.prim < prm.light_first) {
+        pix_hint.a = tris[h.prim].a.xyz;
+        pix_hint.b = tris[h.prim].b.xyz;
+        pix_hint.c = tris[h.prim].c.xyz;
+        pix_hint.prim = h.prim;
+    }
     uint word = mat_word(h.prim);
     uint mat = word & 0xffu;
     if (mat == MAT_LIGHT) return;
@@ -618,7 +629,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         // The ray's closest hit; with a control-variate term pending also the first light
         // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped.
         uint kind = stop ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
-        TraceResult tq = trace_query(kind, o, d, 0.0, 3.0e38, 0.0);
+        TraceResult tq = trace_query_hinted(kind, o, d, 0.0, 3.0e38, 0.0,
+                                            depth == 0u ? pix_hint : trace_no_hint());
         Hit h = tq.h;
         if (cv_pending != 0.0) {
             L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, tq.light, cv_mask) * cv_pending;
@@ -881,6 +893,7 @@ void main() {
     // batch's samples are traced for their labels alone (camera ray and first hit, as
     // the pass would), so a first batch of fewer samples needs no pass either.
     uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
+    pix_hint = trace_no_hint();
     if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();

@@ -4,7 +4,7 @@ mod common;
 
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
-use synosis::render::raycast::{RayIn, trace_rays};
+use synosis::render::raycast::{HitOut, RayHint, RayIn, trace_rays, trace_rays_hinted};
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::trace::TraceScene;
 use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
@@ -191,6 +191,62 @@ fn every_bvh_preset_gives_the_same_hits() {
     assert!(same(&medium, &reference), "GPU and CPU differ");
     for q in [BvhQuality::Fastest, BvhQuality::Slow] {
         assert!(same(&gpu(q), &medium), "{}: other GPU hits", q.name());
+    }
+    common::assert_clean(&ctx);
+}
+
+/// The path tracer's camera rays start their closest-hit query from a hint, the triangle
+/// the pixel's centre ray met (glsl/common/trace.glsl, TraceHint), so the traversal skips
+/// what lies behind it. Whatever the hint (the ray's own closest triangle, another one
+/// beside it, one anywhere on the mesh, none) the hit must be the same bit for bit (distance,
+/// triangle, barycentrics), on the rays aimed at shared edges and vertices too.
+#[test]
+fn a_hint_never_changes_the_closest_hit() {
+    let ctx = common::gpu();
+    let mesh = bumpy_sphere(96, 41, 10.0, 0.05);
+    let rays = rays(&mesh, 20_000, 13);
+    let n = mesh.triangles.len() as u32;
+    let hint = |p: u32| RayHint {
+        corners: mesh.corners(p as usize).map(|v| v.into()),
+        prim: Some(p),
+    };
+    let none = RayHint {
+        corners: [[0.0; 3]; 3],
+        prim: None,
+    };
+    let bits = |h: &HitOut| (h.t.to_bits(), h.prim, h.bary.map(f32::to_bits));
+    for backend in common::BACKENDS {
+        let scene = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
+        let (plain, _) = trace_rays(&ctx, &scene, &rays, None).unwrap();
+        assert!(plain.iter().filter(|h| h.is_hit()).count() > 10_000);
+        let hints: Vec<RayHint> = plain
+            .iter()
+            .enumerate()
+            .map(|(i, h)| {
+                let own = h.is_hit().then_some(h.prim);
+                match i % 4 {
+                    0 => own.map_or(none, hint),
+                    1 => own.map_or(none, |p| hint(if p + 1 < n { p + 1 } else { p - 1 })),
+                    2 => hint((i as u32).wrapping_mul(2_654_435_761) % n),
+                    _ => none,
+                }
+            })
+            .collect();
+        let (hinted, _) = trace_rays_hinted(&ctx, &scene, &rays, Some(&hints), None).unwrap();
+        let differ: Vec<usize> = (0..rays.len())
+            .filter(|&i| bits(&plain[i]) != bits(&hinted[i]))
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "{}: {} of {} rays hit otherwise with a hint; first: ray {} (hint mode {}) {:?} against {:?}",
+            backend.name(),
+            differ.len(),
+            rays.len(),
+            differ[0],
+            differ[0] % 4,
+            hinted[differ[0]],
+            plain[differ[0]]
+        );
     }
     common::assert_clean(&ctx);
 }

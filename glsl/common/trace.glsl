@@ -54,6 +54,20 @@ struct TraceResult {
     bool blocked;
 };
 
+// A closest-hit query's hint (TQ_CLOSEST only): an object triangle (level 0; corners in
+// original order, as the BVH's leaves hold them) the ray is likely to hit first, or
+// prim NO_HIT. The software traversal tests it before the BVH, so it starts with that
+// hit as its bound and skips what lies behind; the answer is the same (the closest hit,
+// ties to the lower index, whatever the order). The ray query ignores it.
+struct TraceHint { vec3 a; vec3 b; vec3 c; uint prim; };
+
+TraceHint trace_no_hint() {
+    TraceHint t;
+    t.a = t.b = t.c = vec3(0.0);
+    t.prim = NO_HIT;
+    return t;
+}
+
 #if defined(TRACE_RAY_QUERY)
 #extension GL_EXT_ray_query : require
 #define TRACE_BINDING_COUNT 1
@@ -81,7 +95,8 @@ Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask, bool any) {
 // instances of mask 0x02 (src/trace/mod.rs), the object's 0x01. A shadow test: the
 // lights' closest hit first, then a query of the object that ends at its first hit up
 // to there.
-TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light) {
+TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light,
+                              TraceHint hint) {
     TraceResult res;
     res.blocked = false;
     res.light = hit_none(3.0e38);
@@ -214,7 +229,8 @@ void trace_prepare(vec3 o, vec3 d, out vec3 inv_d, out TraceRay tr) {
 // wins a tie, its index is lower), or up to tmax (exclusive, as the closest hit's)
 // without one: the answer the closest hit would give, without finding the closest
 // occluder.
-TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light) {
+TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light,
+                              TraceHint hint) {
     vec3 inv_d;
     TraceRay tr;
     trace_prepare(o, d, inv_d, tr);
@@ -224,6 +240,9 @@ TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float
     uint level = kind == TQ_CLOSEST || kind == TQ_BLOCKED ? 0u : 1u;
     bool any = kind == TQ_BLOCKED;
     Hit h = hit_none(tmax);
+    if (kind == TQ_CLOSEST && hint.prim != NO_HIT) {
+        trace_tri_test(hint.a, hint.b, hint.c, hint.prim, 0u, tr, tmin, h);
+    }
     for (uint step = 0u; step < 2u; step++) {
         trace_bvh(level, o, inv_d, tr, tmin, h, any);
         if (step == 1u) break;
@@ -257,6 +276,11 @@ TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float
 #else
 #error "define TRACE_RAY_QUERY or TRACE_SOFTWARE"
 #endif
+
+// trace_query_hinted without a hint.
+TraceResult trace_query(uint kind, vec3 o, vec3 d, float tmin, float tmax, float t_light) {
+    return trace_query_hinted(kind, o, d, tmin, tmax, t_light, trace_no_hint());
+}
 
 // The closest hit over both levels.
 Hit trace(vec3 o, vec3 d, float tmin, float tmax) {

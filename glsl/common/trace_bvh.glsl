@@ -13,35 +13,42 @@ TRACE_NODE trace_node(uint level, uint i) {
     return trace_nodes2[i];
 }
 
+// The watertight test of one triangle (corners v0, v1, v2, original index `prim`, of
+// `level`) against ray r, taken into h where it is the closer hit.
+void trace_tri_test(vec3 v0, vec3 v1, vec3 v2, uint prim, uint level, TraceRay r, float tmin,
+                    inout Hit h) {
+    precise vec3 a = v0 - r.o;
+    precise vec3 b = v1 - r.o;
+    precise vec3 c = v2 - r.o;
+    precise float ax = a[r.kx] - r.s.x * a[r.kz];
+    precise float ay = a[r.ky] - r.s.y * a[r.kz];
+    precise float bx = b[r.kx] - r.s.x * b[r.kz];
+    precise float by = b[r.ky] - r.s.y * b[r.kz];
+    precise float cx = c[r.kx] - r.s.x * c[r.kz];
+    precise float cy = c[r.ky] - r.s.y * c[r.kz];
+    precise float u = cx * by - cy * bx;
+    precise float v = ax * cy - ay * cx;
+    precise float w = bx * ay - by * ax;
+    bool inside = !((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0));
+    precise float det = u + v + w;
+    precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
+    precise float t = tt / det;
+    // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
+    // triangle index, so the result does not depend on the traversal order. Taken
+    // with selects, not a branch: lanes run both sides of a branch on lavapipe.
+    bool take = inside && det != 0.0 && t >= tmin
+        && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim));
+    h.t = take ? t : h.t;
+    h.prim = take ? prim : h.prim;
+    h.bary = take ? vec2(v / det, w / det) : h.bary;
+    h.inst = take ? level : h.inst;
+}
+
 void trace_leaf(uint level, uint first, uint count, TraceRay r, float tmin, inout Hit h) {
     for (uint i = first; i < first + count; ++i) {
         BvhTri tri = trace_tri(level, i);
-        precise vec3 a = tri.v0.xyz - r.o;
-        precise vec3 b = tri.v1.xyz - r.o;
-        precise vec3 c = tri.v2.xyz - r.o;
-        precise float ax = a[r.kx] - r.s.x * a[r.kz];
-        precise float ay = a[r.ky] - r.s.y * a[r.kz];
-        precise float bx = b[r.kx] - r.s.x * b[r.kz];
-        precise float by = b[r.ky] - r.s.y * b[r.kz];
-        precise float cx = c[r.kx] - r.s.x * c[r.kz];
-        precise float cy = c[r.ky] - r.s.y * c[r.kz];
-        precise float u = cx * by - cy * bx;
-        precise float v = ax * cy - ay * cx;
-        precise float w = bx * ay - by * ax;
-        bool inside = !((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0));
-        precise float det = u + v + w;
-        precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
-        precise float t = tt / det;
-        // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
-        // triangle index, so the result does not depend on the traversal order. Taken
-        // with selects, not a branch: lanes run both sides of a branch on lavapipe.
-        uint prim = floatBitsToUint(tri.v0.w);
-        bool take = inside && det != 0.0 && t >= tmin
-            && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim));
-        h.t = take ? t : h.t;
-        h.prim = take ? prim : h.prim;
-        h.bary = take ? vec2(v / det, w / det) : h.bary;
-        h.inst = take ? level : h.inst;
+        trace_tri_test(tri.v0.xyz, tri.v1.xyz, tri.v2.xyz, floatBitsToUint(tri.v0.w), level, r,
+                       tmin, h);
     }
 }
 

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::view::{Tiling, camera_block};
-use crate::gpu_interface::{HitsBinding, HitsPush, ImagePush, RaycastBinding, TILE};
+use crate::gpu_interface::{HitsBinding, HitsPush, ImagePush, RaycastBinding, TILE, Tri};
 use crate::graph::{Graph, PassTiming};
 use crate::scene::Camera;
 use crate::trace::{TraceScene, scramble_multiplier, trace_pipeline};
@@ -121,6 +121,33 @@ pub fn trace_rays(
     rays: &[RayIn],
     profiler: Option<&Profiler>,
 ) -> Result<(Vec<HitOut>, PassTiming), VkError> {
+    trace_rays_hinted(ctx, scene, rays, None, profiler)
+}
+
+/// A closest-hit hint for [`trace_rays_hinted`]: a triangle of the scene (its corners in
+/// the mesh's order and its index), or none.
+#[derive(Clone, Copy, Debug)]
+pub struct RayHint {
+    pub corners: [[f32; 3]; 3],
+    pub prim: Option<u32>,
+}
+
+/// [`trace_rays`] with a hint per ray (`hints`, as many as `rays`): the path tracer's
+/// camera rays start their closest-hit query from the triangle the pixel's centre ray met
+/// (glsl/common/trace.glsl, TraceHint); whatever the hint, the hit must be the same.
+///
+/// # Panics
+/// If `hints` is given and its length is not `rays`'.
+pub fn trace_rays_hinted(
+    ctx: &Arc<Context>,
+    scene: &TraceScene,
+    rays: &[RayIn],
+    hints: Option<&[RayHint]>,
+    profiler: Option<&Profiler>,
+) -> Result<(Vec<HitOut>, PassTiming), VkError> {
+    if let Some(h) = hints {
+        assert_eq!(h.len(), rays.len(), "trace_rays_hinted: one hint a ray");
+    }
     let off = TraceScene::binding_kinds(scene.backend).len() as u32;
     let push_size = std::mem::size_of::<HitsPush>() as u32;
     let pipeline = trace_pipeline(
@@ -133,6 +160,21 @@ pub fn trace_rays(
     )?;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let ray_buf = Buffer::from_slice(ctx, "rays", rays, storage)?;
+    let hint_tris: Vec<Tri> = match hints {
+        Some(h) => h
+            .iter()
+            .map(|h| {
+                let [a, b, c] = h.corners;
+                Tri {
+                    a: [a[0], a[1], a[2], f32::from_bits(h.prim.unwrap_or(u32::MAX))],
+                    b: [b[0], b[1], b[2], 0.0],
+                    c: [c[0], c[1], c[2], 0.0],
+                }
+            })
+            .collect(),
+        None => vec![bytemuck::Zeroable::zeroed()],
+    };
+    let hint_buf = Buffer::from_slice(ctx, "ray hints", &hint_tris, storage)?;
     let hit_buf = Buffer::new(
         ctx,
         "hits",
@@ -146,14 +188,16 @@ pub fn trace_rays(
         count: rays.len() as u32,
         groups,
         mult: scramble_multiplier(groups),
-        pad0: 0,
+        hinted: u32::from(hints.is_some()),
     };
     let mut g = Graph::new(ctx, "trace rays");
     let refs = scene.import(&mut g);
     let r = g.import(&ray_buf);
+    let hb = g.import(&hint_buf);
     let mut h = g.import(&hit_buf);
     refs.bind(g.dispatch("trace", &pipeline, [groups, 1, 1]))
         .read(HitsBinding::Rays.at(off), &r)
+        .read(HitsBinding::Hints.at(off), &hb)
         .write(HitsBinding::Hits.at(off), &mut h)
         .push(&push)
         .submit();
