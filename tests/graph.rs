@@ -53,9 +53,9 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
     use synosis::trace::{Backend, TraceScene, trace_pipeline};
     use synosis::vk::{BindingKind, VkError};
     let ctx = common::gpu();
-    // Software backend: its own bindings first, then rays, hits; 16-byte push block.
+    // Software backend: its own bindings first, then rays, hits, hints; 16-byte push block.
     let off = TraceScene::binding_kinds(Backend::Software).len() as u32;
-    let pipe = trace_pipeline(&ctx, "hits", Backend::Software, 2, 16, [64, 1, 1]).unwrap();
+    let pipe = trace_pipeline(&ctx, "hits", Backend::Software, 3, 16, [64, 1, 1]).unwrap();
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let out = Buffer::new(&ctx, "out", 256, usage, MemoryKind::Readback).unwrap();
     let run = |name: &str, bind_rays: bool, push: &[u32; 4], words: usize, groups: [u32; 3]| {
@@ -74,6 +74,7 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
             _ => d.push(&[push[0], push[1], push[2]]),
         }
         .write(off + 1, &mut o)
+        .read(off + 2, &a)
         .submit();
         g.execute(None)
     };
