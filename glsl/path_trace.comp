@@ -511,10 +511,9 @@ PixelPlane pix_plane;
 TraceHint pix_hint;
 
 // Sets the pixel's reference point and records its rings (none where the centre ray
-// meets no conductor).
+// meets no conductor); sets pix_hint where that ray meets the object (main clears it).
 void pixel_plane_init(uint px, uint py) {
     rec_rings = 0u;
-    pix_hint = trace_no_hint();
     vec3 o, d;
     camera_ray(prm.cam, vec2(px, py) + 0.5, vec2(prm.width, prm.height), vec2(0.5), o, d);
     Hit h = trace(o, d, 0.0, 3.0e38);
