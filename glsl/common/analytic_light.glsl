@@ -22,6 +22,7 @@
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
 #extension GL_KHR_shader_subgroup_vote : require
+#extension GL_EXT_control_flow_attributes : require
 
 // A linearly transformed cosine in world space: orthonormal frame (t1, t2, r), r its
 // axis, widths a1 along t1 and a2 along t2; g = c D.
@@ -82,6 +83,11 @@ float edge_z(vec3 a, vec3 b) {
 vec3 rec_w[2u * REC_RINGS * REC_LOOP_VERTS];
 uint rec_n[2u * REC_RINGS];   // vertices of loop i (ring i / 2, its lo loop first)
 float rec_le[REC_RINGS];      // the ring's radiance
+// A cone holding the ring's recorded vertices as seen from the recording point: unit
+// axis and the sine of its half-angle (2 where it is a hemisphere or wider): a lobe
+// whose shading normal keeps the cone above its horizon has every vertex above it, one
+// test per ray and ring instead of one per vertex (recorded_rings2).
+vec4 rec_cone[REC_RINGS];
 uint rec_rings = 0u;
 
 // Unit-free direction w from the shading point in the lobe's cosine space, or below its
@@ -369,6 +375,21 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
     return a;
 }
 
+// The cone of recorded ring r's two loops (rec_cone): axis the mean of their unit
+// vertices, half-angle the widest (once per pixel).
+vec4 recorded_cone(uint r) {
+    vec3 axis = vec3(0.0);
+    for (uint i = 2u * r; i < 2u * r + 2u; i++) {
+        for (uint j = 0u; j < rec_n[i]; j++) axis += normalize(rec_w[i * REC_LOOP_VERTS + j]);
+    }
+    axis = normalize(axis);
+    float c = 1.0;
+    for (uint i = 2u * r; i < 2u * r + 2u; i++) {
+        for (uint j = 0u; j < rec_n[i]; j++) c = min(c, dot(normalize(rec_w[i * REC_LOOP_VERTS + j]), axis));
+    }
+    return vec4(axis, c > 0.0 ? sqrt(max(1.0 - c * c, 0.0)) : 2.0);
+}
+
 // Records the rings the control variate may use at x (geometric normal ng; bit k of
 // analytic_rings' mask), over the coarser ring of `divisor`, as seen from x: the first
 // REC_RINGS of them whose loops fit (rec_rings of them; recorded_rings2 sums them).
@@ -384,6 +405,7 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
         ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ok);
         if (ok) {
             rec_le[rec_rings] = e.emit.x;
+            rec_cone[rec_rings] = recorded_cone(rec_rings);
             rec_rings++;
         }
     }
@@ -392,47 +414,52 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
 // One edge of the clamped-cosine polygon integral between unit a and b, over 2 pi:
 // angle / sin(angle) from a rational fit in cos(angle) (Hill's, of the LTC reference
 // code; relative error below 2e-6 over (0, pi), measured), no atan: what the extra
-// camera rays' closed form takes (edge_z is kept where A must equal E[G]).
+// camera rays' closed form takes (edge_z is kept where A must equal E[G]). An obtuse
+// edge (one passing near the lobe's axis: few of a loop's) takes pi / sin(angle) minus
+// the acute fit; that square root and division sit behind a real branch
+// (`[[dont_flatten]]`): as a select, which the compiler makes of so small an `if`,
+// lavapipe computed them for every edge of every lane (taking them out of the select
+// made the path tracing 0.92x, the same values; docs/benchmarks/dataset.md).
 float edge_z_unit(vec3 a, vec3 b) {
     float x = dot(a, b);
     float y = abs(x);
     float v = (0.8543985 + (0.4965155 + 0.0145206 * y) * y) / (3.4175940 + (4.1616724 + y) * y);
-    float ts = x > 0.0 ? v : 0.5 * inversesqrt(max(1.0 - x * x, 1e-7)) - v;
+    float ts = v;
+    [[dont_flatten]] if (!(x > 0.0)) ts = 0.5 * inversesqrt(max(1.0 - x * x, 1e-7)) - v;
     return (a.x * b.y - a.y * b.x) * ts;
 }
 
-// Recorded vertex w in the cosine space of lobe l (reciprocal widths rt1, rt2), unit
-// length; below its horizon (z < 0) where w is below the shading horizon ns.
-vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r, vec3 ns) {
-    if (!(dot(w, ns) > 0.0)) return vec3(0.0, 0.0, -1.0);
+// Recorded vertex w in the cosine space of lobe l (reciprocal widths rt1, rt2, axis r),
+// unit length (z <= 0: at or below the cosine space's horizon).
+vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r) {
     vec3 v = vec3(dot(w, rt1), dot(w, rt2), dot(w, r));
     return v * inversesqrt(dot(v, v));
 }
 
 // Recorded loop i summed as ring_integral sums a loop, for two lobes at once (the extra
-// camera rays go in pairs): lobes l0 and l1 (shading normals ns0, ns1), closed, over
-// 2 pi; `above` as the loop's for each (record_rings kept only loops above the geometric
-// horizon). The lobes' widths are taken as reciprocals and the edges from edge_z_unit
+// camera rays go in pairs): lobes l0 and l1, closed, over 2 pi; `above` where every
+// vertex is above each lobe's cosine-space horizon (record_rings kept only loops above
+// the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The lobes' widths are taken as reciprocals and the edges from edge_z_unit
 // (roundings of their own: A' needs only to be one function of the camera ray). Each
 // vertex is read once for both lobes (a private array's read is a per-lane gather on
 // lavapipe) and the two sums give the loop's body independent work; each sum is what a
 // pass of its own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
 // of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
 // rays' edge sums in pairs").
-vec2 recorded_loop2(uint i, Lobe l0, vec3 ns0, Lobe l1, vec3 ns1, out bvec2 above) {
+vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     uint base = i * REC_LOOP_VERTS;
     vec3 t10 = l0.t1 * (1.0 / l0.a1), t20 = l0.t2 * (1.0 / l0.a2);
     vec3 t11 = l1.t1 * (1.0 / l1.a1), t21 = l1.t2 * (1.0 / l1.a2);
     vec3 w = rec_w[base];
-    vec3 first0 = recorded_point(w, t10, t20, l0.r, ns0);
-    vec3 first1 = recorded_point(w, t11, t21, l1.r, ns1);
+    vec3 first0 = recorded_point(w, t10, t20, l0.r);
+    vec3 first1 = recorded_point(w, t11, t21, l1.r);
     vec3 prev0 = first0, prev1 = first1;
     float sum0 = 0.0, sum1 = 0.0;
     bool ab0 = first0.z > 0.0, ab1 = first1.z > 0.0;
     for (uint j = 1u; j < rec_n[i]; j++) {
         w = rec_w[base + j];
-        vec3 v0 = recorded_point(w, t10, t20, l0.r, ns0);
-        vec3 v1 = recorded_point(w, t11, t21, l1.r, ns1);
+        vec3 v0 = recorded_point(w, t10, t20, l0.r);
+        vec3 v1 = recorded_point(w, t11, t21, l1.r);
         sum0 += edge_z_unit(prev0, v0);
         sum1 += edge_z_unit(prev1, v1);
         prev0 = v0;
@@ -445,16 +472,21 @@ vec2 recorded_loop2(uint i, Lobe l0, vec3 ns0, Lobe l1, vec3 ns1, out bvec2 abov
 }
 
 // analytic_rings' closed form for lobes l0 and l1 over the recorded rings (as seen from
-// the point they were recorded at), each ring counted where its loops are above the
-// horizons.
+// the point they were recorded at) and shading normals ns0, ns1, each ring counted
+// where its loops are above the cosine spaces' horizons and its cone (rec_cone) above
+// the shading horizon. (A' of a ray whose shading horizon cuts the cone but not the
+// loops is 0 where a per-vertex test would have kept the ring: rare, and A' need only
+// be one function of the camera ray.)
 vec2 recorded_rings2(Lobe l0, vec3 ns0, Lobe l1, vec3 ns1) {
     vec2 a = vec2(0.0);
     for (uint r = 0u; r < rec_rings; r++) {
         bvec2 above_lo, above_hi;
-        vec2 lo = recorded_loop2(2u * r, l0, ns0, l1, ns1, above_lo);
-        vec2 hi = recorded_loop2(2u * r + 1u, l0, ns0, l1, ns1, above_hi);
-        if (above_lo.x && above_hi.x) a.x += l0.c * rec_le[r] * abs(lo.x - hi.x);
-        if (above_lo.y && above_hi.y) a.y += l1.c * rec_le[r] * abs(lo.y - hi.y);
+        vec2 lo = recorded_loop2(2u * r, l0, l1, above_lo);
+        vec2 hi = recorded_loop2(2u * r + 1u, l0, l1, above_hi);
+        vec4 cone = rec_cone[r];
+        bool up0 = dot(cone.xyz, ns0) > cone.w, up1 = dot(cone.xyz, ns1) > cone.w;
+        if (up0 && above_lo.x && above_hi.x) a.x += l0.c * rec_le[r] * abs(lo.x - hi.x);
+        if (up1 && above_lo.y && above_hi.y) a.y += l1.c * rec_le[r] * abs(lo.y - hi.y);
     }
     return a;
 }
