@@ -418,8 +418,9 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
 // edge (one passing near the lobe's axis: few of a loop's) takes pi / sin(angle) minus
 // the acute fit; that square root and division sit behind a real branch
 // (`[[dont_flatten]]`): as a select, which the compiler makes of so small an `if`,
-// lavapipe computed them for every edge of every lane (taking them out of the select
-// made the path tracing 0.92x, the same values; docs/benchmarks/dataset.md).
+// lavapipe computed them for every edge of every lane (the same values; with the cone's
+// horizon test, recorded_rings2, 0.987x the path tracing of whole paper frames,
+// docs/benchmarks/dataset.md).
 float edge_z_unit(vec3 a, vec3 b) {
     float x = dot(a, b);
     float y = abs(x);
