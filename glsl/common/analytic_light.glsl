@@ -21,7 +21,6 @@
 // unbiased, and its variance falls where f V ~ g over the ring.
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
-#extension GL_KHR_shader_subgroup_vote : require
 #extension GL_EXT_control_flow_attributes : require
 
 // A linearly transformed cosine in world space: orthonormal frame (t1, t2, r), r its
@@ -288,11 +287,14 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
                 - g.big_r * cn;
             // Most segments keep both boundaries: the walk (a loop whose steps every lane
             // of a subgroup pays for on lavapipe) runs only where a lane's boundary moves
-            // (a vote: a uniform branch, skipped for real).
+            // (a real branch, which lavapipe skips where no lane of the subgroup takes
+            // it; a subgroup vote here cost a loop over the lanes per segment).
             bool settled = ring_settled(g, lo.v, true) && ring_settled(g, hi.v, false);
-            if (subgroupAny(!settled)
-                    && (!ring_side(lo, g, l, rad, true, true) || !ring_side(hi, g, l, rad, false, true))) {
-                return 0.0;
+            [[dont_flatten]] if (!settled) {
+                if (!ring_side(lo, g, l, rad, true, true)
+                        || !ring_side(hi, g, l, rad, false, true)) {
+                    return 0.0;
+                }
             }
         }
         loop_add(lo.lp, ns, ng, l, ring_vertex(g, rad_next, lo.v));
@@ -385,7 +387,9 @@ vec4 recorded_cone(uint r) {
     axis = normalize(axis);
     float c = 1.0;
     for (uint i = 2u * r; i < 2u * r + 2u; i++) {
-        for (uint j = 0u; j < rec_n[i]; j++) c = min(c, dot(normalize(rec_w[i * REC_LOOP_VERTS + j]), axis));
+        for (uint j = 0u; j < rec_n[i]; j++) {
+            c = min(c, dot(normalize(rec_w[i * REC_LOOP_VERTS + j]), axis));
+        }
     }
     return vec4(axis, c > 0.0 ? sqrt(max(1.0 - c * c, 0.0)) : 2.0);
 }
@@ -440,7 +444,8 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r) {
 // Recorded loop i summed as ring_integral sums a loop, for two lobes at once (the extra
 // camera rays go in pairs): lobes l0 and l1, closed, over 2 pi; `above` where every
 // vertex is above each lobe's cosine-space horizon (record_rings kept only loops above
-// the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The lobes' widths are taken as reciprocals and the edges from edge_z_unit
+// the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The
+// lobes' widths are taken as reciprocals and the edges from edge_z_unit
 // (roundings of their own: A' needs only to be one function of the camera ray). Each
 // vertex is read once for both lobes (a private array's read is a per-lane gather on
 // lavapipe) and the two sums give the loop's body independent work; each sum is what a
