@@ -1953,20 +1953,67 @@ fn run_in_flight(
     Result<dataset::RunReport, DatasetError>,
     Vec<(usize, usize)>,
 ) {
+    run_lanes(f, out, in_flight, 1, None, None, textures)
+}
+
+/// As [`run_in_flight`] with `renderers` renderers (each an [`OrthoLabelTestDouble`],
+/// failing on the image of seed `fail_seed` when given) and the `fail_after` test hook.
+fn run_lanes(
+    f: &Fixture,
+    out: &Path,
+    in_flight: usize,
+    renderers: usize,
+    fail_seed: Option<u64>,
+    fail_after: Option<usize>,
+    textures: &mut (dyn TextureSource + Send),
+) -> (
+    Result<dataset::RunReport, DatasetError>,
+    Vec<(usize, usize)>,
+) {
     let mut calls = Vec::new();
     let mut progress = |done: usize, total: usize| calls.push((done, total));
+    let mut all: Vec<FailingAtTestDouble> = (0..renderers)
+        .map(|_| FailingAtTestDouble {
+            inner: OrthoLabelTestDouble { calls: 0 },
+            seed: fail_seed,
+        })
+        .collect();
+    let (first, more) = all.split_first_mut().expect("one renderer at least");
     let r = dataset::run(
         &f.prep,
         out,
-        &mut OrthoLabelTestDouble { calls: 0 },
+        first,
         textures,
         RunOptions {
             progress: Some(&mut progress),
             in_flight,
+            fail_after,
+            more_renderers: more
+                .iter_mut()
+                .map(|r| r as &mut (dyn ImageRenderer + Send))
+                .collect(),
             ..Default::default()
         },
     );
     (r, calls)
+}
+
+/// TEST DOUBLE: the [`OrthoLabelTestDouble`], failing on the image of one seed.
+struct FailingAtTestDouble {
+    inner: OrthoLabelTestDouble,
+    seed: Option<u64>,
+}
+
+impl ImageRenderer for FailingAtTestDouble {
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+    fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
+        if Some(req.seed) == self.seed {
+            return Err("device lost at this image (test double)".into());
+        }
+        self.inner.render(req)
+    }
 }
 
 /// The shard manifest's image indices, in file order.
@@ -1989,19 +2036,67 @@ fn overlapped_runs_write_the_same_files_as_one_image_at_a_time() {
     let made_one = tex.made;
     let want: Vec<(usize, usize)> = (1..=total).map(|k| (k, total)).collect();
     assert_eq!(calls_one, want);
-    for in_flight in [2, 4] {
-        let out = f.root.join(format!("overlapped-{in_flight}"));
+    // With several renderers each takes the next image, on a thread of its own.
+    for (in_flight, renderers) in [(2, 1), (4, 1), (2, 2), (3, 3)] {
+        let out = f.root.join(format!("overlapped-{in_flight}-{renderers}"));
         let mut tex = FlatTexturesTestDouble { made: 0 };
-        let (r, calls) = run_in_flight(&f, &out, in_flight, &mut tex);
-        assert_eq!(r.unwrap().rendered, total);
+        let (r, calls) = run_lanes(&f, &out, in_flight, renderers, None, None, &mut tex);
+        let case = format!("in_flight {in_flight}, renderers {renderers}");
+        assert_eq!(r.unwrap().rendered, total, "{case}");
         assert_same_dataset(&one, &out);
-        assert_eq!(manifest_order(&out), manifest_order(&one));
-        assert_eq!(listing(&out), listing(&one));
+        assert_eq!(manifest_order(&out), manifest_order(&one), "{case}");
+        assert_eq!(listing(&out), listing(&one), "{case}");
         // The progress counts written images, one call each, in order.
-        assert_eq!(calls, want, "in_flight {in_flight}");
+        assert_eq!(calls, want, "{case}");
         // The same texture cache misses (the inputs are made in the same order).
-        assert_eq!(tex.made, made_one, "in_flight {in_flight}");
+        assert_eq!(tex.made, made_one, "{case}");
     }
+}
+
+#[test]
+fn a_render_error_or_a_kill_stops_a_run_of_several_renderers_as_it_stops_one() {
+    let f = fixture(2, 2);
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    // The 8th image fails to render, whichever renderer takes it.
+    let seed = f.prep.plan.items[7].seed;
+    let mut errors = Vec::new();
+    for (in_flight, renderers) in [(1, 1), (3, 1), (3, 2), (2, 4)] {
+        let case = format!("in_flight {in_flight}, renderers {renderers}");
+        let out = f.root.join(format!("render-{in_flight}-{renderers}"));
+        let mut tex = FlatTexturesTestDouble { made: 0 };
+        let (r, calls) = run_lanes(&f, &out, in_flight, renderers, Some(seed), None, &mut tex);
+        let err = r.unwrap_err();
+        assert!(
+            matches!(err, DatasetError::Render { .. }),
+            "{case}: {err:?}"
+        );
+        errors.push(err.to_string());
+        // The images before it are written and listed, none after it.
+        assert_eq!(manifest_order(&out), (0..7).collect::<Vec<_>>(), "{case}");
+        assert_eq!(calls.len(), 7, "{case}");
+        let names = listing(&out);
+        assert!(
+            names.iter().all(|n| !n.contains(".tmp")),
+            "{case}: {names:?}"
+        );
+        // Resumable: with a renderer that works it ends as an uninterrupted run.
+        let (r, _) = run_lanes(&f, &out, in_flight, renderers, None, None, &mut tex);
+        assert_eq!(r.unwrap().already_done, 7, "{case}");
+        assert_same_dataset(&full, &out);
+        // Killed after 5 images (the test hook): 5 listed, the run resumes.
+        let out = f.root.join(format!("killed-{in_flight}-{renderers}"));
+        let (r, _) = run_lanes(&f, &out, in_flight, renderers, None, Some(5), &mut tex);
+        assert!(
+            matches!(r, Err(DatasetError::Interrupted { done: 5 })),
+            "{case}: {r:?}"
+        );
+        assert_eq!(manifest_order(&out), (0..5).collect::<Vec<_>>(), "{case}");
+        let (r, _) = run_lanes(&f, &out, in_flight, renderers, None, None, &mut tex);
+        assert_eq!(r.unwrap().already_done, 5, "{case}");
+        assert_same_dataset(&full, &out);
+    }
+    assert!(errors.iter().all(|e| *e == errors[0]), "{errors:?}");
 }
 
 /// TEST DOUBLE: flat textures that fail from the `fail_at`-th make on.

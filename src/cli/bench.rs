@@ -47,6 +47,10 @@ pub struct BenchGpuArgs {
     /// other. Default: 3 on a GPU, 1 on a CPU Vulkan device (lavapipe).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
     in_flight: Option<usize>,
+    /// Renderers, each with its own Vulkan device context (as `dataset run --renderers`).
+    /// Default: 2 on a GPU, 1 on a CPU Vulkan device (lavapipe).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
+    renderers: Option<usize>,
 }
 
 /// The job text with `[render]` overrides.
@@ -95,6 +99,8 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let t0 = Instant::now();
     let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
+    let mut more = super::dataset::more_renderers(a.renderers, &renderer)?;
+    let renderers = 1 + more.len();
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
     let in_flight = super::dataset::in_flight(a.in_flight, &renderer);
@@ -112,6 +118,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             progress: Some(&mut progress),
             profiler: Some(&profiler),
             in_flight,
+            more_renderers: super::dataset::renderer_refs(&mut more),
             ..Default::default()
         },
     )
@@ -166,6 +173,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
         n_inst
     );
     println!("| images in flight | {in_flight} |");
+    println!("| renderers (device contexts) | {renderers} |");
     println!("| start-up (Vulkan, pipelines, energy tables) | {startup_s:.2} s |");
     println!(
         "| per image | {per_image:.2} s ({:.0} images per hour) |",
@@ -194,6 +202,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             "images": entries.len(),
             "width": w, "height": h, "spp": spp,
             "in_flight": in_flight,
+            "renderers": renderers,
             "startup_s": startup_s,
             "per_image_s": per_image,
             "images_per_hour": 3600.0 / per_image,

@@ -107,6 +107,12 @@ struct RunArgs {
     /// 1 on a CPU Vulkan device (lavapipe), where the overlap only competes for the cores.
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
     in_flight: Option<usize>,
+    /// Renderers, each with its own Vulkan device context and thread, rendering the next
+    /// images at once (with --in-flight 2 or more): the GPU samples one image while
+    /// another renderer's CPU work (scene set-up, noise checks, read-back) runs (same
+    /// files either way). Default: 2 on a GPU, 1 on a CPU Vulkan device (lavapipe).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
+    renderers: Option<usize>,
 }
 
 /// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
@@ -118,6 +124,36 @@ pub(super) fn in_flight(arg: Option<usize>, renderer: &GpuRenderer) -> usize {
     } else {
         dataset::DEFAULT_IN_FLIGHT
     })
+}
+
+/// Renderers on a GPU by default (`--renderers`): two keep an H100 busy while one of
+/// them does its CPU work (docs/benchmarks/dataset.md, "Several renderers").
+pub const DEFAULT_GPU_RENDERERS: usize = 2;
+
+/// The renderers beside `first` (`--renderers`, or its default for the device:
+/// [`DEFAULT_GPU_RENDERERS`] on a GPU, 1 on a CPU implementation), each opening its own
+/// Vulkan device context, made at once on threads of their own.
+pub(super) fn more_renderers(arg: Option<usize>, first: &GpuRenderer) -> Result<Vec<GpuRenderer>> {
+    let n = arg.unwrap_or(if first.device_is_cpu() {
+        1
+    } else {
+        DEFAULT_GPU_RENDERERS
+    });
+    std::thread::scope(|s| {
+        let made: Vec<_> = (1..n).map(|_| s.spawn(gpu_renderer)).collect();
+        made.into_iter()
+            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    })
+}
+
+/// `RunOptions::more_renderers` of `more`.
+pub(super) fn renderer_refs(
+    more: &mut [GpuRenderer],
+) -> Vec<&mut (dyn dataset::ImageRenderer + Send)> {
+    more.iter_mut()
+        .map(|r| r as &mut (dyn dataset::ImageRenderer + Send))
+        .collect()
 }
 
 /// A `RunOptions::progress` callback that moves `bar` to (done, total).
@@ -151,7 +187,7 @@ fn resolve_shard(a: &RunArgs) -> Result<Shard> {
     Ok(shard)
 }
 
-fn gpu_renderer() -> Result<GpuRenderer> {
+pub(super) fn gpu_renderer() -> Result<GpuRenderer> {
     let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     GpuRenderer::new(accel, false)
         .map_err(anyhow::Error::msg)
@@ -294,6 +330,9 @@ fn run_job(a: RunArgs) -> Result<()> {
     bar.enable_steady_tick(Duration::from_millis(500));
     let mut progress = bar_progress(&bar);
     let in_flight = in_flight(a.in_flight, &renderer);
+    let mut more = profiler.cpu("Vulkan init, pipelines, energy tables", || {
+        more_renderers(a.renderers, &renderer)
+    })?;
     let result = dataset::run(
         &prep,
         &a.out,
@@ -305,6 +344,7 @@ fn run_job(a: RunArgs) -> Result<()> {
             progress: Some(&mut progress),
             profiler: a.profile.as_ref().map(|_| &profiler),
             in_flight,
+            more_renderers: renderer_refs(&mut more),
         },
     );
     bar.finish_and_clear();

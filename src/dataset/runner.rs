@@ -398,6 +398,12 @@ pub struct RunOptions<'a> {
     /// The files and manifest are the same byte for byte (docs/dataset.md, "How a run
     /// is scheduled"). 0 is taken as 1.
     pub in_flight: usize,
+    /// Renderers beside the one given to [`run`], each rendering on a thread of its own
+    /// (with `in_flight` >= 2; one at a time uses the first only): every renderer takes
+    /// the next image in the list's order, so on a GPU one renderer's CPU work (scene
+    /// set-up, noise checks, read-back) runs while another's samples keep the GPU busy
+    /// (`dataset run --renderers`). The files and manifest are the same byte for byte.
+    pub more_renderers: Vec<&'a mut (dyn ImageRenderer + Send)>,
 }
 
 /// Images in flight by default: one rendering, two being written.
@@ -411,6 +417,7 @@ impl Default for RunOptions<'_> {
             progress: None,
             profiler: None,
             in_flight: DEFAULT_IN_FLIGHT,
+            more_renderers: Vec::new(),
         }
     }
 }
@@ -592,6 +599,7 @@ fn run_locked(
         overlapped.run(
             &todo,
             renderer,
+            &mut opts.more_renderers,
             textures,
             opts.fail_after,
             &mut progress,
@@ -667,13 +675,14 @@ impl Commits<'_> {
 }
 
 /// A run with several images in flight: the calling thread renders (the renderer
-/// stays on it); a "prepare" thread makes the next images' inputs (mesh, textures)
-/// through a channel of one object instance's views; `writers` "writer" threads take
-/// rendered images through a rendezvous channel (so at most `writers + 1` rendered
-/// images exist) and write them; manifest lines are appended in the list's order
-/// ([`Commits`]). The first error in the list's order ends the run, as it would end a
-/// run of one image at a time: every image before it is written and listed, none
-/// after it is listed.
+/// stays on it), and each of `more` renderers on a "render N" thread of its own, every
+/// one taking the next image in the list's order; a "prepare" thread makes the next
+/// images' inputs (mesh, textures) through a channel of one object instance's views;
+/// `writers` "writer" threads take rendered images through a rendezvous channel (so at
+/// most `writers + renderers` rendered images exist) and write them; manifest lines are
+/// appended in the list's order ([`Commits`]). The first error in the list's order ends
+/// the run, as it would end a run of one image at a time: every image before it is
+/// written and listed, none after it is listed.
 struct Overlapped<'a> {
     prep: &'a Prepared,
     out: &'a Path,
@@ -683,11 +692,85 @@ struct Overlapped<'a> {
     writers: usize,
 }
 
+/// What the render lanes share: the prepared inputs in the list's order with the
+/// position of the next, the render errors and the test hook's stop.
+struct Lanes<'t> {
+    todo: &'t [&'t ItemPlan],
+    /// The inputs' receiving end (None once the lanes are done, so that a preparing
+    /// thread waiting to send stops) and the position of the next image.
+    feed: Mutex<(Option<std::sync::mpsc::Receiver<Result<ItemInputs>>>, usize)>,
+    fail_after: Option<usize>,
+    /// The first render error in the list's order (position, error).
+    stopped: Mutex<Option<(usize, DatasetError)>>,
+    /// The position the test hook stopped at.
+    interrupted: Mutex<Option<usize>>,
+}
+
+impl<'t> Lanes<'t> {
+    /// The next image to render and its inputs, in the list's order; None when the list
+    /// is done or the run stops (an error or the test hook at or before it).
+    fn next(&self, commits: &Commits) -> Option<(usize, Result<ItemInputs>)> {
+        let mut feed = self.feed.lock().unwrap_or_else(|p| p.into_inner());
+        let pos = feed.1;
+        if pos >= self.todo.len() || commits.failed.load(Ordering::SeqCst) <= pos {
+            return None;
+        }
+        if self.fail_after == Some(pos) {
+            *self.interrupted.lock().unwrap_or_else(|p| p.into_inner()) = Some(pos);
+            commits.failed.fetch_min(pos, Ordering::SeqCst);
+            return None;
+        }
+        // Err: the preparing thread ended (it panicked: the scope re-raises it).
+        let got = feed.0.as_ref()?.recv().ok()?;
+        feed.1 += 1;
+        Some((pos, got))
+    }
+
+    /// One renderer's loop: renders images until the list is done or the run stops;
+    /// `report` after each image taken (the calling thread's progress).
+    fn render(
+        &self,
+        run: &Overlapped,
+        commits: &Commits,
+        renderer: &mut dyn ImageRenderer,
+        job_tx: std::sync::mpsc::SyncSender<(usize, RenderedItem<'t>)>,
+        report: &mut dyn FnMut(),
+    ) {
+        loop {
+            report();
+            let Some((pos, got)) = self.next(commits) else {
+                break;
+            };
+            let item = self.todo[pos];
+            let start = run.profiler.map(Profiler::now_us);
+            let r = got.and_then(|i| render_stage(run.prep, item, i, renderer, run.profiler));
+            image_span(run.profiler, item, start);
+            match r {
+                Ok(r) => {
+                    if job_tx.send((pos, r)).is_err() {
+                        break; // every writer panicked: the scope re-raises it
+                    }
+                }
+                Err(e) => {
+                    commits.failed.fetch_min(pos, Ordering::SeqCst);
+                    let mut stopped = self.stopped.lock().unwrap_or_else(|p| p.into_inner());
+                    if stopped.as_ref().is_none_or(|(p, _)| pos < *p) {
+                        *stopped = Some((pos, e));
+                    }
+                    break;
+                }
+            }
+        }
+    }
+}
+
 impl Overlapped<'_> {
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         todo: &[&ItemPlan],
         renderer: &mut dyn ImageRenderer,
+        more: &mut [&mut (dyn ImageRenderer + Send)],
         textures: &mut (dyn TextureSource + Send),
         fail_after: Option<usize>,
         progress: &mut dyn FnMut(usize),
@@ -706,12 +789,19 @@ impl Overlapped<'_> {
         // Rendered images to the writers; the receiving end shared by them.
         let (job_tx, job_rx) = std::sync::mpsc::sync_channel::<(usize, RenderedItem)>(0);
         let job_rx = Mutex::new(job_rx);
-        let (stopped, interrupted) = std::thread::scope(|s| -> Result<_> {
-            // One object instance ahead: the channel holds one instance's views less one
-            // and the preparing thread the last, so the next instance's mesh and textures
-            // are made while the current one's first view renders, never further ahead.
-            let ahead = self.prep.job.viewpoints().len().saturating_sub(1);
-            let (in_tx, in_rx) = std::sync::mpsc::sync_channel::<Result<ItemInputs>>(ahead);
+        // One object instance ahead: the channel holds one instance's views less one
+        // and the preparing thread the last, so the next instance's mesh and textures
+        // are made while the current one's first view renders, never further ahead.
+        let ahead = self.prep.job.viewpoints().len().saturating_sub(1);
+        let (in_tx, in_rx) = std::sync::mpsc::sync_channel::<Result<ItemInputs>>(ahead);
+        let lanes = Lanes {
+            todo,
+            feed: Mutex::new((Some(in_rx), 0)),
+            fail_after,
+            stopped: Mutex::new(None),
+            interrupted: Mutex::new(None),
+        };
+        std::thread::scope(|s| -> Result<()> {
             let mut inputs = Inputs::new(self.prep, self.profiler);
             let profiler = self.profiler;
             let preparing = std::thread::Builder::new()
@@ -759,55 +849,38 @@ impl Overlapped<'_> {
                     .map_err(spawn_err)?;
                 writers.push(handle);
             }
+            let mut others = Vec::new();
+            for (k, r) in more.iter_mut().enumerate() {
+                let (lanes, commits, tx) = (&lanes, &commits, job_tx.clone());
+                let handle = std::thread::Builder::new()
+                    .name(format!("render {}", k + 2))
+                    .spawn_scoped(s, move || {
+                        lanes.render(self, commits, &mut **r, tx, &mut || {})
+                    })
+                    .map_err(spawn_err)?;
+                others.push(handle);
+            }
             let mut reported = 0;
-            let mut report = |upto: usize| {
+            let mut report = || {
+                let upto = commits.state().next;
                 while reported < upto {
                     reported += 1;
                     progress(reported);
                 }
             };
-            // The render loop's own error (inputs or render), at its position.
-            let mut stopped = None;
-            let mut interrupted = None;
-            for (pos, &item) in todo.iter().enumerate() {
-                report(commits.state().next);
-                if commits.failed.load(Ordering::SeqCst) != usize::MAX {
-                    break;
-                }
-                if fail_after == Some(pos) {
-                    interrupted = Some(item);
-                    break;
-                }
-                let Ok(got) = in_rx.recv() else {
-                    break; // the preparing thread panicked: the scope re-raises it
-                };
-                let start = self.profiler.map(Profiler::now_us);
-                let r = got.and_then(|i| render_stage(self.prep, item, i, renderer, self.profiler));
-                image_span(self.profiler, item, start);
-                match r {
-                    Ok(r) => {
-                        if job_tx.send((pos, r)).is_err() {
-                            break; // every writer panicked: the scope re-raises it
-                        }
-                    }
-                    Err(e) => {
-                        stopped = Some(e);
-                        break;
-                    }
-                }
-            }
-            drop(job_tx);
-            drop(in_rx);
-            for w in writers {
-                if let Err(p) = w.join() {
+            lanes.render(self, &commits, renderer, job_tx, &mut report);
+            for h in others.into_iter().chain(writers) {
+                if let Err(p) = h.join() {
                     std::panic::resume_unwind(p);
                 }
             }
+            // A preparing thread waiting to send (the run stopped early) stops.
+            lanes.feed.lock().unwrap_or_else(|p| p.into_inner()).0 = None;
             if let Err(p) = preparing.join() {
                 std::panic::resume_unwind(p);
             }
-            report(commits.state().next);
-            Ok((stopped, interrupted))
+            report();
+            Ok(())
         })?;
         let c = commits
             .state
@@ -817,13 +890,20 @@ impl Overlapped<'_> {
         if let Some(e) = c.error {
             return Err(e);
         }
-        if let Some(e) = stopped {
-            return Err(e);
+        let stopped = lanes
+            .stopped
+            .into_inner()
+            .unwrap_or_else(|p| p.into_inner());
+        let interrupted = lanes
+            .interrupted
+            .into_inner()
+            .unwrap_or_else(|p| p.into_inner());
+        // The first of a render error and the test hook's stop in the list's order.
+        match (stopped, interrupted) {
+            (Some((p, e)), i) if i.is_none_or(|i| p < i) => Err(e),
+            (_, Some(i)) => Err(interrupt(self.out, todo[i], *rendered)?),
+            _ => Ok(()),
         }
-        if let Some(item) = interrupted {
-            return Err(interrupt(self.out, item, *rendered)?);
-        }
-        Ok(())
     }
 }
 

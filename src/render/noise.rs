@@ -33,6 +33,7 @@
 use super::sensor::{Responsivity, SensorError, exposure_time_s, saturation_electrons};
 pub use crate::scene::config::NoiseEstimator;
 use crate::scene::config::SensorConfig;
+use rayon::prelude::*;
 
 /// The camera the noise is measured against: its responsivity, its sensor and the factor
 /// the sensor step puts on the (auto or fixed) exposure time (a finish's exposure, the
@@ -196,7 +197,7 @@ fn pixel_variance(estimator: NoiseEstimator, sum: &[f32], noise: &[f32], n: u32,
 
 /// The mean image: each pixel's sum over its samples (none: 0).
 pub fn mean_image(sum: &[f32], n: PixelSamples<'_>) -> Vec<f32> {
-    sum.iter()
+    sum.par_iter()
         .enumerate()
         .map(|(i, v)| v * (1.0 / n.of(i).max(1) as f32))
         .collect()
@@ -248,20 +249,31 @@ impl CameraNoise {
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
+        // Each pixel's terms on all cores, summed in pixel order (the same sums as one
+        // loop).
+        let terms: Vec<Option<(f64, f64)>> = (0..px)
+            .into_par_iter()
+            .map(|i| {
+                if !(all || object_mask[i]) {
+                    return None;
+                }
+                let e_per_l = self.resp.electrons_per_s[i] * t;
+                let l = mean[i].max(0.0) as f64;
+                let mu = l * e_per_l;
+                if mu >= full {
+                    return None;
+                }
+                let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
+                Some((
+                    (k * e_per_l).powi(2) * var_l,
+                    camera_variance_dn(&self.sensor, mu),
+                ))
+            })
+            .collect();
         let (mut render, mut camera, mut pixels) = (0.0f64, 0.0f64, 0usize);
-        for i in 0..px {
-            if !(all || object_mask[i]) {
-                continue;
-            }
-            let e_per_l = self.resp.electrons_per_s[i] * t;
-            let l = mean[i].max(0.0) as f64;
-            let mu = l * e_per_l;
-            if mu >= full {
-                continue;
-            }
-            let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
-            render += (k * e_per_l).powi(2) * var_l;
-            camera += camera_variance_dn(&self.sensor, mu);
+        for (r, c) in terms.into_iter().flatten() {
+            render += r;
+            camera += c;
             pixels += 1;
         }
         let (render_rms_dn, camera_rms_dn, ratio) = if pixels == 0 {
@@ -326,31 +338,41 @@ impl CameraNoise {
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
-        let mut per_sample = vec![0.0f64; px];
-        let mut unknown = vec![false; px];
-        let mut counted = vec![false; px];
+        // Per pixel on all cores: (variance per sample, unknown, camera variance when
+        // counted); the camera's sum in pixel order (the same sum as one loop).
+        let per_pixel: Vec<(f64, bool, Option<f64>)> = (0..px)
+            .into_par_iter()
+            .map(|i| {
+                let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
+                let mu = mean[i].max(0.0) as f64 * e_per_l;
+                if mu >= full {
+                    return (0.0, false, None);
+                }
+                let v = (k * e_per_l).powi(2)
+                    * pixel_variance(estimator, sum, noise, n.of(i), i)
+                    * n.of(i) as f64;
+                let counted = (all || object_mask[i]).then(|| camera_variance_dn(&self.sensor, mu));
+                match v.is_finite() {
+                    true => (v, false, counted),
+                    false => (0.0, true, counted),
+                }
+            })
+            .collect();
+        let per_sample: Vec<f64> = per_pixel.par_iter().map(|p| p.0).collect();
+        let unknown: Vec<bool> = per_pixel.par_iter().map(|p| p.1).collect();
         let mut camera = 0.0f64;
-        for i in 0..px {
-            let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
-            let mu = mean[i].max(0.0) as f64 * e_per_l;
-            if mu >= full {
-                continue;
-            }
-            let v = (k * e_per_l).powi(2)
-                * pixel_variance(estimator, sum, noise, n.of(i), i)
-                * n.of(i) as f64;
-            if v.is_finite() {
-                per_sample[i] = v;
-            } else {
-                unknown[i] = true;
-            }
-            if all || object_mask[i] {
-                counted[i] = true;
-                camera += camera_variance_dn(&self.sensor, mu);
+        // The counted pixels with a known variance, in order: the budget's terms.
+        let mut shared = Vec::new();
+        for (i, p) in per_pixel.iter().enumerate() {
+            if let Some(c) = p.2 {
+                camera += c;
+                if !p.1 {
+                    shared.push(i);
+                }
             }
         }
         let smooth = box_mean(&per_sample, width.max(1), radius as usize);
-        let roots: Vec<f64> = smooth.iter().map(|v| v.max(0.0).sqrt()).collect();
+        let roots: Vec<f64> = smooth.par_iter().map(|v| v.max(0.0).sqrt()).collect();
         let budget = target * target * camera;
         // Pixels whose share is at most the samples they have keep those (fixed): their
         // variance is spent, the rest of the budget is shared by the others; repeat
@@ -358,7 +380,7 @@ impl CameraNoise {
         let mut fixed = vec![false; px];
         let scale = loop {
             let (mut spent, mut free) = (0.0f64, 0.0f64);
-            for i in (0..px).filter(|&i| counted[i] && !unknown[i]) {
+            for &i in &shared {
                 if fixed[i] {
                     spent += smooth[i] / n.of(i).max(1) as f64;
                 } else {
@@ -370,18 +392,21 @@ impl CameraNoise {
             } else {
                 f64::INFINITY
             };
-            let mut more = false;
-            for i in 0..px {
-                if !fixed[i] && !unknown[i] && roots[i] * scale <= n.of(i) as f64 {
-                    fixed[i] = true;
-                    more = true;
-                }
-            }
+            let more = fixed
+                .par_iter_mut()
+                .enumerate()
+                .map(|(i, f)| {
+                    let now = !*f && !unknown[i] && roots[i] * scale <= n.of(i) as f64;
+                    *f |= now;
+                    now
+                })
+                .reduce(|| false, |a, b| a || b);
             if !more {
                 break scale;
             }
         };
         (0..px)
+            .into_par_iter()
             .map(|i| {
                 if unknown[i] {
                     f64::INFINITY
@@ -399,22 +424,40 @@ impl CameraNoise {
 /// each value, clipped at the image's edges (two passes of running sums).
 pub fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
     let height = v.len() / width;
-    let pass = |src: &[f64], len: usize, at: &dyn Fn(usize, usize) -> usize, lines: usize| {
-        let mut out = vec![0.0; src.len()];
-        let mut prefix = vec![0.0f64; len + 1];
-        for line in 0..lines {
-            for j in 0..len {
-                prefix[j + 1] = prefix[j] + src[at(line, j)];
+    let window = |j: usize, len: usize| (j.saturating_sub(r), (j + r + 1).min(len));
+    // Along the rows: each row's running sum on its own (rows on all cores).
+    let mut rows = vec![0.0; v.len()];
+    rows.par_chunks_mut(width)
+        .zip(v.par_chunks(width))
+        .for_each(|(out, src)| {
+            let mut prefix = vec![0.0f64; width + 1];
+            for j in 0..width {
+                prefix[j + 1] = prefix[j] + src[j];
             }
-            for j in 0..len {
-                let (lo, hi) = (j.saturating_sub(r), (j + r + 1).min(len));
-                out[at(line, j)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+            for (j, o) in out.iter_mut().enumerate() {
+                let (lo, hi) = window(j, width);
+                *o = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
             }
+        });
+    // Along the columns: every column's running sum, a row at a time (the same sums in
+    // the same order per column), then each output row from two of them.
+    let mut prefix = vec![0.0f64; (height + 1) * width];
+    for y in 0..height {
+        let (done, next) = prefix.split_at_mut((y + 1) * width);
+        let (above, row) = (&done[y * width..], &mut next[..width]);
+        for x in 0..width {
+            row[x] = above[x] + rows[y * width + x];
         }
-        out
-    };
-    let rows = pass(v, width, &|y, x| y * width + x, height);
-    pass(&rows, height, &|x, y| y * width + x, width)
+    }
+    let mut out = vec![0.0; v.len()];
+    out.par_chunks_mut(width).enumerate().for_each(|(y, o)| {
+        let (lo, hi) = window(y, height);
+        let (a, b) = (&prefix[lo * width..], &prefix[hi * width..]);
+        for x in 0..width {
+            o[x] = (b[x] - a[x]) / (hi - lo) as f64;
+        }
+    });
+    out
 }
 
 impl NoiseStop {
@@ -646,6 +689,35 @@ mod tests {
         assert_eq!(m[1], 3.5, "all six");
         assert_eq!(m[5], 4.0, "2 3 5 6");
         assert_eq!(box_mean(&v, 3, 5), vec![3.5; 6]);
+    }
+
+    #[test]
+    fn box_mean_equals_the_window_means_on_a_larger_image() {
+        // 37 x 23 values, radius 4: each output against the plain mean of its clipped
+        // window (the running sums round differently: within 1e-12).
+        let (w, h, r) = (37usize, 23usize, 4usize);
+        let v: Vec<f64> = (0..w * h)
+            .map(|i| ((i * 7919) % 101) as f64 * 0.37 + 1.0)
+            .collect();
+        let m = box_mean(&v, w, r);
+        for y in 0..h {
+            for x in 0..w {
+                let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
+                let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
+                let mut s = 0.0;
+                for yy in y0..y1 {
+                    for xx in x0..x1 {
+                        s += v[yy * w + xx];
+                    }
+                }
+                let want = s / ((y1 - y0) * (x1 - x0)) as f64;
+                let got = m[y * w + x];
+                assert!(
+                    (got - want).abs() <= 1e-12 * want,
+                    "({x}, {y}): {got} vs {want}"
+                );
+            }
+        }
     }
 
     #[test]

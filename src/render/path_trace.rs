@@ -159,31 +159,34 @@ pub fn render_frame(
             if let Some(radius) = adaptive {
                 let (sum, noise) = sums;
                 let object = &masks.as_ref().expect("filled by the estimate").1;
-                let want = stop.camera.pixel_samples_wanted(
-                    stop.estimator,
-                    &sum,
-                    &noise,
-                    samples,
-                    est.exposure_s,
-                    object,
-                    width as usize,
-                    stop.target,
-                    radius,
-                );
-                let order = sampling.take().unwrap_or_else(|| tile_order(width, height));
-                let (keep, stop_now): (Vec<u32>, Vec<u32>) = order
-                    .into_iter()
-                    .partition(|&i| want[i as usize] > done as f64);
-                for i in stop_now {
-                    stopped[i as usize] = done;
-                }
+                let (keep, fewest) = crate::vk::timed(opts.profiler, "samples wanted", || {
+                    let want = stop.camera.pixel_samples_wanted(
+                        stop.estimator,
+                        &sum,
+                        &noise,
+                        samples,
+                        est.exposure_s,
+                        object,
+                        width as usize,
+                        stop.target,
+                        radius,
+                    );
+                    let order = sampling.take().unwrap_or_else(|| tile_order(width, height));
+                    let (keep, stop_now): (Vec<u32>, Vec<u32>) = order
+                        .into_iter()
+                        .partition(|&i| want[i as usize] > done as f64);
+                    for i in stop_now {
+                        stopped[i as usize] = done;
+                    }
+                    let fewest = keep
+                        .iter()
+                        .map(|&i| want[i as usize])
+                        .fold(f64::INFINITY, f64::min);
+                    (keep, fewest)
+                });
                 if keep.is_empty() {
                     break;
                 }
-                let fewest = keep
-                    .iter()
-                    .map(|&i| want[i as usize])
-                    .fold(f64::INFINITY, f64::min);
                 next_check = Some(stop.next_check_at(done, fewest));
                 view.set_pixels(tracer, Some(&keep))?;
                 sampling = Some(keep);
