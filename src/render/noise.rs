@@ -249,29 +249,26 @@ impl CameraNoise {
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
-        // Each pixel's terms on all cores, summed in pixel order (the same sums as one
-        // loop).
-        let terms: Vec<Option<(f64, f64)>> = (0..px)
-            .into_par_iter()
-            .map(|i| {
-                if !(all || object_mask[i]) {
-                    return None;
-                }
-                let e_per_l = self.resp.electrons_per_s[i] * t;
-                let l = mean[i].max(0.0) as f64;
-                let mu = l * e_per_l;
-                if mu >= full {
-                    return None;
-                }
-                let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
-                Some((
-                    (k * e_per_l).powi(2) * var_l,
-                    camera_variance_dn(&self.sensor, mu),
-                ))
-            })
-            .collect();
+        // Each pixel's terms on all cores, a chunk of pixels at a time, summed in pixel
+        // order (the same sums as one loop over the pixels).
+        let terms = ordered_terms(px, |i| {
+            if !(all || object_mask[i]) {
+                return None;
+            }
+            let e_per_l = self.resp.electrons_per_s[i] * t;
+            let l = mean[i].max(0.0) as f64;
+            let mu = l * e_per_l;
+            if mu >= full {
+                return None;
+            }
+            let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
+            Some((
+                (k * e_per_l).powi(2) * var_l,
+                camera_variance_dn(&self.sensor, mu),
+            ))
+        });
         let (mut render, mut camera, mut pixels) = (0.0f64, 0.0f64, 0usize);
-        for (r, c) in terms.into_iter().flatten() {
+        for (_, (r, c)) in terms.iter().flatten() {
             render += r;
             camera += c;
             pixels += 1;
@@ -338,41 +335,49 @@ impl CameraNoise {
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
-        // Per pixel on all cores: (variance per sample, unknown, camera variance when
-        // counted); the camera's sum in pixel order (the same sum as one loop).
-        let per_pixel: Vec<(f64, bool, Option<f64>)> = (0..px)
-            .into_par_iter()
-            .map(|i| {
-                let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
-                let mu = mean[i].max(0.0) as f64 * e_per_l;
-                if mu >= full {
-                    return (0.0, false, None);
+        // Per pixel on all cores: the variance per sample (0 when unknown or saturated)
+        // and whether it is unknown; the counted pixels' camera variances a chunk at a
+        // time, summed in pixel order (the same sum as one loop).
+        let variance = |i: usize| -> Option<(f64, f64)> {
+            let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
+            let mu = mean[i].max(0.0) as f64 * e_per_l;
+            if mu >= full {
+                return None;
+            }
+            let v = (k * e_per_l).powi(2)
+                * pixel_variance(estimator, sum, noise, n.of(i), i)
+                * n.of(i) as f64;
+            Some((v, mu))
+        };
+        let mut per_sample = vec![0.0f64; px];
+        let mut unknown = vec![false; px];
+        per_sample
+            .par_iter_mut()
+            .zip(unknown.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (p, u))| {
+                if let Some((v, _)) = variance(i) {
+                    match v.is_finite() {
+                        true => *p = v,
+                        false => *u = true,
+                    }
                 }
-                let v = (k * e_per_l).powi(2)
-                    * pixel_variance(estimator, sum, noise, n.of(i), i)
-                    * n.of(i) as f64;
-                let counted = (all || object_mask[i]).then(|| camera_variance_dn(&self.sensor, mu));
-                match v.is_finite() {
-                    true => (v, false, counted),
-                    false => (0.0, true, counted),
-                }
-            })
-            .collect();
-        let per_sample: Vec<f64> = per_pixel.par_iter().map(|p| p.0).collect();
-        let unknown: Vec<bool> = per_pixel.par_iter().map(|p| p.1).collect();
+            });
+        let counted = ordered_terms(px, |i| match all || object_mask[i] {
+            true => variance(i).map(|(_, mu)| camera_variance_dn(&self.sensor, mu)),
+            false => None,
+        });
         let mut camera = 0.0f64;
         // The counted pixels with a known variance, in order: the budget's terms.
         let mut shared = Vec::new();
-        for (i, p) in per_pixel.iter().enumerate() {
-            if let Some(c) = p.2 {
-                camera += c;
-                if !p.1 {
-                    shared.push(i);
-                }
+        for &(i, c) in counted.iter().flatten() {
+            camera += c;
+            if !unknown[i] {
+                shared.push(i);
             }
         }
         let smooth = box_mean(&per_sample, width.max(1), radius as usize);
-        let roots: Vec<f64> = smooth.par_iter().map(|v| v.max(0.0).sqrt()).collect();
+        let mut roots: Vec<f64> = smooth.par_iter().map(|v| v.max(0.0).sqrt()).collect();
         let budget = target * target * camera;
         // Pixels whose share is at most the samples they have keep those (fixed): their
         // variance is spent, the rest of the budget is shared by the others; repeat
@@ -405,19 +410,58 @@ impl CameraNoise {
                 break scale;
             }
         };
-        (0..px)
-            .into_par_iter()
-            .map(|i| {
-                if unknown[i] {
-                    f64::INFINITY
-                } else if roots[i] > 0.0 {
-                    roots[i] * scale
-                } else {
-                    0.0
-                }
-            })
-            .collect()
+        // Each pixel's samples, in the roots' place.
+        roots.par_iter_mut().zip(&unknown).for_each(|(r, &u)| {
+            *r = if u {
+                f64::INFINITY
+            } else if *r > 0.0 {
+                *r * scale
+            } else {
+                0.0
+            }
+        });
+        roots
     }
+}
+
+/// Runs `f` (a noise check's per-pixel work) on the checks' own thread pool: the global
+/// pool is often busy with the next object instance's textures (a dataset run makes them
+/// on its preparing thread), and a check queued behind them leaves the GPU idle. At
+/// most 8 threads, shared by every renderer of the process.
+pub fn on_check_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    let pool = POOL.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(cores.min(8))
+            .thread_name(|i| format!("noise check {}", i + 1))
+            .build()
+            .ok()
+    });
+    match pool {
+        Some(p) => p.install(f),
+        None => f(), // no thread could be made: the global pool
+    }
+}
+
+/// Pixels a chunk of [`ordered_terms`] holds.
+const TERM_CHUNK: usize = 16384;
+
+/// `f` of pixels `0..px` on all cores, a chunk of pixels at a time: each chunk's
+/// (pixel, term) of the pixels where `f` gives one, the chunks in pixel order (summing
+/// them in that order gives the same sums as one loop over the pixels).
+fn ordered_terms<T: Send>(
+    px: usize,
+    f: impl Fn(usize) -> Option<T> + Sync,
+) -> Vec<Vec<(usize, T)>> {
+    (0..px.div_ceil(TERM_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            (c * TERM_CHUNK..((c + 1) * TERM_CHUNK).min(px))
+                .filter_map(|i| f(i).map(|t| (i, t)))
+                .collect()
+        })
+        .collect()
 }
 
 /// The mean of `v` (an image `width` values a row) over the (2 r + 1)^2 window around
@@ -440,7 +484,8 @@ pub fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
             }
         });
     // Along the columns: every column's running sum, a row at a time (the same sums in
-    // the same order per column), then each output row from two of them.
+    // the same order per column), then each output row from two of them (written over
+    // the rows' pass, which the sums hold by then).
     let mut prefix = vec![0.0f64; (height + 1) * width];
     for y in 0..height {
         let (done, next) = prefix.split_at_mut((y + 1) * width);
@@ -449,15 +494,14 @@ pub fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
             row[x] = above[x] + rows[y * width + x];
         }
     }
-    let mut out = vec![0.0; v.len()];
-    out.par_chunks_mut(width).enumerate().for_each(|(y, o)| {
+    rows.par_chunks_mut(width).enumerate().for_each(|(y, o)| {
         let (lo, hi) = window(y, height);
         let (a, b) = (&prefix[lo * width..], &prefix[hi * width..]);
         for x in 0..width {
             o[x] = (b[x] - a[x]) / (hi - lo) as f64;
         }
     });
-    out
+    rows
 }
 
 impl NoiseStop {

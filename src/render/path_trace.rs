@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::annotate::Annotation;
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
-use super::noise::{NoiseEstimate, NoiseStop, PixelSamples};
+use super::noise::{NoiseEstimate, NoiseStop, PixelSamples, on_check_pool};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use super::view::{View, tile_order};
@@ -149,7 +149,7 @@ pub fn render_frame(
             let counts = pixel_counts(&stopped, done);
             let samples = PixelSamples::new(counts.as_deref(), done);
             let (est, sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
-                noise_estimate(&view, stop, samples, &mut masks)
+                on_check_pool(|| noise_estimate(&view, stop, samples, &mut masks))
             })?;
             checks.push(est);
             if est.ratio <= stop.target {
@@ -160,17 +160,19 @@ pub fn render_frame(
                 let (sum, noise) = sums;
                 let object = &masks.as_ref().expect("filled by the estimate").1;
                 let (keep, fewest) = crate::vk::timed(opts.profiler, "samples wanted", || {
-                    let want = stop.camera.pixel_samples_wanted(
-                        stop.estimator,
-                        &sum,
-                        &noise,
-                        samples,
-                        est.exposure_s,
-                        object,
-                        width as usize,
-                        stop.target,
-                        radius,
-                    );
+                    let want = on_check_pool(|| {
+                        stop.camera.pixel_samples_wanted(
+                            stop.estimator,
+                            &sum,
+                            &noise,
+                            samples,
+                            est.exposure_s,
+                            object,
+                            width as usize,
+                            stop.target,
+                            radius,
+                        )
+                    });
                     let order = sampling.take().unwrap_or_else(|| tile_order(width, height));
                     let (keep, stop_now): (Vec<u32>, Vec<u32>) = order
                         .into_iter()

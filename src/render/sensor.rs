@@ -8,6 +8,7 @@
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal, Poisson};
 use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
 
 use crate::scene::Camera;
 use crate::scene::config::{AutoStatistic, Blooming, ExposureSetting, SensorConfig};
@@ -122,16 +123,18 @@ pub fn exposure_time_s(
     match sensor.exposure {
         ExposureSetting::Fixed { ms } => Ok(ms * 1e-3),
         ExposureSetting::Auto(_) => {
-            let rate = resp.mean_electrons(radiance, 1.0);
+            // The signal per second of the pixels in `m`, in pixel order (on all cores;
+            // `Responsivity::mean_electrons` at 1 s of those pixels alone).
             let pick = |m: Option<&[bool]>| -> Vec<f64> {
+                let pixels = radiance.par_iter().zip(&resp.electrons_per_s);
+                let rate = |(&l, &r): (&f32, &f64)| if l > 0.0 { l as f64 * r } else { 0.0 };
                 match m {
-                    Some(m) => rate
-                        .iter()
+                    Some(m) => pixels
                         .zip(m)
                         .filter(|(_, in_mask)| **in_mask)
-                        .map(|(r, _)| *r)
+                        .map(|(p, _)| rate(p))
                         .collect(),
-                    None => rate.clone(),
+                    None => pixels.map(rate).collect(),
                 }
             };
             let mut v = pick(mask);
