@@ -97,6 +97,18 @@ fn bad_input_fails_before_any_work_naming_the_input() {
         "{err}"
     );
     assert!(!dp.join("o").exists());
+    // Renderers: 1 to 8.
+    let o = synosis(
+        &["dataset", "run", job, "--out", "o", "--renderers", "9"],
+        dp,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("--renderers") && err.contains("1..=8"),
+        "{err}"
+    );
+    assert!(!dp.join("o").exists());
     // A missing job file: the OS error once.
     let e = assert_fails(
         &synosis(&["dataset", "run", "missing.toml", "--out", "o"], dp),
@@ -354,6 +366,14 @@ fn bench_gpu_writes_its_table() {
         table.contains(&format!("| images in flight | {want} |")),
         "{table}"
     );
+    // One renderer (device context) on a CPU Vulkan device.
+    if cpu {
+        assert_eq!(v["renderers"].as_u64(), Some(1));
+        assert!(
+            table.contains("| renderers (device contexts) | 1 |"),
+            "{table}"
+        );
+    }
     // A non-empty work folder is refused before any work.
     let o = synosis(
         &["bench-gpu", "--job", job.to_str().unwrap(), "--out", "data"],

@@ -48,7 +48,7 @@ pub struct BenchGpuArgs {
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
     in_flight: Option<usize>,
     /// Renderers, each with its own Vulkan device context (as `dataset run --renderers`).
-    /// Default: 2 on a GPU, 1 on a CPU Vulkan device (lavapipe).
+    /// Default: 3 on a GPU for a job with `[render] noise_target`, else 1.
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
     renderers: Option<usize>,
 }
@@ -99,7 +99,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let t0 = Instant::now();
     let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
-    let mut more = super::dataset::more_renderers(a.renderers, &renderer)?;
+    let mut more = super::dataset::more_renderers(a.renderers, &renderer, &prep.job)?;
     let renderers = 1 + more.len();
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);

@@ -110,7 +110,8 @@ struct RunArgs {
     /// Renderers, each with its own Vulkan device context and thread, rendering the next
     /// images at once (with --in-flight 2 or more): the GPU samples one image while
     /// another renderer's CPU work (scene set-up, noise checks, read-back) runs (same
-    /// files either way). Default: 2 on a GPU, 1 on a CPU Vulkan device (lavapipe).
+    /// files either way). Default: 3 on a GPU for a job with `[render] noise_target`,
+    /// else 1 (a CPU Vulkan device such as lavapipe: always 1).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
     renderers: Option<usize>,
 }
@@ -126,19 +127,29 @@ pub(super) fn in_flight(arg: Option<usize>, renderer: &GpuRenderer) -> usize {
     })
 }
 
-/// Renderers on a GPU by default (`--renderers`): two keep an H100 busy while one of
-/// them does its CPU work (docs/benchmarks/dataset.md, "Several renderers").
-pub const DEFAULT_GPU_RENDERERS: usize = 2;
+/// Renderers on a GPU by default (`--renderers`) for a job with `[render] noise_target`:
+/// its noise checks are CPU work between short batches, and while one renderer does
+/// them the others' batches keep the GPU busy (the paper job at the recommended setting
+/// on an H100: 1.3x the images per hour with 3). A job of fixed samples keeps 1: there
+/// the GPU is busy already, and two device contexts time-slicing it made the paper job
+/// at 256 spp 0.64x as fast (docs/benchmarks/dataset.md, "Several renderers").
+pub const DEFAULT_GPU_RENDERERS_ADAPTIVE: usize = 3;
 
-/// The renderers beside `first` (`--renderers`, or its default for the device:
-/// [`DEFAULT_GPU_RENDERERS`] on a GPU, 1 on a CPU implementation), each opening its own
-/// Vulkan device context, made at once on threads of their own.
-pub(super) fn more_renderers(arg: Option<usize>, first: &GpuRenderer) -> Result<Vec<GpuRenderer>> {
-    let n = arg.unwrap_or(if first.device_is_cpu() {
-        1
-    } else {
-        DEFAULT_GPU_RENDERERS
-    });
+/// The renderers beside `first` (`--renderers`, or its default for the device and job:
+/// [`DEFAULT_GPU_RENDERERS_ADAPTIVE`] on a GPU for a job with a noise target, else 1),
+/// each opening its own Vulkan device context, made at once on threads of their own.
+pub(super) fn more_renderers(
+    arg: Option<usize>,
+    first: &GpuRenderer,
+    job: &dataset::Job,
+) -> Result<Vec<GpuRenderer>> {
+    let n = arg.unwrap_or(
+        if !first.device_is_cpu() && job.render.noise_target.is_some() {
+            DEFAULT_GPU_RENDERERS_ADAPTIVE
+        } else {
+            1
+        },
+    );
     std::thread::scope(|s| {
         let made: Vec<_> = (1..n).map(|_| s.spawn(gpu_renderer)).collect();
         made.into_iter()
@@ -331,7 +342,7 @@ fn run_job(a: RunArgs) -> Result<()> {
     let mut progress = bar_progress(&bar);
     let in_flight = in_flight(a.in_flight, &renderer);
     let mut more = profiler.cpu("Vulkan init, pipelines, energy tables", || {
-        more_renderers(a.renderers, &renderer)
+        more_renderers(a.renderers, &renderer, &prep.job)
     })?;
     let result = dataset::run(
         &prep,

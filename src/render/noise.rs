@@ -349,33 +349,40 @@ impl CameraNoise {
                 * n.of(i) as f64;
             Some((v, mu))
         };
+        // One pass on all cores: the variance per sample (0 when unknown or saturated),
+        // whether it is unknown, and the camera's variance of a counted pixel (NaN: not
+        // counted); then the camera's sum in pixel order (the same sum as one loop).
         let mut per_sample = vec![0.0f64; px];
         let mut unknown = vec![false; px];
+        let mut camera_of = vec![f64::NAN; px];
         per_sample
             .par_iter_mut()
             .zip(unknown.par_iter_mut())
+            .zip(camera_of.par_iter_mut())
             .enumerate()
-            .for_each(|(i, (p, u))| {
-                if let Some((v, _)) = variance(i) {
+            .for_each(|(i, ((p, u), c))| {
+                if let Some((v, mu)) = variance(i) {
                     match v.is_finite() {
                         true => *p = v,
                         false => *u = true,
                     }
+                    if all || object_mask[i] {
+                        *c = camera_variance_dn(&self.sensor, mu);
+                    }
                 }
             });
-        let counted = ordered_terms(px, |i| match all || object_mask[i] {
-            true => variance(i).map(|(_, mu)| camera_variance_dn(&self.sensor, mu)),
-            false => None,
-        });
         let mut camera = 0.0f64;
         // The counted pixels with a known variance, in order: the budget's terms.
         let mut shared = Vec::new();
-        for &(i, c) in counted.iter().flatten() {
-            camera += c;
-            if !unknown[i] {
-                shared.push(i);
+        for (i, &c) in camera_of.iter().enumerate() {
+            if !c.is_nan() {
+                camera += c;
+                if !unknown[i] {
+                    shared.push(i);
+                }
             }
         }
+        drop(camera_of);
         let smooth = box_mean(&per_sample, width.max(1), radius as usize);
         let mut roots: Vec<f64> = smooth.par_iter().map(|v| v.max(0.0).sqrt()).collect();
         let budget = target * target * camera;
@@ -383,11 +390,16 @@ impl CameraNoise {
         // variance is spent, the rest of the budget is shared by the others; repeat
         // until no more become fixed (each round only adds fixed pixels).
         let mut fixed = vec![false; px];
+        // A fixed pixel's variance (its share of the budget spent), once for every round.
+        let spent_of: Vec<f64> = (0..px)
+            .into_par_iter()
+            .map(|i| smooth[i] / n.of(i).max(1) as f64)
+            .collect();
         let scale = loop {
             let (mut spent, mut free) = (0.0f64, 0.0f64);
             for &i in &shared {
                 if fixed[i] {
-                    spent += smooth[i] / n.of(i).max(1) as f64;
+                    spent += spent_of[i];
                 } else {
                     free += roots[i];
                 }
