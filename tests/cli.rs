@@ -343,6 +343,7 @@ fn bench_gpu_writes_its_table() {
     let table = text(&o.stdout);
     for row in [
         "| per image |",
+        "| per image from the first render on (a long run) |",
         "| stage textures |",
         "| stage render.path_trace_gpu |",
         "| stage write |",
@@ -355,6 +356,12 @@ fn bench_gpu_writes_its_table() {
         serde_json::from_slice(&std::fs::read(dp.join("b.json")).unwrap()).unwrap();
     let busy = v["gpu_busy_fraction"].as_f64().unwrap();
     assert!(busy > 0.0 && busy <= 1.0, "{busy}");
+    // From the first render on: no longer than the whole loop's time per image.
+    let (steady, per) = (
+        v["steady_per_image_s"].as_f64().unwrap(),
+        v["per_image_s"].as_f64().unwrap(),
+    );
+    assert!(steady > 0.0 && steady <= per, "{steady} {per}");
     assert!(v["images"].as_u64().unwrap() > 0);
     assert!(v["rays"]["primary_mrays_s"].as_f64().unwrap() > 0.0);
     assert!(dp.join("run.json").is_file());
