@@ -109,6 +109,25 @@ fn bad_input_fails_before_any_work_naming_the_input() {
         "{err}"
     );
     assert!(!dp.join("o").exists());
+    // Several renderers with one image in flight: refused before any work.
+    assert_fails(
+        &synosis(
+            &[
+                "dataset",
+                "run",
+                job,
+                "--out",
+                "o",
+                "--renderers",
+                "2",
+                "--in-flight",
+                "1",
+            ],
+            dp,
+        ),
+        &["--renderers 2", "--in-flight 2 or more"],
+    );
+    assert!(!dp.join("o").exists());
     // A missing job file: the OS error once.
     let e = assert_fails(
         &synosis(&["dataset", "run", "missing.toml", "--out", "o"], dp),

@@ -3,8 +3,6 @@
 // levels, the level a value: a shader compiles one traversal per call site of
 // trace_query (lavapipe inlines every call; two per level and query cost it minutes of
 // LLVM compile).
-#extension GL_EXT_control_flow_attributes : require
-
 BvhTri trace_tri(uint level, uint i) {
     if (level == 0u) return trace_tris[i];
     return trace_tris2[i];
@@ -36,18 +34,14 @@ void trace_tri_test(vec3 v0, vec3 v1, vec3 v2, uint prim, uint level, TraceRay r
     precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
     precise float t = tt / det;
     // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
-    // triangle index, so the result does not depend on the traversal order. Taken in a
-    // real branch (`[[dont_flatten]]`): as selects, which the compiler makes of so small
-    // an `if`, lavapipe computed the barycentrics' two divisions for every test of every
-    // lane; it skips a branch that no lane of the subgroup takes, and few tests take.
+    // triangle index, so the result does not depend on the traversal order. Taken
+    // with selects, not a branch: lanes run both sides of a branch on lavapipe.
     bool take = inside && det != 0.0 && t >= tmin
         && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim));
-    [[dont_flatten]] if (take) {
-        h.t = t;
-        h.prim = prim;
-        h.bary = vec2(v / det, w / det);
-        h.inst = level;
-    }
+    h.t = take ? t : h.t;
+    h.prim = take ? prim : h.prim;
+    h.bary = take ? vec2(v / det, w / det) : h.bary;
+    h.inst = take ? level : h.inst;
 }
 
 void trace_leaf(uint level, uint first, uint count, TraceRay r, float tmin, inout Hit h) {

@@ -84,6 +84,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     if a.instances == 0 {
         anyhow::bail!("--instances 0: allowed 1 or more");
     }
+    super::dataset::check_renderers(a.renderers, a.in_flight)?;
     if a.out.exists() && std::fs::read_dir(&a.out)?.next().is_some() {
         anyhow::bail!("--out {}: must be empty or absent", a.out.display());
     }
@@ -99,11 +100,11 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let t0 = Instant::now();
     let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
-    let mut more = super::dataset::more_renderers(a.renderers, &renderer, &prep.job)?;
+    let in_flight = super::dataset::in_flight(a.in_flight, a.renderers, &renderer);
+    let mut more = super::dataset::more_renderers(a.renderers, &renderer, &prep.job, in_flight)?;
     let renderers = 1 + more.len();
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
-    let in_flight = super::dataset::in_flight(a.in_flight, &renderer);
     let bar = indicatif::ProgressBar::new(0);
     let mut progress = super::dataset::bar_progress(&bar);
     let loop_start_us = profiler.now_us();

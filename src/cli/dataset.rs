@@ -118,13 +118,33 @@ struct RunArgs {
 
 /// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
 /// on a GPU, 1 on a CPU implementation (lavapipe), where the render uses the same cores
-/// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run").
-pub(super) fn in_flight(arg: Option<usize>, renderer: &GpuRenderer) -> usize {
-    arg.unwrap_or(if renderer.device_is_cpu() {
-        1
-    } else {
-        dataset::DEFAULT_IN_FLIGHT
-    })
+/// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run"); with
+/// several renderers asked for (`renderers` above 1), DEFAULT_IN_FLIGHT everywhere.
+pub(super) fn in_flight(
+    arg: Option<usize>,
+    renderers: Option<usize>,
+    renderer: &GpuRenderer,
+) -> usize {
+    arg.unwrap_or(
+        if renderer.device_is_cpu() && renderers.is_none_or(|n| n <= 1) {
+            1
+        } else {
+            dataset::DEFAULT_IN_FLIGHT
+        },
+    )
+}
+
+/// Refuses `--renderers` above 1 with `--in-flight 1` (one image made, rendered and
+/// written at a time), before any work.
+pub(super) fn check_renderers(renderers: Option<usize>, in_flight: Option<usize>) -> Result<()> {
+    if let (Some(n), Some(1)) = (renderers, in_flight)
+        && n > 1
+    {
+        anyhow::bail!(
+            "--renderers {n}: several renderers need --in-flight 2 or more (with --in-flight 1 one image is made, rendered and written at a time)"
+        );
+    }
+    Ok(())
 }
 
 /// Renderers on a GPU by default (`--renderers`) for a job with `[render] noise_target`:
@@ -138,11 +158,17 @@ pub const DEFAULT_GPU_RENDERERS_ADAPTIVE: usize = 3;
 /// The renderers beside `first` (`--renderers`, or its default for the device and job:
 /// [`DEFAULT_GPU_RENDERERS_ADAPTIVE`] on a GPU for a job with a noise target, else 1),
 /// each opening its own Vulkan device context, made at once on threads of their own.
+/// One image in flight renders on the calling thread alone: none beside it then
+/// ([`check_renderers`] refused an explicit `--renderers` above 1 with it).
 pub(super) fn more_renderers(
     arg: Option<usize>,
     first: &GpuRenderer,
     job: &dataset::Job,
+    in_flight: usize,
 ) -> Result<Vec<GpuRenderer>> {
+    if in_flight <= 1 {
+        return Ok(Vec::new());
+    }
     let n = arg.unwrap_or(
         if !first.device_is_cpu() && job.render.noise_target.is_some() {
             DEFAULT_GPU_RENDERERS_ADAPTIVE
@@ -313,6 +339,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
 fn run_job(a: RunArgs) -> Result<()> {
     let shard = resolve_shard(&a)?;
     // Everything is checked before the renderer starts or a file is written.
+    check_renderers(a.renderers, a.in_flight)?;
     synosis::util::check_writable_dir(&a.out)
         .with_context(|| format!("--out {}", a.out.display()))?;
     if let Some(p) = &a.profile
@@ -340,9 +367,9 @@ fn run_job(a: RunArgs) -> Result<()> {
     );
     bar.enable_steady_tick(Duration::from_millis(500));
     let mut progress = bar_progress(&bar);
-    let in_flight = in_flight(a.in_flight, &renderer);
+    let in_flight = in_flight(a.in_flight, a.renderers, &renderer);
     let mut more = profiler.cpu("Vulkan init, pipelines, energy tables", || {
-        more_renderers(a.renderers, &renderer, &prep.job)
+        more_renderers(a.renderers, &renderer, &prep.job, in_flight)
     })?;
     let result = dataset::run(
         &prep,
