@@ -335,9 +335,8 @@ impl CameraNoise {
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
-        // Per pixel on all cores: the variance per sample (0 when unknown or saturated)
-        // and whether it is unknown; the counted pixels' camera variances a chunk at a
-        // time, summed in pixel order (the same sum as one loop).
+        // A pixel's variance per sample in codes and its mean signal in electrons; None
+        // at or above saturation.
         let variance = |i: usize| -> Option<(f64, f64)> {
             let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
             let mu = mean[i].max(0.0) as f64 * e_per_l;
@@ -506,13 +505,16 @@ pub fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
             row[x] = above[x] + rows[y * width + x];
         }
     }
-    rows.par_chunks_mut(width).enumerate().for_each(|(y, o)| {
-        let (lo, hi) = window(y, height);
-        let (a, b) = (&prefix[lo * width..], &prefix[hi * width..]);
-        for x in 0..width {
-            o[x] = (b[x] - a[x]) / (hi - lo) as f64;
-        }
-    });
+    rows.par_chunks_mut(width)
+        .take(height)
+        .enumerate()
+        .for_each(|(y, o)| {
+            let (lo, hi) = window(y, height);
+            let (a, b) = (&prefix[lo * width..], &prefix[hi * width..]);
+            for ((o, b), a) in o.iter_mut().zip(b).zip(a) {
+                *o = (b - a) / (hi - lo) as f64;
+            }
+        });
     rows
 }
 
