@@ -111,7 +111,7 @@ struct RunArgs {
     /// images at once (with --in-flight 2 or more): the GPU samples one image while
     /// another renderer's CPU work (scene set-up, noise checks, read-back) runs (same
     /// files either way). Default: 3 on a GPU for a job with `[render] noise_target`,
-    /// else 1 (a CPU Vulkan device such as lavapipe: always 1).
+    /// else 1 (also on a CPU Vulkan device such as lavapipe).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
     renderers: Option<usize>,
 }
