@@ -85,30 +85,18 @@ fn bad_input_fails_before_any_work_naming_the_input() {
         &["render.bounces"],
     );
     assert!(!dp.join("o").exists(), "a refused job leaves no folder");
-    // Images in flight: 1 to 64 (a usage error: clap's exit code 2).
-    let o = synosis(
-        &["dataset", "run", job, "--out", "o", "--in-flight", "0"],
-        dp,
-    );
-    assert_eq!(o.status.code(), Some(2));
-    let err = text(&o.stderr);
-    assert!(
-        err.contains("--in-flight") && err.contains("1..=64"),
-        "{err}"
-    );
-    assert!(!dp.join("o").exists());
-    // Renderers: 1 to 8.
-    let o = synosis(
-        &["dataset", "run", job, "--out", "o", "--renderers", "9"],
-        dp,
-    );
-    assert_eq!(o.status.code(), Some(2));
-    let err = text(&o.stderr);
-    assert!(
-        err.contains("--renderers") && err.contains("1..=8"),
-        "{err}"
-    );
-    assert!(!dp.join("o").exists());
+    // Images in flight: 1 to 64; renderers: 1 to 8 (usage errors: clap's exit code 2,
+    // naming the option and its range, no folder).
+    for (flag, value, range) in [
+        ("--in-flight", "0", "1..=64"),
+        ("--renderers", "9", "1..=8"),
+    ] {
+        let o = synosis(&["dataset", "run", job, "--out", "o", flag, value], dp);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}");
+        let err = text(&o.stderr);
+        assert!(err.contains(flag) && err.contains(range), "{err}");
+        assert!(!dp.join("o").exists());
+    }
     // Several renderers with one image in flight: refused before any work.
     assert_fails(
         &synosis(

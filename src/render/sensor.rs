@@ -93,9 +93,16 @@ impl Responsivity {
         radiance
             .iter()
             .zip(&self.electrons_per_s)
-            .map(|(&l, &r)| if l > 0.0 { l as f64 * r * t_s } else { 0.0 })
+            .map(|(&l, &r)| pixel_electrons(l, r, t_s))
             .collect()
     }
+}
+
+/// One pixel's mean electrons ([`Responsivity::mean_electrons`]): radiance `l` at
+/// `r` electrons per second and unit radiance, for `t_s` seconds; NaN and negative
+/// radiance count as 0.
+fn pixel_electrons(l: f32, r: f64, t_s: f64) -> f64 {
+    if l > 0.0 { l as f64 * r * t_s } else { 0.0 }
 }
 
 /// The largest code of `bits` bits.
@@ -127,7 +134,7 @@ pub fn exposure_time_s(
             // `Responsivity::mean_electrons` at 1 s of those pixels alone).
             let pick = |m: Option<&[bool]>| -> Vec<f64> {
                 let pixels = radiance.par_iter().zip(&resp.electrons_per_s);
-                let rate = |(&l, &r): (&f32, &f64)| if l > 0.0 { l as f64 * r } else { 0.0 };
+                let rate = |(&l, &r): (&f32, &f64)| pixel_electrons(l, r, 1.0);
                 match m {
                     Some(m) => pixels
                         .zip(m)
