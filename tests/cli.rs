@@ -355,6 +355,7 @@ fn bench_gpu_writes_its_table() {
         "| stage render.path_trace_gpu |",
         "| stage write |",
         "| GPU busy |",
+        "| CPU busy |",
         "| rays (",
     ] {
         assert!(table.contains(row), "no row {row} in\n{table}");
@@ -363,6 +364,10 @@ fn bench_gpu_writes_its_table() {
         serde_json::from_slice(&std::fs::read(dp.join("b.json")).unwrap()).unwrap();
     let busy = v["gpu_busy_fraction"].as_f64().unwrap();
     assert!(busy > 0.0 && busy <= 1.0, "{busy}");
+    // The process's CPU time over the loop on all cores (the ticks are 10 ms, the loop
+    // several seconds).
+    let cpu = v["cpu_busy_fraction"].as_f64().unwrap();
+    assert!(cpu > 0.0 && cpu <= 1.05, "{cpu}");
     // From the first render on: no longer than the whole loop's time per image.
     let (steady, per) = (
         v["steady_per_image_s"].as_f64().unwrap(),

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use synosis::dataset::renderer::{ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 use synosis::dataset::seed::splitmix64;
-use synosis::dataset::textures::TextureSource;
+use synosis::dataset::textures::{TextureSource, TextureWant};
 use synosis::dataset::{
     self, DatasetError, Finish, Job, Label, Prepared, RunOptions, Shard, Split, labels, post,
 };
@@ -1516,6 +1516,24 @@ measurement = { path = "scan.exr", exr_spacing_um = 2.0 }
         .unwrap()
         .slopes();
     assert_eq!(got.data, want.data);
+    // Made side by side (`make_many`: one image's faces), from a fresh source (the
+    // measurements loaded on the way): each the map `make` gives, in the order asked.
+    let wants: Vec<TextureWant> = [(0, 5), (1, 9), (0, 6), (1, 10)]
+        .into_iter()
+        .map(|(f, seed)| TextureWant {
+            finish: &job.finishes[f],
+            instance: 0,
+            seed,
+            size_px: 64,
+            spacing_um: 4.0,
+        })
+        .collect();
+    let many = ModuleTextures::default().make_many(&wants);
+    let mut one = ModuleTextures::default();
+    for (w, got) in wants.iter().zip(many) {
+        let want = one.make(w.finish, w.instance, w.seed, 64, 4.0).unwrap();
+        assert_eq!(got.unwrap().data, want.data, "seed {}", w.seed);
+    }
     // Errors name the fields.
     for (bad, want) in [
         (

@@ -100,18 +100,28 @@ fn hashed_files(dir: &std::path::Path) -> Vec<(String, String)> {
 }
 
 #[test]
-fn overlapped_gpu_run_writes_the_same_files_as_one_image_at_a_time() {
+fn overlapped_gpu_run_writes_the_same_files_as_one_image_at_a_time_with_renderers_beside() {
     let tmp = tempfile::tempdir().unwrap();
     let mut r = GpuRenderer::new(AccelChoice::Software, true)
         .unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
     // Shard 0 of 4: two instances (the second's mesh and textures made ahead) of two
     // views each.
     let shard = Shard { index: 0, count: 4 };
+    // The third run: two more renderers beside the first on its device
+    // (`GpuRenderer::beside`; lavapipe has one queue, so they share it under its lock),
+    // validation on for all three.
+    let mut beside = r.beside(2).unwrap();
     let mut lines = Vec::new();
     let mut hashes = Vec::new();
-    for in_flight in [1, 3] {
-        let out = tmp.path().join(format!("in-flight-{in_flight}"));
-        let rep = common::run_small_smoke_with(&mut r, &out, shard, in_flight);
+    for (in_flight, renderers) in [(1, 1), (3, 1), (3, 3)] {
+        let out = tmp
+            .path()
+            .join(format!("in-flight-{in_flight}-{renderers}"));
+        let more = beside[..renderers - 1]
+            .iter_mut()
+            .map(|r| r as &mut (dyn dataset::ImageRenderer + Send))
+            .collect();
+        let rep = common::run_small_smoke_lanes(&mut r, more, &out, shard, in_flight);
         assert_eq!(rep.rendered, 4);
         let entries =
             dataset::read_manifest(&out.join("manifests/shard-0-of-4.jsonl"), false).unwrap();
@@ -129,8 +139,10 @@ fn overlapped_gpu_run_writes_the_same_files_as_one_image_at_a_time() {
         hashes.push(hashed_files(&out));
     }
     assert_eq!(hashes[0].len(), 4 * dataset::runner::IMAGE_FILES.len());
-    assert_eq!(hashes[0], hashes[1]);
-    assert_eq!(lines[0], lines[1]);
+    for i in 1..3 {
+        assert_eq!(hashes[0], hashes[i], "run {i}");
+        assert_eq!(lines[0], lines[i], "run {i}");
+    }
 }
 
 #[test]

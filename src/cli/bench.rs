@@ -80,6 +80,18 @@ fn peak_rss_mib() -> Option<f64> {
     Some(kib / 1024.0)
 }
 
+/// This process's CPU time so far (user + system, all threads), from /proc/self/stat's
+/// utime and stime in the kernel's fixed user-space tick of 1/100 s (USER_HZ).
+fn process_cpu_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The fields after the command name (which is in parentheses and may hold spaces):
+    // state is field 3, utime 14 and stime 15.
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
 pub fn run(a: BenchGpuArgs) -> Result<()> {
     if a.instances == 0 {
         anyhow::bail!("--instances 0: allowed 1 or more");
@@ -100,14 +112,16 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let t0 = Instant::now();
     let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
-    let in_flight = super::dataset::in_flight(a.in_flight, a.renderers, &renderer);
-    let mut more = super::dataset::more_renderers(a.renderers, &renderer, &prep.job, in_flight)?;
+    let renderers = super::dataset::renderer_count(a.renderers, a.in_flight, &renderer, &prep.job);
+    let in_flight = super::dataset::in_flight(a.in_flight, renderers, &renderer);
+    let mut more = super::dataset::more_renderers(renderers, &renderer)?;
     let renderers = 1 + more.len();
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
     let bar = indicatif::ProgressBar::new(0);
     let mut progress = super::dataset::bar_progress(&bar);
     let loop_start_us = profiler.now_us();
+    let cpu0 = process_cpu_s();
     let t1 = Instant::now();
     dataset::run(
         &prep,
@@ -127,6 +141,12 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     bar.finish_and_clear();
     let loop_s = t1.elapsed().as_secs_f64();
     let loop_end_us = profiler.now_us();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // The CPU share of the image loop: the process's CPU time over the loop's wall time
+    // on all cores (1.0: every core busy all the time).
+    let cpu = cpu0
+        .zip(process_cpu_s())
+        .map(|(a, b)| (b - a, (b - a) / (loop_s * cores as f64).max(1e-9)));
     if let Some(p) = &a.profile {
         profiler
             .write_chrome_trace(p)
@@ -202,6 +222,12 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
         100.0 * busy,
         loop_s * 1e3
     );
+    if let Some((cpu_s, f)) = cpu {
+        println!(
+            "| CPU busy | {:.1} % of {cores} cores over the image loop ({cpu_s:.1} s of CPU time) |",
+            100.0 * f
+        );
+    }
     if let Some(m) = peak_rss_mib() {
         println!("| peak memory (RSS) | {m:.0} MiB |");
     }
@@ -224,6 +250,8 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             "steady_per_image_s": steady,
             "stages_s": stages,
             "gpu_busy_fraction": busy,
+            "cpu_cores": cores,
+            "cpu_busy_fraction": cpu.map(|c| c.1),
             "peak_rss_mib": peak_rss_mib(),
             "rays": rays.as_ref().map(|(name, tris, nrays, p, r)| serde_json::json!({
                 "backend": name, "triangles": tris, "rays_per_set": nrays,

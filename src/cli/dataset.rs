@@ -107,11 +107,12 @@ struct RunArgs {
     /// 1 on a CPU Vulkan device (lavapipe), where the overlap only competes for the cores.
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
     in_flight: Option<usize>,
-    /// Renderers, each with its own Vulkan device context and thread, rendering the next
-    /// images at once (with --in-flight 2 or more): the GPU samples one image while
-    /// another renderer's CPU work (scene set-up, noise checks, read-back) runs (same
-    /// files either way). Default: 3 on a GPU for a job with `[render] noise_target`,
-    /// else 1 (also on a CPU Vulkan device such as lavapipe).
+    /// Renderers, each with its own Vulkan context (queue) on the one device and its own
+    /// thread, rendering the next images at once (with --in-flight 2 or more): the GPU
+    /// samples one image while another renderer's CPU work (scene set-up, noise checks,
+    /// read-back) runs (same files either way). Default: 6 on a GPU for a job with
+    /// `[render] noise_target` (at most one per 2 GiB of device memory), else 1 (also on
+    /// a CPU Vulkan device such as lavapipe).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
     renderers: Option<usize>,
 }
@@ -119,19 +120,16 @@ struct RunArgs {
 /// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
 /// on a GPU, 1 on a CPU implementation (lavapipe), where the render uses the same cores
 /// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run"); with
-/// several renderers asked for (`renderers` above 1), DEFAULT_IN_FLIGHT everywhere.
-pub(super) fn in_flight(
-    arg: Option<usize>,
-    renderers: Option<usize>,
-    renderer: &GpuRenderer,
-) -> usize {
-    arg.unwrap_or(
-        if renderer.device_is_cpu() && renderers.is_none_or(|n| n <= 1) {
-            1
-        } else {
-            dataset::DEFAULT_IN_FLIGHT
-        },
-    )
+/// several renderers (`renderers` above 1), one per renderer and two more everywhere.
+pub(super) fn in_flight(arg: Option<usize>, renderers: usize, renderer: &GpuRenderer) -> usize {
+    arg.unwrap_or(if renderers > 1 {
+        // Every renderer an image, and two more being written.
+        renderers + 2
+    } else if renderer.device_is_cpu() {
+        1
+    } else {
+        dataset::DEFAULT_IN_FLIGHT
+    })
 }
 
 /// Refuses `--renderers` above 1 with `--in-flight 1` (one image made, rendered and
@@ -150,38 +148,51 @@ pub(super) fn check_renderers(renderers: Option<usize>, in_flight: Option<usize>
 /// Renderers on a GPU by default (`--renderers`) for a job with `[render] noise_target`:
 /// its noise checks are CPU work between short batches, and while one renderer does
 /// them the others' batches keep the GPU busy (the paper job at the recommended setting
-/// on an H100: 1.3x the images per hour with 3). A job of fixed samples keeps 1: there
-/// the GPU is busy already, and two device contexts time-slicing it made the paper job
-/// at 256 spp 0.64x as fast (docs/benchmarks/dataset.md, "Several renderers").
-pub const DEFAULT_GPU_RENDERERS_ADAPTIVE: usize = 3;
+/// on an H100: 3 renderers 1.3x the images per hour of 1, 6 about 1.1x more than 3). A
+/// job of fixed samples keeps 1: there the GPU is busy already, and two renderers sharing
+/// it made the paper job at 256 spp 0.64x as fast (docs/benchmarks/dataset.md, "Several
+/// renderers" and "Renderers beside one another").
+pub const DEFAULT_GPU_RENDERERS_ADAPTIVE: usize = 6;
 
-/// The renderers beside `first` (`--renderers`, or its default for the device and job:
-/// [`DEFAULT_GPU_RENDERERS_ADAPTIVE`] on a GPU for a job with a noise target, else 1),
-/// each opening its own Vulkan device context, made at once on threads of their own.
-/// One image in flight renders on the calling thread alone: none beside it then
-/// ([`check_renderers`] refused an explicit `--renderers` above 1 with it).
-pub(super) fn more_renderers(
+/// Device-local memory per default renderer: the default is at most one renderer per this
+/// much of the GPU's largest device-local heap (each holds its GPU scene, its images'
+/// slope maps and sums: about 1 GiB at the paper job's 5792^2 maps and 1224 x 1025
+/// pixels, measured on the H100), so that a smaller GPU is not filled.
+pub const DEVICE_BYTES_PER_DEFAULT_RENDERER: u64 = 2 << 30;
+
+/// How many renderers: `--renderers`, or the default for the device and job:
+/// [`DEFAULT_GPU_RENDERERS_ADAPTIVE`] (at most one per
+/// [`DEVICE_BYTES_PER_DEFAULT_RENDERER`] of device memory) on a GPU for a job with a
+/// noise target, else 1. With one image in flight (`--in-flight 1`), 1: the image
+/// renders on the calling thread alone ([`check_renderers`] refused an explicit
+/// `--renderers` above 1 with it).
+pub(super) fn renderer_count(
     arg: Option<usize>,
+    in_flight_arg: Option<usize>,
     first: &GpuRenderer,
     job: &dataset::Job,
-    in_flight: usize,
-) -> Result<Vec<GpuRenderer>> {
-    if in_flight <= 1 {
-        return Ok(Vec::new());
+) -> usize {
+    if in_flight_arg == Some(1) {
+        return 1;
     }
-    let n = arg.unwrap_or(
+    arg.unwrap_or_else(|| {
         if !first.device_is_cpu() && job.render.noise_target.is_some() {
-            DEFAULT_GPU_RENDERERS_ADAPTIVE
+            let fit = first.device_local_bytes() / DEVICE_BYTES_PER_DEFAULT_RENDERER;
+            DEFAULT_GPU_RENDERERS_ADAPTIVE.min(fit as usize).max(1)
         } else {
             1
-        },
-    );
-    std::thread::scope(|s| {
-        let made: Vec<_> = (1..n).map(|_| s.spawn(gpu_renderer)).collect();
-        made.into_iter()
-            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-            .collect()
+        }
     })
+}
+
+/// The `n - 1` renderers beside `first` on its Vulkan device
+/// ([`GpuRenderer::beside`]: each its own context, queue, path tracer and GPU scenes),
+/// made at once on threads of their own.
+pub(super) fn more_renderers(n: usize, first: &GpuRenderer) -> Result<Vec<GpuRenderer>> {
+    first
+        .beside(n.saturating_sub(1))
+        .map_err(anyhow::Error::msg)
+        .context("starting the GPU renderers beside the first")
 }
 
 /// `RunOptions::more_renderers` of `more`.
@@ -367,9 +378,10 @@ fn run_job(a: RunArgs) -> Result<()> {
     );
     bar.enable_steady_tick(Duration::from_millis(500));
     let mut progress = bar_progress(&bar);
-    let in_flight = in_flight(a.in_flight, a.renderers, &renderer);
+    let renderers = renderer_count(a.renderers, a.in_flight, &renderer, &prep.job);
+    let in_flight = in_flight(a.in_flight, renderers, &renderer);
     let mut more = profiler.cpu("Vulkan init, pipelines, energy tables", || {
-        more_renderers(a.renderers, &renderer, &prep.job, in_flight)
+        more_renderers(renderers, &renderer)
     })?;
     let result = dataset::run(
         &prep,

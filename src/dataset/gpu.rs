@@ -61,6 +61,49 @@ impl GpuRenderer {
         })
     }
 
+    /// `n` more renderers on this one's Vulkan device, each with a context of its own
+    /// ([`Context::beside`]: its own queue while the device has a free one), its own path
+    /// tracer (the same backend) and GPU scenes, made in parallel. Their GPU work can run
+    /// beside this one's on the GPU; renderers on separate devices ([`GpuRenderer::new`]
+    /// twice) only take turns on it.
+    pub fn beside(&self, n: usize) -> Result<Vec<GpuRenderer>, String> {
+        let (ctx, backend) = (&self.ctx, self.tracer.backend);
+        std::thread::scope(|s| {
+            let made: Vec<_> = (0..n)
+                .map(|_| {
+                    s.spawn(move || {
+                        let ctx = ctx.beside().map_err(|e| format!("Vulkan: {e}"))?;
+                        let tracer = PathTracer::new(&ctx, backend, &EnergyTables::compute())
+                            .map_err(|e| e.to_string())?;
+                        Ok(GpuRenderer {
+                            ctx,
+                            tracer,
+                            cached: None,
+                            base: SceneConfig::default(),
+                            stages: Vec::new(),
+                            profile: None,
+                            samples: None,
+                        })
+                    })
+                })
+                .collect();
+            made.into_iter()
+                .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                .collect()
+        })
+    }
+
+    /// The size of the device's largest device-local memory heap (bytes).
+    pub fn device_local_bytes(&self) -> u64 {
+        let heaps = &self.ctx.info.memory_heaps;
+        heaps
+            .iter()
+            .filter(|h| h.device_local)
+            .map(|h| h.size_bytes)
+            .max()
+            .unwrap_or(0)
+    }
+
     /// True when the Vulkan device is a CPU implementation (lavapipe): there the "GPU"
     /// work runs on the same cores as the run's CPU stages, so overlapping them gains
     /// nothing (`dataset run` then defaults to one image in flight).

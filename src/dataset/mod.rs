@@ -30,4 +30,4 @@ pub use runner::{
     DEFAULT_IN_FLIGHT, ManifestEntry, Prepared, RunOptions, RunReport, Shard, finish, merge,
     postprocess_dir, prepare, prepare_text, read_manifest, render_one, render_one_seeded, run,
 };
-pub use textures::{TextureCache, TextureSource};
+pub use textures::{TextureCache, TextureSource, TextureWant};

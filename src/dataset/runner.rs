@@ -22,7 +22,7 @@ use super::plan::{self, FaceChoice, InstancePlan, ItemPlan, Label, Plan, Split};
 use super::post::{self, DefectVisibility, Frame};
 use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
 use super::seed::{derive, name, tag};
-use super::textures::{TextureCache, TextureSource, texture_error};
+use super::textures::{TextureCache, TextureSource, TextureWant, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, imprint_traced, sample_defects};
 use crate::render::pixels::{quantise_units_deep, quantise_units8};
 use crate::scene::assemble::Placement;
@@ -1261,28 +1261,45 @@ impl<'p> Inputs<'p> {
                 message,
             })?;
         let present: BTreeSet<u8> = mesh.labels.iter().map(|l| l.face).collect();
-        let mut face_textures = Vec::new();
-        for fc in params.faces.iter().filter(|f| present.contains(&f.face)) {
-            let size = job.texture.size_px as usize;
-            let spacing = job.texture.spacing_um;
-            let tseed = derive(
-                job.seed,
-                &[tag::TEXTURE, name(&finish.name), fc.texture as u64],
-            );
-            let map = self.cache.get((inst.finish, fc.texture), || {
-                textures
-                    .make(finish, fc.texture, tseed, size, spacing)
-                    .map_err(|m| texture_error(finish, fc.texture, m))
-            })?;
-            face_textures.push(FaceTexture {
+        let faces: Vec<_> = params
+            .faces
+            .iter()
+            .filter(|f| present.contains(&f.face))
+            .collect();
+        let (size, spacing) = (job.texture.size_px as usize, job.texture.spacing_um);
+        let keys: Vec<(usize, u32)> = faces.iter().map(|fc| (inst.finish, fc.texture)).collect();
+        // The misses made side by side (`make_many`); the first failure in the faces'
+        // order is the error, as when they are made one after the other.
+        let maps = self.cache.get_many(&keys, |misses| {
+            let wants: Vec<TextureWant> = misses
+                .iter()
+                .map(|&(_, t)| TextureWant {
+                    finish,
+                    instance: t,
+                    seed: derive(job.seed, &[tag::TEXTURE, name(&finish.name), t as u64]),
+                    size_px: size,
+                    spacing_um: spacing,
+                })
+                .collect();
+            textures
+                .make_many(&wants)
+                .into_iter()
+                .zip(misses)
+                .map(|(r, &(_, t))| r.map_err(|m| texture_error(finish, t, m)))
+                .collect()
+        })?;
+        let face_textures = faces
+            .iter()
+            .zip(maps)
+            .map(|(fc, map)| FaceTexture {
                 face: fc.face,
                 finish: finish.name.clone(),
                 texture_instance: fc.texture,
                 map,
                 rotation_rad: (fc.rotation_deg as f32).to_radians(),
                 offset_px: [fc.offset_px[0] as f32, fc.offset_px[1] as f32],
-            });
-        }
+            })
+            .collect();
         laps.stage("textures", &mut stages);
         Ok(ItemInputs {
             mesh,

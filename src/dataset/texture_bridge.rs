@@ -11,7 +11,7 @@ use rand::SeedableRng;
 use super::job::{Finish, FinishKind};
 use super::renderer::TextureMap;
 use super::seed::{derive, name};
-use super::textures::TextureSource;
+use super::textures::{TextureSource, TextureWant};
 use crate::texture::{
     HeightMap, MilledParams, MilledVariation, NoProgress, SandblastParams, StandInExemplar,
     generate_milled, generate_sandblasted,
@@ -86,11 +86,28 @@ impl ModuleTextures {
     }
 }
 
-impl TextureSource for ModuleTextures {
-    fn make(
-        &mut self,
+impl ModuleTextures {
+    /// Loads or makes what `finish`'s textures share (its measurement, its sandblasted
+    /// exemplar), once per finish, so that [`ModuleTextures::make_ready`] only reads.
+    fn ready(&mut self, f: &Finish) -> Result<(), String> {
+        self.measurement(f)?;
+        if f.kind == FinishKind::Sandblasted && !self.exemplars.contains_key(&f.name) {
+            let (_, ex) = sandblasted(f)?;
+            let e = match self.measurement(f)? {
+                Some(m) => m,
+                // One exemplar per finish, seeded by its name (not the job seed): it
+                // stands in for a measurement of the real surface.
+                None => Arc::new(ex.generate(name(&f.name)).map_err(|e| e.to_string())?),
+            };
+            self.exemplars.insert(f.name.clone(), e);
+        }
+        Ok(())
+    }
+
+    /// One texture of a finish made [`ModuleTextures::ready`].
+    fn make_ready(
+        &self,
         f: &Finish,
-        _instance: u32,
         seed: u64,
         size: usize,
         spacing_um: f64,
@@ -98,7 +115,7 @@ impl TextureSource for ModuleTextures {
         let height = match f.kind {
             FinishKind::Milled => {
                 let (mut base, var) = milled(f)?;
-                if let Some(m) = self.measurement(f)? {
+                if let Some(m) = self.measurements.get(&f.name) {
                     base.moments = m.moments();
                 }
                 let p = match var {
@@ -112,26 +129,44 @@ impl TextureSource for ModuleTextures {
                     .map_err(|e| e.to_string())?
             }
             FinishKind::Sandblasted => {
-                let (p, ex) = sandblasted(f)?;
-                let exemplar = match self.exemplars.get(&f.name) {
-                    Some(e) => e.clone(),
-                    None if f.measurement.is_some() => {
-                        let e = self.measurement(f)?.unwrap_or_else(|| unreachable!());
-                        self.exemplars.insert(f.name.clone(), e.clone());
-                        e
-                    }
-                    None => {
-                        // One exemplar per finish, seeded by its name (not the job seed):
-                        // it stands in for a measurement of the real surface.
-                        let e = Arc::new(ex.generate(name(&f.name)).map_err(|e| e.to_string())?);
-                        self.exemplars.insert(f.name.clone(), e.clone());
-                        e
-                    }
-                };
-                generate_sandblasted(&exemplar, &p, size, size, spacing_um, seed, &NoProgress)
+                let (p, _) = sandblasted(f)?;
+                let exemplar = self
+                    .exemplars
+                    .get(&f.name)
+                    .ok_or_else(|| format!("finish {}: no exemplar made", f.name))?;
+                generate_sandblasted(exemplar, &p, size, size, spacing_um, seed, &NoProgress)
                     .map_err(|e| e.to_string())?
             }
         };
         Ok(height.slopes())
+    }
+}
+
+impl TextureSource for ModuleTextures {
+    fn make(
+        &mut self,
+        f: &Finish,
+        _instance: u32,
+        seed: u64,
+        size: usize,
+        spacing_um: f64,
+    ) -> Result<TextureMap, String> {
+        self.ready(f)?;
+        self.make_ready(f, seed, size, spacing_um)
+    }
+
+    /// Side by side on rayon's pool (each texture's synthesis is parallel too; one
+    /// image's two or three faces together keep more of the cores busy).
+    fn make_many(&mut self, wants: &[TextureWant<'_>]) -> Vec<Result<TextureMap, String>> {
+        use rayon::prelude::*;
+        let ready: Vec<Result<(), String>> = wants.iter().map(|w| self.ready(w.finish)).collect();
+        let this = &*self;
+        wants
+            .par_iter()
+            .zip(ready)
+            .map(|(w, r)| {
+                r.and_then(|()| this.make_ready(w.finish, w.seed, w.size_px, w.spacing_um))
+            })
+            .collect()
     }
 }

@@ -36,7 +36,10 @@ impl Context {
             let cbs = [cb];
             let submit = [vk::SubmitInfo::default().command_buffers(&cbs)];
             unsafe {
-                self.device.queue_submit(self.queue, &submit, fence)?;
+                {
+                    let _queue = self.queue_lock.lock().unwrap_or_else(|p| p.into_inner());
+                    self.device.queue_submit(self.queue, &submit, fence)?;
+                }
                 self.device.wait_for_fences(&[fence], true, u64::MAX)?;
             }
             Ok(r)

@@ -2,6 +2,7 @@
 
 use std::ffi::{CStr, CString, c_void};
 use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
@@ -39,6 +40,9 @@ pub struct DeviceInfo {
     pub is_cpu: bool,
     pub timestamp_period_ns: f32,
     pub timestamps_supported: bool,
+    /// How many queues of the chosen family the device was opened with (at most
+    /// [`MAX_QUEUES`]).
+    pub queue_count: u32,
     pub max_storage_buffer_range: u32,
     pub max_workgroup_count: [u32; 3],
     pub memory_heaps: Vec<MemoryHeap>,
@@ -106,8 +110,24 @@ unsafe extern "system" fn debug_callback(
     vk::FALSE
 }
 
+/// The most queues of the chosen family a device is opened with: contexts made
+/// [`Context::beside`] one another take them in turn, so their submissions can run on the
+/// GPU side by side (contexts on different devices only take turns).
+pub const MAX_QUEUES: u32 = 8;
+
+/// The device's queues of the chosen family, each with the lock its submissions take
+/// (contexts beside one another may share a queue when there are more of them than
+/// queues; Vulkan wants a queue's submissions externally synchronised).
+struct Queues {
+    queues: Vec<(vk::Queue, Arc<Mutex<()>>)>,
+    /// The queue the next context made beside this device takes (modulo their number).
+    next: AtomicUsize,
+}
+
 /// The Vulkan device and everything that lives as long as it. Shared as `Arc<Context>`;
-/// every resource keeps an `Arc` so the device outlives them.
+/// every resource keeps an `Arc` so the device outlives them. A context made by
+/// [`Context::beside`] shares the device of the one it was made from but has its own
+/// queue (while the device has one free), memory allocator and command pool.
 pub struct Context {
     pub entry: ash::Entry,
     pub instance: ash::Instance,
@@ -115,6 +135,14 @@ pub struct Context {
     pub device: ash::Device,
     pub queue: vk::Queue,
     pub queue_family: u32,
+    /// Which of the family's queues `queue` is.
+    pub queue_index: u32,
+    /// Held while submitting to `queue`.
+    pub(crate) queue_lock: Arc<Mutex<()>>,
+    /// The device's queues (taken in turn by contexts made beside this one).
+    queues: Arc<Queues>,
+    /// The context that owns the device, for one made beside it (kept alive by this).
+    owner: Option<Arc<Context>>,
     pub info: DeviceInfo,
     pub accel: Option<ash::khr::acceleration_structure::Device>,
     pub debug_utils: Option<ash::ext::debug_utils::Device>,
@@ -233,7 +261,13 @@ impl Context {
                 return Err(e);
             }
         };
-        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+        let queues: Vec<(vk::Queue, Arc<Mutex<()>>)> = (0..info.queue_count)
+            .map(|i| {
+                let q = unsafe { device.get_device_queue(queue_family, i) };
+                (q, Arc::new(Mutex::new(())))
+            })
+            .collect();
+        let (queue, queue_lock) = queues[0].clone();
         let allocator = Allocator::new(&AllocatorCreateDesc {
             instance: instance.clone(),
             device: device.clone(),
@@ -257,6 +291,13 @@ impl Context {
             device,
             queue,
             queue_family,
+            queue_index: 0,
+            queue_lock,
+            queues: Arc::new(Queues {
+                queues,
+                next: AtomicUsize::new(1),
+            }),
+            owner: None,
             info,
             accel,
             debug_utils,
@@ -265,6 +306,51 @@ impl Context {
             command_pool: Mutex::new(command_pool),
             debug_instance,
             messenger,
+        }))
+    }
+
+    /// A context on the same device with the device's next queue (the queues are taken
+    /// in turn and shared, each submission under its queue's lock, once every one is
+    /// taken), its own memory allocator and command pool. Work submitted by contexts on
+    /// different queues can run on the GPU at the same time; contexts on separate
+    /// devices ([`Context::new`] twice) only take turns. Resources made with it belong
+    /// to it, the device's validation log is shared.
+    pub fn beside(self: &Arc<Context>) -> Result<Arc<Context>, VkError> {
+        let owner = self.owner.clone().unwrap_or_else(|| self.clone());
+        let n = owner.queues.queues.len();
+        let index = owner.queues.next.fetch_add(1, Ordering::Relaxed) % n;
+        let (queue, queue_lock) = owner.queues.queues[index].clone();
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: owner.instance.clone(),
+            device: owner.device.clone(),
+            physical_device: owner.physical,
+            debug_settings: Default::default(),
+            buffer_device_address: owner.accel.is_some(),
+            allocation_sizes: Default::default(),
+        })?;
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(owner.queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        let command_pool = unsafe { owner.device.create_command_pool(&pool_info, None) }?;
+        Ok(Arc::new(Context {
+            entry: owner.entry.clone(),
+            instance: owner.instance.clone(),
+            physical: owner.physical,
+            device: owner.device.clone(),
+            queue,
+            queue_family: owner.queue_family,
+            queue_index: index as u32,
+            queue_lock,
+            queues: owner.queues.clone(),
+            info: owner.info.clone(),
+            accel: owner.accel.clone(),
+            debug_utils: owner.debug_utils.clone(),
+            validation: owner.validation.clone(),
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            command_pool: Mutex::new(command_pool),
+            debug_instance: None,
+            messenger: vk::DebugUtilsMessengerEXT::null(),
+            owner: Some(owner),
         }))
     }
 
@@ -293,10 +379,21 @@ impl Context {
                 continue;
             }
             let families = unsafe { instance.get_physical_device_queue_family_properties(p) };
-            if let Some(q) = families
-                .iter()
-                .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
-            {
+            let compute =
+                |f: &vk::QueueFamilyProperties| f.queue_flags.contains(vk::QueueFlags::COMPUTE);
+            let compute_only = |f: &vk::QueueFamilyProperties| {
+                compute(f) && !f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
+            };
+            let want_compute_only = matches!(
+                std::env::var("SYNOSIS_QUEUE_FAMILY").as_deref(),
+                Ok("compute")
+            );
+            let pick = if want_compute_only {
+                families.iter().position(compute_only)
+            } else {
+                None
+            };
+            if let Some(q) = pick.or_else(|| families.iter().position(compute)) {
                 candidates.push((p, q as u32, score(props.device_type)));
             }
         }
@@ -342,7 +439,11 @@ impl Context {
         if ray_query_enabled {
             ext_names.extend(rq_exts.iter().map(|e| e.as_ptr()));
         }
-        let priorities = [1.0f32];
+        let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
+        let queue_count = families[queue_family as usize]
+            .queue_count
+            .clamp(1, MAX_QUEUES);
+        let priorities = vec![1.0f32; queue_count as usize];
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
@@ -365,7 +466,6 @@ impl Context {
         let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
         unsafe { instance.get_physical_device_properties2(physical, &mut props2) };
         let props = props2.properties;
-        let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
         let mem = unsafe { instance.get_physical_device_memory_properties(physical) };
         let info = DeviceInfo {
             name: cstr_field(&props.device_name),
@@ -378,6 +478,7 @@ impl Context {
             is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,
+            queue_count,
             max_storage_buffer_range: props.limits.max_storage_buffer_range,
             max_workgroup_count: props.limits.max_compute_work_group_count,
             memory_heaps: mem.memory_heaps[..mem.memory_heap_count as usize]
@@ -425,6 +526,17 @@ impl Context {
 impl Drop for Context {
     fn drop(&mut self) {
         unsafe {
+            if self.owner.is_some() {
+                // Beside another: every submission was waited for; the owner (kept
+                // alive until this drop ends) destroys the device.
+                let pool = *self
+                    .command_pool
+                    .get_mut()
+                    .unwrap_or_else(|p| p.into_inner());
+                self.device.destroy_command_pool(pool, None);
+                ManuallyDrop::drop(&mut self.allocator);
+                return;
+            }
             let _ = self.device.device_wait_idle();
             let pool = *self
                 .command_pool

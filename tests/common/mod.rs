@@ -74,6 +74,17 @@ pub fn run_small_smoke_with(
     shard: synosis::dataset::Shard,
     in_flight: usize,
 ) -> synosis::dataset::RunReport {
+    run_small_smoke_lanes(renderer, Vec::new(), out, shard, in_flight)
+}
+
+/// As [`run_small_smoke_with`], with `more` renderers beside `renderer`.
+pub fn run_small_smoke_lanes(
+    renderer: &mut dyn synosis::dataset::ImageRenderer,
+    more: Vec<&mut (dyn synosis::dataset::ImageRenderer + Send)>,
+    out: &std::path::Path,
+    shard: synosis::dataset::Shard,
+    in_flight: usize,
+) -> synosis::dataset::RunReport {
     use synosis::dataset::{self, RunOptions};
     let text = small_smoke_text().replace("spp = 4", "spp = 1");
     let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
@@ -82,6 +93,7 @@ pub fn run_small_smoke_with(
     let opts = RunOptions {
         shard,
         in_flight,
+        more_renderers: more,
         ..Default::default()
     };
     dataset::run(&prep, out, renderer, &mut textures, opts).unwrap()
