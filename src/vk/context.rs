@@ -379,21 +379,10 @@ impl Context {
                 continue;
             }
             let families = unsafe { instance.get_physical_device_queue_family_properties(p) };
-            let compute =
-                |f: &vk::QueueFamilyProperties| f.queue_flags.contains(vk::QueueFlags::COMPUTE);
-            let compute_only = |f: &vk::QueueFamilyProperties| {
-                compute(f) && !f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
-            };
-            let want_compute_only = matches!(
-                std::env::var("SYNOSIS_QUEUE_FAMILY").as_deref(),
-                Ok("compute")
-            );
-            let pick = if want_compute_only {
-                families.iter().position(compute_only)
-            } else {
-                None
-            };
-            if let Some(q) = pick.or_else(|| families.iter().position(compute)) {
+            if let Some(q) = families
+                .iter()
+                .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+            {
                 candidates.push((p, q as u32, score(props.device_type)));
             }
         }
