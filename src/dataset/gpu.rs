@@ -63,9 +63,10 @@ impl GpuRenderer {
 
     /// `n` more renderers on this one's Vulkan device, each with a context of its own
     /// ([`Context::beside`]: its own queue while the device has a free one), its own path
-    /// tracer (the same backend) and GPU scenes, made in parallel. Their GPU work can run
-    /// beside this one's on the GPU; renderers on separate devices ([`GpuRenderer::new`]
-    /// twice) only take turns on it.
+    /// tracer (the same backend) and GPU scenes, made in parallel. Against renderers on
+    /// separate devices ([`GpuRenderer::new`] twice) they share one device's memory
+    /// overhead (on an H100 6 renderers took 7.0 GB instead of 20.4 GB) at the same
+    /// speed as measured (docs/benchmarks/dataset.md, "Renderers beside one another").
     pub fn beside(&self, n: usize) -> Result<Vec<GpuRenderer>, String> {
         let (ctx, backend) = (&self.ctx, self.tracer.backend);
         std::thread::scope(|s| {

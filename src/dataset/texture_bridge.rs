@@ -84,9 +84,7 @@ impl ModuleTextures {
         self.measurements.insert(f.name.clone(), h.clone());
         Ok(Some(h))
     }
-}
 
-impl ModuleTextures {
     /// Loads or makes what `finish`'s textures share (its measurement, its sandblasted
     /// exemplar), once per finish, so that [`ModuleTextures::make_ready`] only reads.
     fn ready(&mut self, f: &Finish) -> Result<(), String> {
