@@ -16,7 +16,7 @@ use crate::scene::assemble::{DefectSurface, Stage, ViewSetup};
 use crate::scene::config::SceneConfig;
 use crate::scene::materials::RegionSelector;
 use crate::scene::mesh::FACE_OTHER;
-use crate::trace::{AccelChoice, resolve};
+use crate::trace::{AccelChoice, Backend, resolve};
 use crate::vk::{Context, ContextOptions, Profiler};
 
 /// Face id given to the object's non-inspected triangles for the annotation pass only,
@@ -48,6 +48,11 @@ impl GpuRenderer {
         })
         .map_err(|e| format!("Vulkan: {e}"))?;
         let backend = resolve(accel, &ctx.info).map_err(|e| e.to_string())?;
+        Self::on(ctx, backend)
+    }
+
+    /// A renderer on `ctx` with a path tracer of `backend` and no scene yet.
+    fn on(ctx: Arc<Context>, backend: Backend) -> Result<GpuRenderer, String> {
         let tracer =
             PathTracer::new(&ctx, backend, &EnergyTables::compute()).map_err(|e| e.to_string())?;
         Ok(GpuRenderer {
@@ -74,17 +79,7 @@ impl GpuRenderer {
                 .map(|_| {
                     s.spawn(move || {
                         let ctx = ctx.beside().map_err(|e| format!("Vulkan: {e}"))?;
-                        let tracer = PathTracer::new(&ctx, backend, &EnergyTables::compute())
-                            .map_err(|e| e.to_string())?;
-                        Ok(GpuRenderer {
-                            ctx,
-                            tracer,
-                            cached: None,
-                            base: SceneConfig::default(),
-                            stages: Vec::new(),
-                            profile: None,
-                            samples: None,
-                        })
+                        Self::on(ctx, backend)
                     })
                 })
                 .collect();

@@ -515,18 +515,13 @@ impl Context {
 impl Drop for Context {
     fn drop(&mut self) {
         unsafe {
-            if self.owner.is_some() {
-                // Beside another: every submission was waited for; the owner (kept
-                // alive until this drop ends) destroys the device.
-                let pool = *self
-                    .command_pool
-                    .get_mut()
-                    .unwrap_or_else(|p| p.into_inner());
-                self.device.destroy_command_pool(pool, None);
-                ManuallyDrop::drop(&mut self.allocator);
-                return;
+            // Beside another context, every submission was waited for and the owner
+            // (kept alive until this drop ends) destroys the device; the owner waits for
+            // the device first.
+            let owns_device = self.owner.is_none();
+            if owns_device {
+                let _ = self.device.device_wait_idle();
             }
-            let _ = self.device.device_wait_idle();
             let pool = *self
                 .command_pool
                 .get_mut()
@@ -534,6 +529,9 @@ impl Drop for Context {
             self.device.destroy_command_pool(pool, None);
             // The allocator frees its memory blocks, so it must go before the device.
             ManuallyDrop::drop(&mut self.allocator);
+            if !owns_device {
+                return;
+            }
             self.device.destroy_device(None);
             if let Some(di) = &self.debug_instance
                 && self.messenger != vk::DebugUtilsMessengerEXT::null()
