@@ -137,6 +137,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             ..Default::default()
         },
     )
+    .map_err(|e| super::dataset::with_renderers_hint(e.into(), renderers))
     .with_context(|| format!("dataset run into {}", a.out.display()))?;
     bar.finish_and_clear();
     let loop_s = t1.elapsed().as_secs_f64();

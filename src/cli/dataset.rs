@@ -191,8 +191,28 @@ pub(super) fn renderer_count(
 pub(super) fn more_renderers(n: usize, first: &GpuRenderer) -> Result<Vec<GpuRenderer>> {
     first
         .beside(n.saturating_sub(1))
-        .map_err(anyhow::Error::msg)
+        .map_err(|e| with_renderers_hint(anyhow::Error::msg(e), n))
         .context("starting the GPU renderers beside the first")
+}
+
+/// What a failure says when `renderers` above 1 shared the GPU and it ran out of GPU
+/// memory: the setting that decides it, its range, and what to do.
+pub(super) fn renderers_memory_hint(error: &str, renderers: usize) -> Option<String> {
+    const OUT_OF_GPU_MEMORY: [&str; 2] =
+        ["GPU memory allocation failed", "ERROR_OUT_OF_DEVICE_MEMORY"];
+    (renderers > 1 && OUT_OF_GPU_MEMORY.iter().any(|m| error.contains(m))).then(|| {
+        format!(
+            "--renderers {renderers}: the renderers share the GPU's memory, each with its own GPU scene and slope maps (allowed 1 to 8; fewer need less, 1 the least)"
+        )
+    })
+}
+
+/// `error` with [`renderers_memory_hint`] as its outer context where it applies.
+pub(super) fn with_renderers_hint(error: anyhow::Error, renderers: usize) -> anyhow::Error {
+    match renderers_memory_hint(&format!("{error:#}"), renderers) {
+        Some(hint) => error.context(hint),
+        None => error,
+    }
 }
 
 /// `RunOptions::more_renderers` of `more`.
@@ -413,7 +433,9 @@ fn run_job(a: RunArgs) -> Result<()> {
             100.0 * gpu / wall.max(1e-9)
         );
     }
-    let report = result.with_context(|| format!("dataset run into {}", a.out.display()))?;
+    let report = result
+        .map_err(|e| with_renderers_hint(e.into(), renderers))
+        .with_context(|| format!("dataset run into {}", a.out.display()))?;
     println!(
         "shard {}/{}: {} images ({} already done, {} rendered){}",
         shard.index,
@@ -451,4 +473,30 @@ fn print_report(reports: &[dataset::report::FinishReport], out: &std::path::Path
         );
     }
     eprintln!("report: {}", out.join("report.html").display());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn out_of_gpu_memory_with_several_renderers_names_the_setting() {
+        let oom = "image 7 (000007): GPU memory allocation failed: Out of memory";
+        let hint = renderers_memory_hint(oom, 6).unwrap();
+        assert!(
+            hint.starts_with("--renderers 6:") && hint.contains("allowed 1 to 8"),
+            "{hint}"
+        );
+        let vk = "Vulkan call failed: ERROR_OUT_OF_DEVICE_MEMORY";
+        assert!(renderers_memory_hint(vk, 2).is_some());
+        // One renderer, or another error: no hint.
+        assert!(renderers_memory_hint(oom, 1).is_none());
+        assert!(renderers_memory_hint("writing faces.png: disk full", 6).is_none());
+        let e = with_renderers_hint(anyhow::anyhow!("{oom}"), 3);
+        let text = format!("{e:#}");
+        assert!(
+            text.starts_with("--renderers 3:") && text.ends_with(oom),
+            "{text}"
+        );
+    }
 }
