@@ -148,7 +148,7 @@ pub(super) fn check_renderers(renderers: Option<usize>, in_flight: Option<usize>
 /// Renderers on a GPU by default (`--renderers`) for a job with `[render] noise_target`:
 /// its noise checks are CPU work between short batches, and while one renderer does
 /// them the others' batches keep the GPU busy (the paper job at the recommended setting
-/// on an H100: 3 renderers 1.3x the images per hour of 1, 6 about 1.1x more than 3). A
+/// on an H100: 3 renderers 1.3x the images per hour of 1, 6 about 1.2x more than 3). A
 /// job of fixed samples keeps 1: there the GPU is busy already, and two renderers sharing
 /// it made the paper job at 256 spp 0.64x as fast (docs/benchmarks/dataset.md, "Several
 /// renderers" and "Renderers beside one another").
