@@ -44,11 +44,13 @@ pub struct BenchGpuArgs {
     #[arg(long)]
     profile: Option<PathBuf>,
     /// Images in flight (as `dataset run --in-flight`): 1 runs the stages one after the
-    /// other. Default: 3 on a GPU, 1 on a CPU Vulkan device (lavapipe).
+    /// other. Default: 3 on a GPU, 1 on a CPU Vulkan device (lavapipe); with several
+    /// renderers, one per renderer and two more.
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
     in_flight: Option<usize>,
-    /// Renderers, each with its own Vulkan device context (as `dataset run --renderers`).
-    /// Default: 3 on a GPU for a job with `[render] noise_target`, else 1.
+    /// Renderers, each with its own Vulkan context on the one device (as `dataset run
+    /// --renderers`). Default: 6 on a GPU for a job with `[render] noise_target` (at most
+    /// one per 2 GiB of device memory), else 1.
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
     renderers: Option<usize>,
 }
@@ -115,7 +117,6 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let renderers = super::dataset::renderer_count(a.renderers, a.in_flight, &renderer, &prep.job);
     let in_flight = super::dataset::in_flight(a.in_flight, renderers, &renderer);
     let mut more = super::dataset::more_renderers(renderers, &renderer)?;
-    let renderers = 1 + more.len();
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
     let bar = indicatif::ProgressBar::new(0);

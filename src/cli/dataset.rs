@@ -104,7 +104,8 @@ struct RunArgs {
     /// Images in flight: 1 makes, renders and writes one image after the other; N >= 2
     /// renders one while N - 1 writer threads write earlier ones and the next images'
     /// meshes and textures are made ahead (same files either way). Default: 3 on a GPU,
-    /// 1 on a CPU Vulkan device (lavapipe), where the overlap only competes for the cores.
+    /// 1 on a CPU Vulkan device (lavapipe), where the overlap only competes for the cores;
+    /// with several renderers, one per renderer and two more.
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
     in_flight: Option<usize>,
     /// Renderers, each with its own Vulkan context (queue) on the one device and its own

@@ -135,8 +135,6 @@ pub struct Context {
     pub device: ash::Device,
     pub queue: vk::Queue,
     pub queue_family: u32,
-    /// Which of the family's queues `queue` is.
-    pub queue_index: u32,
     /// Held while submitting to `queue`.
     pub(crate) queue_lock: Arc<Mutex<()>>,
     /// The device's queues (taken in turn by contexts made beside this one).
@@ -291,7 +289,6 @@ impl Context {
             device,
             queue,
             queue_family,
-            queue_index: 0,
             queue_lock,
             queues: Arc::new(Queues {
                 queues,
@@ -339,7 +336,6 @@ impl Context {
             device: owner.device.clone(),
             queue,
             queue_family: owner.queue_family,
-            queue_index: index as u32,
             queue_lock,
             queues: owner.queues.clone(),
             info: owner.info.clone(),
