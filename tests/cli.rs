@@ -393,6 +393,49 @@ fn bench_gpu_writes_its_table() {
             "{table}"
         );
     }
+    // `--consecutive`: the job's first instance with all its views (images 0.. in the
+    // job's order), not a shard spread over the job; the run is left unfinished.
+    let o = synosis(
+        &[
+            "bench-gpu",
+            "--job",
+            job.to_str().unwrap(),
+            "--out",
+            "first",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--spp",
+            "1",
+            "--rays-side",
+            "0",
+            "--consecutive",
+            "--json",
+            "c.json",
+        ],
+        dp,
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let table = text(&o.stdout);
+    assert!(table.contains("1 instance(s) of"), "{table}");
+    assert!(table.contains("the first, consecutive"), "{table}");
+    let c: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dp.join("c.json")).unwrap()).unwrap();
+    assert_eq!(c["consecutive"].as_bool(), Some(true));
+    let m = std::fs::read_to_string(dp.join("first/manifests/shard-0-of-1.jsonl")).unwrap();
+    let indices: Vec<u64> = m
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["index"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert!(!indices.is_empty());
+    assert_eq!(indices, (0..indices.len() as u64).collect::<Vec<u64>>());
+    assert_eq!(c["images"].as_u64(), Some(indices.len() as u64));
+    assert!(!dp.join("first/manifest.jsonl").exists());
     // A non-empty work folder is refused before any work.
     let o = synosis(
         &["bench-gpu", "--job", job.to_str().unwrap(), "--out", "data"],

@@ -288,6 +288,70 @@ fn assert_same_dataset(a: &Path, b: &Path) {
     }
 }
 
+/// `RunOptions::limit` (`bench-gpu --consecutive`): the first images in the job's order,
+/// the run left unfinished, and a later run without a limit ends in the same dataset as
+/// one run of all.
+#[test]
+fn a_limited_run_renders_the_first_images_and_leaves_the_rest() {
+    let f = fixture(2, 2);
+    let total = f.prep.plan.items.len();
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    let part = f.root.join("part");
+    let mut seen = Vec::new();
+    let mut progress = |done: usize, of: usize| seen.push((done, of));
+    let r = dataset::run(
+        &f.prep,
+        &part,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+        RunOptions {
+            limit: Some(7),
+            progress: Some(&mut progress),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!((r.rendered, r.already_done, r.finished), (7, 0, false));
+    assert_eq!(
+        seen.last(),
+        Some(&(7, 7)),
+        "progress counts the limited run"
+    );
+    assert!(!part.join("manifest.jsonl").exists() && !part.join("coco").exists());
+    let m = std::fs::read_to_string(part.join("manifests/shard-0-of-1.jsonl")).unwrap();
+    let indices: Vec<u64> = m
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["index"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(indices, (0..7).collect::<Vec<u64>>());
+    // A limit past what is left renders what is left and finishes.
+    let r = run_all_limited(&f, &part, Some(total));
+    assert_eq!(
+        (r.rendered, r.already_done, r.finished),
+        (total - 7, 7, true)
+    );
+    assert_same_dataset(&full, &part);
+}
+
+fn run_all_limited(f: &Fixture, out: &Path, limit: Option<usize>) -> dataset::RunReport {
+    dataset::run(
+        &f.prep,
+        out,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+        RunOptions {
+            limit,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
 #[test]
 fn killed_run_resumes_to_the_same_dataset() {
     let f = fixture(2, 2);

@@ -21,9 +21,16 @@ pub struct BenchGpuArgs {
     #[arg(long)]
     out: PathBuf,
     /// Object instances to render (each with all of the job's views): the shard 0 of
-    /// `instances in the job / this` is rendered.
+    /// `instances in the job / this` is rendered (instances spread over the job, each of
+    /// another finish in the paper job, as in a run of many shards), or with
+    /// `--consecutive` the job's first this many.
     #[arg(long, default_value_t = 1)]
     instances: usize,
+    /// Render the job's first `--instances` object instances in the job's order
+    /// (finish-major: the first finish's, sharing its textures as a whole-job run's
+    /// instances do) instead of a shard spread over the job.
+    #[arg(long)]
+    consecutive: bool,
     /// Override the job's `[render] width` (pixels; the camera keeps its sensor size).
     #[arg(long)]
     width: Option<u32>,
@@ -107,8 +114,20 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let prep = dataset::prepare_text(&text, &a.job.display().to_string(), base)
         .with_context(|| format!("job {}", a.job.display()))?;
     let n_inst = prep.plan.instances.len().max(1);
-    let count = (n_inst / a.instances).max(1);
-    let shard = Shard { index: 0, count };
+    let (shard, limit, chosen) = if a.consecutive {
+        // The items of the first instances, which the job's order puts first.
+        let chosen = a.instances.min(n_inst);
+        let limit = prep
+            .plan
+            .items
+            .iter()
+            .take_while(|i| i.instance < chosen)
+            .count();
+        (Shard::ALL, Some(limit), chosen)
+    } else {
+        let count = (n_inst / a.instances).max(1);
+        (Shard { index: 0, count }, None, n_inst.div_ceil(count))
+    };
 
     let profiler = Profiler::new();
     let t0 = Instant::now();
@@ -135,6 +154,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             profiler: Some(&profiler),
             in_flight,
             more_renderers: super::dataset::renderer_refs(&mut more),
+            limit,
             ..Default::default()
         },
     )
@@ -199,11 +219,14 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     println!("| device | {info} |");
     println!("| renderer | {describe} |");
     println!(
-        "| job | {} : {} images ({} instance(s) of {}), {w} x {h}, {spp} spp |",
+        "| job | {} : {} images ({chosen} instance(s) of {n_inst}, {}), {w} x {h}, {spp} spp |",
         a.job.display(),
         entries.len(),
-        prep.plan.instances.len().div_ceil(count),
-        n_inst
+        if a.consecutive {
+            "the first, consecutive"
+        } else {
+            "spread over the job"
+        }
     );
     println!("| images in flight | {in_flight} |");
     println!("| renderers (device contexts) | {renderers} |");
@@ -243,6 +266,8 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             "device": info,
             "renderer": describe,
             "images": entries.len(),
+            "instances": chosen,
+            "consecutive": a.consecutive,
             "width": w, "height": h, "spp": spp,
             "in_flight": in_flight,
             "renderers": renderers,

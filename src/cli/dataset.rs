@@ -416,6 +416,7 @@ fn run_job(a: RunArgs) -> Result<()> {
             profiler: a.profile.as_ref().map(|_| &profiler),
             in_flight,
             more_renderers: renderer_refs(&mut more),
+            limit: None,
         },
     );
     bar.finish_and_clear();

@@ -404,6 +404,11 @@ pub struct RunOptions<'a> {
     /// set-up, noise checks, read-back) runs while another's samples keep the GPU busy
     /// (`dataset run --renderers`). The files and manifest are the same byte for byte.
     pub more_renderers: Vec<&'a mut (dyn ImageRenderer + Send)>,
+    /// At most this many of the shard's images still to do, the first in the job's
+    /// order, then stop (`bench-gpu --consecutive`: a whole-job run's first object
+    /// instances); a run that leaves images undone is not finished (no `manifest.jsonl`
+    /// or `coco/`), and a later run without a limit goes on from there. None: all.
+    pub limit: Option<usize>,
 }
 
 /// Images in flight by default: one rendering, two being written.
@@ -418,6 +423,7 @@ impl Default for RunOptions<'_> {
             profiler: None,
             in_flight: DEFAULT_IN_FLIGHT,
             more_renderers: Vec::new(),
+            limit: None,
         }
     }
 }
@@ -567,7 +573,11 @@ fn run_locked(
         .filter(|i| !done.contains_key(&i.index))
         .collect();
     let already = mine.len() - todo.len();
-    let todo: Vec<&ItemPlan> = todo.into_iter().copied().collect();
+    let mut todo: Vec<&ItemPlan> = todo.into_iter().copied().collect();
+    // Images this run leaves to a later one (RunOptions::limit).
+    let left = todo.len().saturating_sub(opts.limit.unwrap_or(usize::MAX));
+    todo.truncate(todo.len() - left);
+    let total = mine.len() - left;
     if opts.in_flight <= 1 {
         let mut ctx = Ctx::new(prep, opts.profiler)?;
         for item in todo {
@@ -578,14 +588,14 @@ fn run_locked(
             append_line(&manifest_path, &entry)?;
             *rendered += 1;
             if let Some(p) = opts.progress.as_deref_mut() {
-                p(already + *rendered, mine.len());
+                p(already + *rendered, total);
             }
         }
     } else {
         let camera = image_camera_record(&prep.job)?;
         let mut progress = |done: usize| {
             if let Some(p) = opts.progress.as_deref_mut() {
-                p(already + done, mine.len());
+                p(already + done, total);
             }
         };
         let overlapped = Overlapped {
@@ -606,7 +616,8 @@ fn run_locked(
             rendered,
         )?;
     }
-    if exclusive {
+    let finished = exclusive && left == 0;
+    if finished {
         finish_locked(out)?;
     }
     Ok(RunReport {
@@ -614,7 +625,7 @@ fn run_locked(
         already_done: already,
         rendered: *rendered,
         stray_temps_removed: stray,
-        finished: exclusive,
+        finished,
     })
 }
 
