@@ -234,8 +234,9 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
 // axis become n / divisor (at least 3), its tube keeps its m, and its major radius grows
 // so that each chord between two sections lies as far from the axis on average (over the
 // chord's angle) as the light's circle: R / (cos h (1 + h^2 / 6)), h half a section's
-// angle (1.3 % wider at 16 sections), where the chords alone would pull the whole band
-// inwards (by 0.64 % of R between two sections at 16). With `rec` >= 0 the walk
+// angle (1.3 % wider at 16 sections, its chords then within +1.3 % / -0.64 % of R of the
+// circle), where the chords alone would pull the whole band inwards (by up to 1.9 % of R
+// between two sections at 16). With `rec` >= 0 the walk
 // only records the two loops' world vertices as ring `rec` of the recorded rings (`ok`:
 // the walk found the boundary, its loops fit and lie above the geometric horizon ng; the
 // lobe and the shading horizon are not used).
