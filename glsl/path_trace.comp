@@ -494,6 +494,12 @@ vec3 hit_point(Tri t, vec2 bary) {
 // function of the camera ray per pixel, which is all the extra-ray term needs to stay
 // unbiased; on a face it follows the texture under the pixel as A does (A' ignores what
 // lies off the reference plane: edges, defects, other faces, where it only helps less).
+// The extra rays' lobe amplitude (pixel_plane_lobe) is not evaluated per ray: fc =
+// f(wo, r) cos(r) at the mirror direction, a function of wo.z alone, is replaced by its
+// secant through the centre ray's cosine to the reference plane +- this (a fixed function
+// of the camera ray, so the estimate stays unbiased; the sample's own A keeps the exact
+// amplitude). docs/rendering.md, "Analytic direct light".
+const float PLANE_FC_STEP = 0.05;
 struct PixelPlane {
     vec3 p;       // the reference point
     vec3 ng;      // its triangle's normal, towards the camera
@@ -503,6 +509,8 @@ struct PixelPlane {
     vec3 a;       // its triangle's first corner,
     vec3 ba;      // and the rows taking p - a to barycentrics in its plane (plane_bary)
     vec3 ca;
+    float fc0;    // the lobe amplitude's line in wo.z, fc ~ fc0 + fc1 wo.z (the secant
+    float fc1;    // through the centre ray's cosine to the plane +- PLANE_FC_STEP)
 };
 PixelPlane pix_plane;
 // The object triangle the pixel's centre ray meets first (pixel_plane_init), the hint of
@@ -545,6 +553,12 @@ void pixel_plane_init(uint px, uint py) {
     pix_plane.a = t.a.xyz;
     pix_plane.ba = (d11 * e1 - d01 * e2) * inv;
     pix_plane.ca = (d00 * e2 - d01 * e1) * inv;
+    float mu = clamp(-dot(d, ng), PLANE_FC_STEP, 1.0);
+    float lo = max(mu - PLANE_FC_STEP, 0.02), hi = min(mu + PLANE_FC_STEP, 1.0);
+    float f_lo = conductor_lobe_amplitude(surf.c, lo);
+    float f_hi = conductor_lobe_amplitude(surf.c, hi);
+    pix_plane.fc1 = (f_hi - f_lo) / (hi - lo);
+    pix_plane.fc0 = f_lo - pix_plane.fc1 * lo;
     record_rings(offset_ray(pix_plane.p, ng), ng, CV_EXTRA_RING_DIVISOR);
 }
 
@@ -571,7 +585,12 @@ bool pixel_plane_lobe(vec3 o, vec3 d, out Lobe lobe, out vec3 ns) {
     vec3 tb, bt;
     onb(ns, tb, bt);
     vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
-    return conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
+    // Where LEAN widened this ray's lobe (alpha not the line's), the exact amplitude.
+    if (surf.c.alpha != pix_plane.surf.c.alpha) {
+        return conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
+    }
+    float fc = max(pix_plane.fc0 + pix_plane.fc1 * wo.z, 0.0);
+    return conductor_lobe_fc(surf.c, fc, wo, tb, bt, ns, lobe);
 }
 
 // The MIS weight of a BSDF sample (solid-angle pdf `pdf`, from o with geometric normal

@@ -47,11 +47,13 @@ float lobe_d(Lobe l, vec3 w) {
     return v.z / (PI * l.a1 * l.a2 * q * q);
 }
 
-// The lobe of conductor `c` seen from wo (shading frame tb, bt, ns; wo local). False
-// where it has no mass above the surface (the mirror direction at or below it).
-bool conductor_lobe(Conductor c, vec3 wo, vec3 tb, vec3 bt, vec3 ns, out Lobe l) {
+// The lobe of conductor `c` seen from wo (shading frame tb, bt, ns; wo local) with
+// amplitude fc = f(wo, r) cos(r) at the mirror direction r given: the exact value
+// (conductor_lobe) or any stand-in for it (the extra camera rays' line in wo.z,
+// pixel_plane_lobe). False where it has no mass above the surface (the mirror direction
+// at or below it, or fc <= 0).
+bool conductor_lobe_fc(Conductor c, float fc, vec3 wo, vec3 tb, vec3 bt, vec3 ns, out Lobe l) {
     vec3 r_local = vec3(-wo.x, -wo.y, wo.z);
-    float fc = conductor_eval_cos(c, wo, r_local);
     vec3 wo_w = wo.x * tb + wo.y * bt + wo.z * ns;
     l.r = normalize(r_local.x * tb + r_local.y * bt + r_local.z * ns);
     vec3 across = cross(ns, wo_w);
@@ -62,6 +64,19 @@ bool conductor_lobe(Conductor c, vec3 wo, vec3 tb, vec3 bt, vec3 ns, out Lobe l)
     l.a2 = max(2.0 * c.alpha * wo.z, 1e-4);
     l.c = fc * PI * l.a1 * l.a2;
     return fc > 0.0 && wo.z > 0.0;
+}
+
+// The lobe of conductor `c` seen from wo with its exact amplitude.
+bool conductor_lobe(Conductor c, vec3 wo, vec3 tb, vec3 bt, vec3 ns, out Lobe l) {
+    float fc = conductor_eval_cos(c, wo, vec3(-wo.x, -wo.y, wo.z));
+    return conductor_lobe_fc(c, fc, wo, tb, bt, ns, l);
+}
+
+// The amplitude fc of an isotropic conductor's lobe is a function of wo.z alone (the
+// half vector is the normal): fc at wo.z = mu.
+float conductor_lobe_amplitude(Conductor c, float mu) {
+    float s = sqrt(max(1.0 - mu * mu, 0.0));
+    return conductor_eval_cos(c, vec3(s, 0.0, mu), vec3(-s, 0.0, mu));
 }
 
 // Angle between unit a and b times the z of their unit normal: one edge of the
