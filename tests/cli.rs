@@ -423,17 +423,14 @@ fn bench_gpu_writes_its_table() {
     let c: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dp.join("c.json")).unwrap()).unwrap();
     assert_eq!(c["consecutive"].as_bool(), Some(true));
-    let m = std::fs::read_to_string(dp.join("first/manifests/shard-0-of-1.jsonl")).unwrap();
-    let indices: Vec<u64> = m
-        .lines()
-        .map(|l| {
-            serde_json::from_str::<serde_json::Value>(l).unwrap()["index"]
-                .as_u64()
-                .unwrap()
-        })
-        .collect();
+    let indices: Vec<usize> =
+        synosis::dataset::read_manifest(&dp.join("first/manifests/shard-0-of-1.jsonl"), false)
+            .unwrap()
+            .iter()
+            .map(|e| e.index)
+            .collect();
     assert!(!indices.is_empty());
-    assert_eq!(indices, (0..indices.len() as u64).collect::<Vec<u64>>());
+    assert_eq!(indices, (0..indices.len()).collect::<Vec<usize>>());
     assert_eq!(c["images"].as_u64(), Some(indices.len() as u64));
     assert!(!dp.join("first/manifest.jsonl").exists());
     // A non-empty work folder is refused before any work.
