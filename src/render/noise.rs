@@ -84,6 +84,14 @@ impl<'a> PixelSamples<'a> {
         }
     }
 
+    /// The most any pixel has.
+    pub fn most(&self) -> u32 {
+        match self {
+            PixelSamples::All(n) => *n,
+            PixelSamples::Each(counts) => counts.iter().copied().max().unwrap_or(0),
+        }
+    }
+
     /// The mean over the image's pixels.
     pub fn mean(&self) -> f64 {
         match self {
@@ -283,10 +291,7 @@ impl CameraNoise {
             (r, c, r / c)
         };
         Ok(NoiseEstimate {
-            spp: match n {
-                PixelSamples::All(n) => n,
-                PixelSamples::Each(c) => c.iter().copied().max().unwrap_or(0),
-            },
+            spp: n.most(),
             mean_spp: n.mean(),
             ratio,
             render_rms_dn,
@@ -365,20 +370,23 @@ impl CameraNoise {
             Some((v, mu))
         };
         // One pass on all cores: the variance per sample (0 when unknown or saturated),
-        // whether it is unknown, and the camera's variance of a counted pixel (NaN: not
-        // counted); then the camera's sum in pixel order (the same sum as one loop).
+        // whether it is unknown, whether it is in its kind's means (known and below
+        // saturation), and the camera's variance of a counted pixel (NaN: not counted);
+        // then the camera's sum in pixel order (the same sum as one loop).
         let mut per_sample = vec![0.0f64; px];
         let mut unknown = vec![false; px];
+        let mut in_mean = vec![false; px];
         let mut camera_of = vec![f64::NAN; px];
         per_sample
             .par_iter_mut()
             .zip(unknown.par_iter_mut())
+            .zip(in_mean.par_iter_mut())
             .zip(camera_of.par_iter_mut())
             .enumerate()
-            .for_each(|(i, ((p, u), c))| {
+            .for_each(|(i, (((p, u), m), c))| {
                 if let Some((v, mu)) = variance(i) {
                     match v.is_finite() {
-                        true => *p = v,
+                        true => (*p, *m) = (v, true),
                         false => *u = true,
                     }
                     if all || object_mask[i] {
@@ -397,13 +405,8 @@ impl CameraNoise {
                 }
             }
         }
-        // A pixel's kind (counted or not) and whether its variance is in its kind's means
-        // (known and below saturation).
+        // A pixel's kind: counted or not.
         let counted = |i: usize| all || object_mask[i];
-        let in_mean: Vec<bool> = (0..px)
-            .into_par_iter()
-            .map(|i| !unknown[i] && variance(i).is_some())
-            .collect();
         drop(camera_of);
         let smooth = kind_mean(
             &per_sample,
@@ -432,10 +435,7 @@ impl CameraNoise {
         // until no more become fixed (each round only adds fixed pixels). A pixel with
         // fewer than the most samples stopped at an earlier check and takes no more:
         // fixed from the start.
-        let most = match n {
-            PixelSamples::All(n) => n,
-            PixelSamples::Each(c) => c.iter().copied().max().unwrap_or(0),
-        };
+        let most = n.most();
         let mut fixed: Vec<bool> = (0..px).into_par_iter().map(|i| n.of(i) < most).collect();
         // A fixed pixel's variance (its share of the budget spent), once for every round.
         let spent_of: Vec<f64> = (0..px)
