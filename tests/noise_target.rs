@@ -51,6 +51,7 @@ fn stop_with(
         min_spp,
         estimator,
         adaptive_radius: None,
+        growth: 0.0,
     }
 }
 
@@ -156,6 +157,62 @@ fn a_noise_target_stops_early_at_the_image_of_a_fixed_spp_render() {
     assert!(bits(&probe.radiance.data) == bits(&plain.radiance.data));
 }
 
+/// `[render] noise_target_growth`: with g = 0.5 the image stops where its noise meets a
+/// target growing as sqrt(mean spp / min_spp), so an image whose noise needs many samples
+/// to reach the base target stops earlier and noisier than the fixed target would make
+/// it, at the criterion it was given; the same with `adaptive_radius` (the shares made
+/// for the target predicted at the stop).
+#[test]
+fn a_growing_target_stops_where_the_noise_meets_it() {
+    let cfg = scene_config(7, SamplerKind::Sobol);
+    let gpu = Gpu::new(&cfg);
+    let scene = &gpu.scene;
+    let r64 = gpu
+        .render(&cfg, 64, Some(&stop(scene, 1e-9, 8)))
+        .noise
+        .expect("estimate")
+        .ratio;
+    // The fixed target that 64 spp meets grown to 64 / 8: the base target is 8^-0.5 of it.
+    let base = r64 * 1.05 / 8f64.sqrt();
+    let fixed = gpu.render(&cfg, 1024, Some(&stop(scene, base, 8)));
+    for adaptive in [None, Some(1)] {
+        let s = NoiseStop {
+            growth: 0.5,
+            adaptive_radius: adaptive,
+            ..stop(scene, base, 8)
+        };
+        let f = gpu.render(&cfg, 1024, Some(&s));
+        let est = f.noise.expect("estimate");
+        eprintln!(
+            "adaptive {adaptive:?}: base target {base:.4}: fixed stop at {} spp ({:.4}); growing: most {} spp, mean {:.2}, ratio {:.4} against {:.4}; checks {:?}",
+            fixed.spp,
+            fixed.noise.unwrap().ratio,
+            f.spp,
+            est.mean_spp,
+            est.ratio,
+            s.target_at(est.mean_spp),
+            f.noise_checks
+                .iter()
+                .map(|c| (c.spp, c.mean_spp, c.ratio))
+                .collect::<Vec<_>>()
+        );
+        assert!(est.ratio <= s.target_at(est.mean_spp), "{est:?}");
+        assert!(est.ratio > base, "stopped at the fixed target: {est:?}");
+        assert!(
+            est.mean_spp < 0.5 * fixed.mean_spp(),
+            "{} against the fixed target's {}",
+            est.mean_spp,
+            fixed.mean_spp()
+        );
+        // Not before the noise met the grown target: the check before it did not.
+        let checks = &f.noise_checks;
+        if checks.len() > 1 {
+            let c = checks[checks.len() - 2];
+            assert!(c.ratio > s.target_at(c.mean_spp), "{checks:?}");
+        }
+    }
+}
+
 /// Measured rms error (DN) of `frame` against `reference` over the pixels the estimate
 /// counts (object, not saturated), with the estimate's exposure.
 fn measured_rms_dn(stop: &NoiseStop, frame: &Frame, reference: &[f32], t: f64) -> f64 {
@@ -237,6 +294,7 @@ fn adaptive_pixels_each_stop_at_their_own_samples() {
     let whole = gpu.render(&cfg, 512, Some(&stop(scene, target, 8)));
     let adaptive_stop = NoiseStop {
         adaptive_radius: Some(1),
+        growth: 0.0,
         ..stop(scene, target, 8)
     };
     let f = gpu.render(&cfg, 512, Some(&adaptive_stop));

@@ -249,5 +249,6 @@ pub fn noise_stop(
         min_spp: job.render.first_check_spp(),
         estimator: job.render.noise_estimate.unwrap_or_default(),
         adaptive_radius: job.render.adaptive_radius.map(|r| r as u32),
+        growth: job.render.noise_target_growth.unwrap_or(0.0),
     }))
 }

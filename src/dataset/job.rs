@@ -236,6 +236,13 @@ pub struct RenderSettings {
     /// "Samples per pixel"); none: every pixel takes the image's samples.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adaptive_radius: Option<i64>,
+    /// How the target grows with an image's mean samples (with `noise_target`), [0, 1]:
+    /// an image stops at `noise_target` (mean spp / min_spp)^growth. None or 0: every
+    /// image to the same target; 0.5: the samples that minimise the dataset's pooled
+    /// error for the samples spent (docs/dataset.md, "Samples chosen from a noise
+    /// target").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_target_growth: Option<f64>,
     /// Where the labels come from: "auto" (default: the path tracer's own samples under
     /// a thin lens, the annotation pass under a pinhole), "pass" or "samples"
     /// (docs/dataset.md, "Labels from the path tracer's samples").
@@ -948,6 +955,16 @@ impl Job {
                 ));
             }
             self.int("render.adaptive_radius", a, 0, 16)?;
+        }
+        if let Some(g) = r.noise_target_growth {
+            if r.noise_target.is_none() {
+                return Err(self.field(
+                    "render.noise_target_growth",
+                    g,
+                    "is how `render.noise_target` grows with an image's samples: give that too, or remove it",
+                ));
+            }
+            self.real("render.noise_target_growth", g, 0.0, 1.0)?;
         }
         if let Some(e) = r.noise_estimate
             && r.noise_target.is_none()

@@ -60,6 +60,17 @@ pub struct NoiseStop {
     /// variance averaged over the (2 r + 1)^2 pixels around it); None: every pixel takes
     /// the same samples.
     pub adaptive_radius: Option<u32>,
+    /// `[render] noise_target_growth`, g in [0, 1]: the target an image must meet grows
+    /// with its mean samples m as `target` (m / `min_spp`)^g ([`NoiseStop::target_at`]).
+    /// 0: every image to the same target. 0.5: the samples that minimise a set of
+    /// images' pooled error (the mean of their squared noise) for the samples spent:
+    /// with v_i an image's variance per sample, the fewest samples in all for a given
+    /// sum of v_i / n_i are n_i proportional to sqrt(v_i) (Lagrange), i.e. each image
+    /// stops where its noise ratio^2 = v_i / n_i falls to n_i / mu^2, ratio = const
+    /// sqrt(n_i). An image whose samples are noisy takes fewer than a fixed target would
+    /// give it and ends noisier; a quiet one stops at `min_spp` either way.
+    /// docs/dataset.md, "Samples chosen from a noise target".
+    pub growth: f64,
 }
 
 /// Samples per pixel so far: the same for every pixel, or each pixel's own (`[render]
@@ -616,8 +627,43 @@ impl NoiseStop {
     /// completes (in between it falls as 1 / n, the prediction itself), and it often
     /// falls faster there than the prediction assumes. The render checks at the first
     /// batch end at or after it.
+    ///
+    /// With a growing target (`growth` g > 0) the prediction is where the falling noise
+    /// meets the rising target: ratio sqrt(done / n) = target_at(done) (n / done)^g, n =
+    /// done (ratio / target_at(done))^(2 / (1 + 2 g)).
     pub fn next_check(&self, done: u32, ratio: f64) -> u32 {
-        self.next_check_at(done, done as f64 * (ratio / self.target).powi(2))
+        let predicted = if self.growth == 0.0 {
+            done as f64 * (ratio / self.target).powi(2)
+        } else {
+            done as f64
+                * (ratio / self.target_at(done as f64)).powf(2.0 / (1.0 + 2.0 * self.growth))
+        };
+        self.next_check_at(done, predicted)
+    }
+
+    /// The target an image with `mean_spp` samples per pixel must meet: `target`
+    /// (mean_spp / min_spp)^growth (never below `target`); `target` itself when
+    /// `growth` is 0.
+    pub fn target_at(&self, mean_spp: f64) -> f64 {
+        if self.growth == 0.0 {
+            return self.target;
+        }
+        let first = self.min_spp.max(2) as f64;
+        self.target * (mean_spp / first).max(1.0).powf(self.growth)
+    }
+
+    /// The target the image is predicted to stop at after an estimate of `ratio` at
+    /// `mean_spp` (the noise falling as 1 / sqrt(spp), the target growing as
+    /// [`NoiseStop::target_at`]): target_at(m) (ratio / target_at(m))^(2 g / (1 + 2 g)),
+    /// m = mean_spp, for a ratio above target_at(m); else target_at(m). What
+    /// `adaptive_radius` shares out (with `growth` 0: `target`).
+    pub fn predicted_target(&self, mean_spp: f64, ratio: f64) -> f64 {
+        let now = self.target_at(mean_spp);
+        if self.growth == 0.0 || !(ratio > now) || !ratio.is_finite() {
+            return now;
+        }
+        let g = self.growth;
+        now * (ratio / now).powf(2.0 * g / (1.0 + 2.0 * g))
     }
 
     /// [`NoiseStop::next_check`] for a check predicted at `predicted` samples (with
@@ -652,6 +698,48 @@ mod tests {
             saturation_electrons: 1000.0,
             bit_depth: 12,
             ..SensorConfig::default()
+        }
+    }
+
+    fn stop_of(target: f64, min_spp: u32, growth: f64) -> NoiseStop {
+        NoiseStop {
+            camera: CameraNoise {
+                resp: Responsivity::uniform(1, 1, 1.0),
+                sensor: sensor(),
+                exposure_factor: 1.0,
+            },
+            target,
+            min_spp,
+            // "samples": no power-of-two bound on the next check.
+            estimator: NoiseEstimator::Samples,
+            adaptive_radius: None,
+            growth,
+        }
+    }
+
+    #[test]
+    fn a_growing_target_and_its_prediction() {
+        // growth 0: the target itself and the 1 / sqrt(spp) prediction, as before.
+        let fixed = stop_of(2.0, 4, 0.0);
+        assert_eq!(fixed.target_at(100.0), 2.0);
+        assert_eq!(fixed.predicted_target(4.0, 8.0), 2.0);
+        assert_eq!(fixed.next_check(4, 4.0), 16);
+        // growth 0.5 from a first check at 4: target 2 sqrt(m / 4), never below 2.
+        let g = stop_of(2.0, 4, 0.5);
+        assert!((g.target_at(16.0) - 4.0).abs() < 1e-12);
+        assert_eq!(g.target_at(2.0), 2.0);
+        // Ratio 8 at 4 spp: the noise 8 sqrt(4 / n) meets 2 sqrt(n / 4) at n = 16, where
+        // the target is 4.
+        assert!((g.predicted_target(4.0, 8.0) - 4.0).abs() < 1e-12);
+        assert_eq!(g.next_check(4, 8.0), 16);
+        // The prediction checks out: at 16 spp the ratio is 8 sqrt(4 / 16) = 4, met.
+        assert!(8.0 * (4.0f64 / 16.0).sqrt() <= g.target_at(16.0) + 1e-12);
+        // Below the target now: the target now.
+        assert_eq!(g.predicted_target(16.0, 1.0), 4.0);
+        // The predicted target always lies between the target now and the ratio.
+        for (m, r) in [(4.0, 3.0), (8.0, 50.0), (20.0, 9.1)] {
+            let (now, t) = (g.target_at(m), g.predicted_target(m, r));
+            assert!(now <= t && t < r, "{m} {r}: {now} {t}");
         }
     }
 
@@ -1086,6 +1174,7 @@ mod tests {
             min_spp: 16,
             estimator: NoiseEstimator::Samples,
             adaptive_radius: None,
+            growth: 0.0,
         };
         assert_eq!(stop.first_check(1000), 16);
         assert_eq!(stop.first_check(8), 8);

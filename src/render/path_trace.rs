@@ -152,7 +152,7 @@ pub fn render_frame(
                 on_check_pool(|| noise_estimate(&view, stop, samples, &mut masks))
             })?;
             checks.push(est);
-            if est.ratio <= stop.target {
+            if est.ratio <= stop.target_at(est.mean_spp) {
                 break;
             }
             next_check = Some(stop.next_check(done, est.ratio));
@@ -169,7 +169,7 @@ pub fn render_frame(
                             est.exposure_s,
                             object,
                             width as usize,
-                            stop.target,
+                            stop.predicted_target(est.mean_spp, est.ratio),
                             radius,
                         )
                     });

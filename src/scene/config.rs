@@ -868,6 +868,11 @@ pub struct RenderConfig {
     /// variance taken as the mean over the (2 r + 1)^2 pixels around it. None: every
     /// pixel takes the same samples. docs/dataset.md, "Samples per pixel".
     pub adaptive_radius: Option<u32>,
+    /// How the target grows with an image's mean samples (with `noise_target`), [0, 1]:
+    /// the image stops at `noise_target` (mean spp / min_spp)^growth. None or 0: a fixed
+    /// target; 0.5: the samples that minimise a set of images' pooled error
+    /// ([`crate::render::noise::NoiseStop::growth`]).
+    pub noise_target_growth: Option<f32>,
     /// Where the labels (class, instance, face, coverage) come from: "auto" (default),
     /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
     /// camera samples); [`LabelSource`].
@@ -1007,6 +1012,7 @@ impl Default for RenderConfig {
             min_spp: None,
             noise_estimate: None,
             adaptive_radius: None,
+            noise_target_growth: None,
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
             analytic_rays: DEFAULT_ANALYTIC_RAYS,
@@ -1474,6 +1480,15 @@ impl SceneConfig {
                 });
             }
             range_u("render.adaptive_radius", a, 0, 16, "[0, 16]")?;
+        }
+        if let Some(g) = r.noise_target_growth {
+            if r.noise_target.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "render.noise_target_growth",
+                    message: "is how render.noise_target grows with an image's samples: give that too, or remove it".into(),
+                });
+            }
+            range_f("render.noise_target_growth", g, 0.0, 1.0, false, "[0, 1]")?;
         }
         if r.noise_estimate.is_some() && r.noise_target.is_none() {
             return Err(ConfigError::Invalid {
