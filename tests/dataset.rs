@@ -1729,6 +1729,11 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         .unwrap()
         .job;
     assert_eq!(job.render.adaptive_radius, Some(4));
+    let growing = target.replace("min_spp = 16", "min_spp = 16\nnoise_target_growth = 0.5");
+    let job = dataset::prepare_text(&growing, "job", tmp.path())
+        .unwrap()
+        .job;
+    assert_eq!(job.render.noise_target_growth, Some(0.5));
     let cases: Vec<(String, &str)> = vec![
         (
             with("[sensor]\nexposure = 1.0\nbit_depth = 12"),
@@ -1778,6 +1783,17 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
                 "spp = 64\nnoise_target = 1.0\nadaptive_radius = 17",
             ),
             "render.adaptive_radius",
+        ),
+        (
+            emva.replace("spp = 1", "spp = 64\nnoise_target_growth = 0.5"),
+            "render.noise_target_growth",
+        ),
+        (
+            emva.replace(
+                "spp = 1",
+                "spp = 64\nnoise_target = 1.0\nnoise_target_growth = 1.5",
+            ),
+            "render.noise_target_growth",
         ),
         (
             emva.replace("spp = 1", "spp = 64\nbatch_spp = 0"),

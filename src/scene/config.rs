@@ -1633,6 +1633,20 @@ mod tests {
             let e = adaptive(r, t).unwrap_err().to_string();
             assert!(e.contains("render.adaptive_radius"), "{e}");
         }
+        // `noise_target_growth` likewise, within [0, 1].
+        let growth = |g: f32, target: &str| {
+            SceneConfig::parse(&format!(
+                "[render]\n{target}noise_target_growth = {g}\n[camera]\nf_number = 8.0\n[sensor]\n"
+            ))
+        };
+        assert_eq!(
+            growth(0.5, target).unwrap().render.noise_target_growth,
+            Some(0.5)
+        );
+        for (g, t) in [(1.5, target), (-0.1, target), (0.5, "")] {
+            let e = growth(g, t).unwrap_err().to_string();
+            assert!(e.contains("render.noise_target_growth"), "{e}");
+        }
     }
 
     #[test]
