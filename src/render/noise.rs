@@ -135,6 +135,10 @@ pub const MAX_CHECK_GROWTH: u32 = 4;
 /// just above the target (ratio q < sqrt(1 + 1/64)) is followed by this step; with 1/16
 /// five of ten measured images took 5 to 7 % more samples than they needed.
 pub const MIN_CHECK_STEP_DIVISOR: u32 = 64;
+/// Halvings of the bracket in which `adaptive_radius` looks for the target a growing
+/// target meets at the shares' end ([`CameraNoise::pixel_samples_wanted`]): 16 take it
+/// to 1.5e-5 of [target, ratio].
+pub const GROWTH_BISECTIONS: u32 = 16;
 
 /// One evaluation of the criterion.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -348,6 +352,19 @@ impl CameraNoise {
     /// sample only the others): its variance is spent from the start, so that the
     /// pixels that can still sample are the ones the argument above finds (its value
     /// here is still its share by the same rule, which the caller does not use).
+    ///
+    /// **A growing target** (`grown`: Some((target_at, ratio)), `[render]
+    /// noise_target_growth`): the target the image must meet rises with its mean samples
+    /// m (`target_at`, [`NoiseStop::target_at`]; `target` is its value now, `ratio` the
+    /// estimate now). The shares are made for the T with T = target_at(m(T)), m(T) the
+    /// mean samples the shares for T give (every pixel its share or the samples it has):
+    /// the image then meets its grown target where the shares end, instead of stopping
+    /// short of it and sampling a few pixels at every batch. T - target_at(m(T)) rises
+    /// with T (m falls as T rises, target_at rises with m), is at most 0 at `target`
+    /// and above 0 at `ratio`: [`GROWTH_BISECTIONS`] halvings of [target, ratio], the
+    /// shares those of the lower end (T <= target_at(m(T)): met at the stop). The
+    /// argument above holds with T: all shares reached would mean ratio <= T =
+    /// target_at(m_now), the target met.
     #[allow(clippy::too_many_arguments)]
     pub fn pixel_samples_wanted<'a>(
         &self,
@@ -359,6 +376,7 @@ impl CameraNoise {
         object_mask: &[bool],
         width: usize,
         target: f64,
+        grown: Option<(&(dyn Fn(f64) -> f64 + Sync), f64)>,
         radius: u32,
     ) -> Vec<f64> {
         let n = n.into();
@@ -440,44 +458,84 @@ impl CameraNoise {
         } else {
             1.0
         };
-        let budget = target * target * camera * consistent;
+        let unit = camera * consistent;
         // Pixels whose share is at most the samples they have keep those (fixed): their
         // variance is spent, the rest of the budget is shared by the others; repeat
         // until no more become fixed (each round only adds fixed pixels). A pixel with
         // fewer than the most samples stopped at an earlier check and takes no more:
         // fixed from the start.
         let most = n.most();
-        let mut fixed: Vec<bool> = (0..px).into_par_iter().map(|i| n.of(i) < most).collect();
+        let stopped: Vec<bool> = (0..px).into_par_iter().map(|i| n.of(i) < most).collect();
         // A fixed pixel's variance (its share of the budget spent), once for every round.
         let spent_of: Vec<f64> = (0..px)
             .into_par_iter()
             .map(|i| smooth[i] / n.of(i).max(1) as f64)
             .collect();
-        let scale = loop {
-            let (mut spent, mut free) = (0.0f64, 0.0f64);
-            for &i in &shared {
-                if fixed[i] {
-                    spent += spent_of[i];
+        // The scale on the roots that meets target t (the budget t^2 times the camera's
+        // variance, made consistent).
+        let water = |t: f64| -> f64 {
+            let budget = t * t * unit;
+            let mut fixed = stopped.clone();
+            loop {
+                let (mut spent, mut free) = (0.0f64, 0.0f64);
+                for &i in &shared {
+                    if fixed[i] {
+                        spent += spent_of[i];
+                    } else {
+                        free += roots[i];
+                    }
+                }
+                let scale = if budget > spent {
+                    free / (budget - spent)
                 } else {
-                    free += roots[i];
+                    f64::INFINITY
+                };
+                let more = fixed
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(i, f)| {
+                        let now = !*f && !unknown[i] && roots[i] * scale <= n.of(i) as f64;
+                        *f |= now;
+                        now
+                    })
+                    .reduce(|| false, |a, b| a || b);
+                if !more {
+                    break scale;
                 }
             }
-            let scale = if budget > spent {
-                free / (budget - spent)
-            } else {
-                f64::INFINITY
-            };
-            let more = fixed
-                .par_iter_mut()
-                .enumerate()
-                .map(|(i, f)| {
-                    let now = !*f && !unknown[i] && roots[i] * scale <= n.of(i) as f64;
-                    *f |= now;
-                    now
-                })
-                .reduce(|| false, |a, b| a || b);
-            if !more {
-                break scale;
+        };
+        let scale = match grown {
+            None => water(target),
+            Some((target_at, ratio)) => {
+                // The mean samples the shares of `scale` give, summed in fixed chunks in
+                // order (the same sum whatever the thread count).
+                let mean_wanted = |scale: f64| -> f64 {
+                    let parts: Vec<f64> = (0..px.div_ceil(TERM_CHUNK))
+                        .into_par_iter()
+                        .map(|c| {
+                            (c * TERM_CHUNK..((c + 1) * TERM_CHUNK).min(px))
+                                .map(|i| {
+                                    let have = n.of(i) as f64;
+                                    match unknown[i] || stopped[i] {
+                                        true => have,
+                                        false => (roots[i] * scale).max(have),
+                                    }
+                                })
+                                .sum::<f64>()
+                        })
+                        .collect();
+                    parts.iter().sum::<f64>() / px.max(1) as f64
+                };
+                let (mut lo, mut hi) = (target, ratio.max(target));
+                for _ in 0..GROWTH_BISECTIONS {
+                    let mid = 0.5 * (lo + hi);
+                    if mid <= target_at(mean_wanted(water(mid))) {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                water(lo)
             }
         };
         // Each pixel's samples, in the roots' place.
@@ -652,20 +710,6 @@ impl NoiseStop {
         self.target * (mean_spp / first).max(1.0).powf(self.growth)
     }
 
-    /// The target the image is predicted to stop at after an estimate of `ratio` at
-    /// `mean_spp` (the noise falling as 1 / sqrt(spp), the target growing as
-    /// [`NoiseStop::target_at`]): target_at(m) (ratio / target_at(m))^(2 g / (1 + 2 g)),
-    /// m = mean_spp, for a ratio above target_at(m); else target_at(m). What
-    /// `adaptive_radius` shares out (with `growth` 0: `target`).
-    pub fn predicted_target(&self, mean_spp: f64, ratio: f64) -> f64 {
-        let now = self.target_at(mean_spp);
-        if self.growth == 0.0 || !(ratio > now) || !ratio.is_finite() {
-            return now;
-        }
-        let g = self.growth;
-        now * (ratio / now).powf(2.0 * g / (1.0 + 2.0 * g))
-    }
-
     /// [`NoiseStop::next_check`] for a check predicted at `predicted` samples (with
     /// `adaptive_radius`: the fewest any still-sampling pixel wants), within the same
     /// bounds.
@@ -722,7 +766,6 @@ mod tests {
         // growth 0: the target itself and the 1 / sqrt(spp) prediction, as before.
         let fixed = stop_of(2.0, 4, 0.0);
         assert_eq!(fixed.target_at(100.0), 2.0);
-        assert_eq!(fixed.predicted_target(4.0, 8.0), 2.0);
         assert_eq!(fixed.next_check(4, 4.0), 16);
         // growth 0.5 from a first check at 4: target 2 sqrt(m / 4), never below 2.
         let g = stop_of(2.0, 4, 0.5);
@@ -730,17 +773,9 @@ mod tests {
         assert_eq!(g.target_at(2.0), 2.0);
         // Ratio 8 at 4 spp: the noise 8 sqrt(4 / n) meets 2 sqrt(n / 4) at n = 16, where
         // the target is 4.
-        assert!((g.predicted_target(4.0, 8.0) - 4.0).abs() < 1e-12);
         assert_eq!(g.next_check(4, 8.0), 16);
         // The prediction checks out: at 16 spp the ratio is 8 sqrt(4 / 16) = 4, met.
         assert!(8.0 * (4.0f64 / 16.0).sqrt() <= g.target_at(16.0) + 1e-12);
-        // Below the target now: the target now.
-        assert_eq!(g.predicted_target(16.0, 1.0), 4.0);
-        // The predicted target always lies between the target now and the ratio.
-        for (m, r) in [(4.0, 3.0), (8.0, 50.0), (20.0, 9.1)] {
-            let (now, t) = (g.target_at(m), g.predicted_target(m, r));
-            assert!(now <= t && t < r, "{m} {r}: {now} {t}");
-        }
     }
 
     #[test]
@@ -1053,10 +1088,68 @@ mod tests {
                     &object,
                     w,
                     est.ratio * f,
+                    None,
                     (trial % 4) as u32,
                 );
                 let more = (0..px).any(|i| counts[i] == 6 && want[i] > 6.0);
                 assert_eq!(more, f < 1.0, "trial {trial}, target {f} x the estimate");
+                // A growing target (from `est.ratio * f` at the mean now, as sqrt(m)):
+                // the same, and the shares are those of the fixed target the grown one
+                // reaches at the mean they give.
+                let now = est.mean_spp;
+                let base = est.ratio * f;
+                let target_at = |m: f64| base * (m / now).max(1.0).sqrt();
+                let grown = cam.pixel_samples_wanted(
+                    samples,
+                    &sum,
+                    &sq,
+                    each,
+                    est.exposure_s,
+                    &object,
+                    w,
+                    base,
+                    Some((&target_at, est.ratio)),
+                    (trial % 4) as u32,
+                );
+                let more = (0..px).any(|i| counts[i] == 6 && grown[i] > 6.0);
+                assert_eq!(
+                    more,
+                    f < 1.0,
+                    "trial {trial}, grown from {f} x the estimate"
+                );
+                // Stopped pixels (fewer than 6) keep their samples; a target out of reach
+                // (the stopped pixels' variance above it) makes every share infinite.
+                let mean_of = |want: &[f64]| {
+                    (0..px)
+                        .map(|i| match counts[i] < 6 {
+                            true => counts[i] as f64,
+                            false => want[i].max(6.0),
+                        })
+                        .sum::<f64>()
+                        / px as f64
+                };
+                let m = mean_of(&grown);
+                let at_m = cam.pixel_samples_wanted(
+                    samples,
+                    &sum,
+                    &sq,
+                    each,
+                    est.exposure_s,
+                    &object,
+                    w,
+                    target_at(m),
+                    None,
+                    (trial % 4) as u32,
+                );
+                // The grown shares aim at T <= target_at(m), met at their end: the fixed
+                // target's shares at target_at(m) ask for no more; and at most the fixed
+                // base target's (the grown one is at least that).
+                let m2 = mean_of(&at_m);
+                assert!(
+                    m2 <= m * (1.0 + 1e-12) && m <= mean_of(&want) * (1.0 + 1e-12),
+                    "trial {trial}, {f}: the grown shares' mean {m}, the fixed target's at it {m2}, at the base {}",
+                    mean_of(&want)
+                );
             }
         }
     }
@@ -1098,6 +1191,7 @@ mod tests {
                 &all,
                 5,
                 target,
+                None,
                 radius,
             )
         };
@@ -1155,6 +1249,7 @@ mod tests {
             &all,
             5,
             target8,
+            None,
             0,
         );
         assert!(want8[1] > 8.0 && want8[1].is_finite(), "{want8:?}");

@@ -159,6 +159,7 @@ pub fn render_frame(
             if let Some(radius) = adaptive {
                 let (sum, noise) = sums;
                 let object = &masks.as_ref().expect("filled by the estimate").1;
+                let grown = |m: f64| stop.target_at(m);
                 let (keep, fewest) = crate::vk::timed(opts.profiler, "samples wanted", || {
                     let want = on_check_pool(|| {
                         stop.camera.pixel_samples_wanted(
@@ -169,7 +170,8 @@ pub fn render_frame(
                             est.exposure_s,
                             object,
                             width as usize,
-                            stop.predicted_target(est.mean_spp, est.ratio),
+                            stop.target_at(est.mean_spp),
+                            (stop.growth > 0.0).then_some((&grown, est.ratio)),
                             radius,
                         )
                     });
