@@ -458,7 +458,6 @@ impl CameraNoise {
         } else {
             1.0
         };
-        let unit = camera * consistent;
         // Pixels whose share is at most the samples they have keep those (fixed): their
         // variance is spent, the rest of the budget is shared by the others; repeat
         // until no more become fixed (each round only adds fixed pixels). A pixel with
@@ -474,7 +473,8 @@ impl CameraNoise {
         // The scale on the roots that meets target t (the budget t^2 times the camera's
         // variance, made consistent).
         let water = |t: f64| -> f64 {
-            let budget = t * t * unit;
+            // (In the order of before: the same budget to the bit without growth.)
+            let budget = t * t * camera * consistent;
             let mut fixed = stopped.clone();
             loop {
                 let (mut spent, mut free) = (0.0f64, 0.0f64);

@@ -871,7 +871,7 @@ pub struct RenderConfig {
     /// How the target grows with an image's mean samples (with `noise_target`), [0, 1]:
     /// the image stops at `noise_target` (mean spp / min_spp)^growth. None or 0: a fixed
     /// target; 0.5: the samples that minimise a set of images' pooled error
-    /// ([`crate::render::noise::NoiseStop::growth`]).
+    /// (docs/dataset.md, "Samples chosen from a noise target").
     pub noise_target_growth: Option<f32>,
     /// Where the labels (class, instance, face, coverage) come from: "auto" (default),
     /// "pass" (the annotation pass) or "samples" (the path tracer's own first n x n
