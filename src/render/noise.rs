@@ -1078,8 +1078,9 @@ mod tests {
             let est = cam
                 .estimate(samples, &sum, &sq, each, &object, &object)
                 .unwrap();
-            for f in [0.3, 0.7, 0.95, 0.999, 1.001, 1.5] {
-                let want = cam.pixel_samples_wanted(
+            // The shares for a target t (and a growing one, `grown`).
+            let wanted = |t: f64, grown: Option<(&(dyn Fn(f64) -> f64 + Sync), f64)>| {
+                cam.pixel_samples_wanted(
                     samples,
                     &sum,
                     &sq,
@@ -1087,10 +1088,13 @@ mod tests {
                     est.exposure_s,
                     &object,
                     w,
-                    est.ratio * f,
-                    None,
+                    t,
+                    grown,
                     (trial % 4) as u32,
-                );
+                )
+            };
+            for f in [0.3, 0.7, 0.95, 0.999, 1.001, 1.5] {
+                let want = wanted(est.ratio * f, None);
                 let more = (0..px).any(|i| counts[i] == 6 && want[i] > 6.0);
                 assert_eq!(more, f < 1.0, "trial {trial}, target {f} x the estimate");
                 // A growing target (from `est.ratio * f` at the mean now, as sqrt(m)):
@@ -1099,18 +1103,7 @@ mod tests {
                 let now = est.mean_spp;
                 let base = est.ratio * f;
                 let target_at = |m: f64| base * (m / now).max(1.0).sqrt();
-                let grown = cam.pixel_samples_wanted(
-                    samples,
-                    &sum,
-                    &sq,
-                    each,
-                    est.exposure_s,
-                    &object,
-                    w,
-                    base,
-                    Some((&target_at, est.ratio)),
-                    (trial % 4) as u32,
-                );
+                let grown = wanted(base, Some((&target_at, est.ratio)));
                 let more = (0..px).any(|i| counts[i] == 6 && grown[i] > 6.0);
                 assert_eq!(
                     more,
@@ -1129,18 +1122,7 @@ mod tests {
                         / px as f64
                 };
                 let m = mean_of(&grown);
-                let at_m = cam.pixel_samples_wanted(
-                    samples,
-                    &sum,
-                    &sq,
-                    each,
-                    est.exposure_s,
-                    &object,
-                    w,
-                    target_at(m),
-                    None,
-                    (trial % 4) as u32,
-                );
+                let at_m = wanted(target_at(m), None);
                 // The grown shares aim at T <= target_at(m), met at their end: the fixed
                 // target's shares at target_at(m) ask for no more; and at most the fixed
                 // base target's (the grown one is at least that).
