@@ -902,8 +902,12 @@ void main() {
         py = pixel_list[e] / prm.width;
     }
     uint i = py * prm.width + px;
-    float sum = 0.0;
-    float sq = 0.0;
+    // Each sample is added to the pixel's running sums in sample order (read once here,
+    // written back at the end), so a render's sums do not depend on how its samples were
+    // split into batches: an image stopped at n samples equals one of n samples in any
+    // batches (the "halves" sums below work the same way).
+    float sum = accum[i];
+    float sq = prm.noise_sums == NOISE_SQUARES ? noise_sums[i] : 0.0;
     vec2 halves = prm.noise_sums == NOISE_HALVES
         ? vec2(noise_sums[2u * i], noise_sums[2u * i + 1u]) : vec2(0.0);
     // Labels from the first n x n samples (the caller makes sure this dispatch starts at
@@ -935,9 +939,9 @@ void main() {
             }
         }
     }
-    accum[i] += sum;
+    accum[i] = sum;
     if (prm.noise_sums == NOISE_SQUARES) {
-        noise_sums[i] += sq;
+        noise_sums[i] = sq;
     } else if (prm.noise_sums == NOISE_HALVES) {
         noise_sums[2u * i] = halves.x;
         noise_sums[2u * i + 1u] = halves.y;

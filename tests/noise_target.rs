@@ -157,6 +157,61 @@ fn a_noise_target_stops_early_at_the_image_of_a_fixed_spp_render() {
     assert!(bits(&probe.radiance.data) == bits(&plain.radiance.data));
 }
 
+/// The shader adds each sample to a pixel's sums in sample order, so an image does not
+/// depend on how its samples were split into batches (a first batch cut to end at the
+/// first check keeps a stopped image equal to a fixed-spp render); and the first check
+/// is at `min_spp` itself when the batches are larger: a target met there stops the
+/// render at `min_spp`.
+#[test]
+fn an_image_does_not_depend_on_its_batches_and_the_first_check_is_at_min_spp() {
+    let cfg = scene_config(11, SamplerKind::Sobol);
+    let gpu = Gpu::new(&cfg);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let with_batch = |batch: u32, spp: u32, noise: Option<&NoiseStop>| {
+        let mut c = cfg.clone();
+        c.render.batch_spp = batch;
+        gpu.render(&c, spp, noise)
+    };
+    let whole = with_batch(12, 12, None);
+    for batch in [1, 4, 5] {
+        let f = with_batch(batch, 12, None);
+        assert!(
+            bits(&f.radiance.data) == bits(&whole.radiance.data),
+            "12 spp in batches of {batch} differ from one batch of 12"
+        );
+        assert_eq!(f.annotation, whole.annotation, "batches of {batch}");
+    }
+    // With the squared sums of the "samples" estimator too (and its estimate equal).
+    let probe = |batch: u32| {
+        let s = stop_with(&gpu.scene, 1e-9, 12, NoiseEstimator::Samples);
+        with_batch(batch, 12, Some(&s))
+    };
+    let (a, b) = (probe(12), probe(5));
+    assert!(bits(&a.radiance.data) == bits(&b.radiance.data));
+    assert_eq!(a.noise, b.noise, "the estimate from batches of 5 and of 12");
+    // A first check at 2 with batches of 8: a target the 2-spp image meets stops there,
+    // at the image of a 2-spp render.
+    let r2 = with_batch(8, 2, Some(&stop(&gpu.scene, 1e-9, 2)))
+        .noise
+        .expect("estimate")
+        .ratio;
+    let f = with_batch(8, 64, Some(&stop(&gpu.scene, r2 * 1.01, 2)));
+    assert_eq!(f.noise_checks.len(), 1, "{:?}", f.noise_checks);
+    assert_eq!(f.spp, 2);
+    let fixed = with_batch(8, 2, None);
+    assert!(bits(&f.radiance.data) == bits(&fixed.radiance.data));
+    // A target it does not meet: the first check at 2, the next batches of 8 after it
+    // (the last cut at spp).
+    let g = with_batch(8, 32, Some(&stop(&gpu.scene, 1e-9, 2)));
+    assert_eq!(g.spp, 32);
+    let spps: Vec<u32> = g.noise_checks.iter().map(|c| c.spp).collect();
+    assert_eq!(spps[0], 2, "{spps:?}");
+    assert!(
+        spps[1..].iter().all(|&s| (s - 2) % 8 == 0 || s == 32),
+        "later checks at batch ends: {spps:?}"
+    );
+}
+
 /// `[render] noise_target_growth`: with g = 0.5 the image stops where its noise meets a
 /// target growing as sqrt(mean spp / min_spp), so an image whose noise needs many samples
 /// to reach the base target stops earlier and noisier than the fixed target would make

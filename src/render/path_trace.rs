@@ -86,9 +86,10 @@ impl Frame {
 /// With `opts.noise`, after the batch that reaches each check (the first at `min_spp`,
 /// the next where the estimate predicts the target, [`NoiseStop::next_check`]) the two
 /// per-pixel sums are read back and the criterion evaluated; the render stops when it is
-/// at most the target, or at `spp`. The batches are those of a fixed-spp render, so the
-/// image equals a render of the chosen spp byte for byte. The decision depends on float
-/// sums: another device may stop at another batch.
+/// at most the target, or at `spp`. The batches before the first check end at it. The
+/// shader adds each sample to a pixel's sums in sample order, whatever the batches, so
+/// the image equals a render of the chosen spp byte for byte. The decision depends on
+/// float sums: another device may stop at another batch.
 ///
 /// With `adaptive_radius` in the criterion, each check that does not stop the render
 /// also stops the pixels that have the samples their share of the target wants
@@ -115,7 +116,8 @@ pub fn render_frame(
     let (width, height) = (setup.camera.width, setup.camera.height);
     let mut done = 0u32;
     let mut gpu_ms = 0.0;
-    let mut next_check = opts.noise.map(|n| n.first_check(spp));
+    let first_check = opts.noise.map(|n| n.first_check(spp));
+    let mut next_check = first_check;
     // (exposure mask, object mask) from the annotation of the first batch.
     let mut masks: Option<(Vec<bool>, Vec<bool>)> = None;
     let mut checks: Vec<NoiseEstimate> = Vec::new();
@@ -130,7 +132,13 @@ pub fn render_frame(
     let mut stopped = vec![0u32; tracked as usize];
     let mut sampling: Option<Vec<u32>> = None;
     while done < spp {
-        let count = batch.min(spp - done);
+        // The batches before the first check end at it (a first check at 2 with batches
+        // of 4: 2, then 4 at a time), later checks at the first batch end at or after
+        // them.
+        let count = match first_check {
+            Some(first) if done < first => batch.min(first - done),
+            _ => batch.min(spp - done),
+        };
         let timings = {
             let mut g = Graph::new(tracer.context(), "path trace");
             view.record_batch(tracer, &mut g, done, count);
