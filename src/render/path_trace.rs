@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::annotate::Annotation;
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
-use super::noise::{NoiseEstimate, NoiseStop, PixelSamples, on_check_pool};
+use super::noise::{NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, on_check_pool};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use super::view::{View, tile_order};
@@ -86,9 +86,11 @@ impl Frame {
 /// With `opts.noise`, after the batch that reaches each check (the first at `min_spp`,
 /// the next where the estimate predicts the target, [`NoiseStop::next_check`]) the two
 /// per-pixel sums are read back and the criterion evaluated; the render stops when it is
-/// at most the target, or at `spp`. The batches before the first check end at it. The
-/// shader adds each sample to a pixel's sums in sample order, whatever the batches, so
-/// the image equals a render of the chosen spp byte for byte. The decision depends on
+/// at most the target, or at `spp`. A batch ends at the next check when that comes
+/// before its `batch_spp` samples, unless less than half a batch away
+/// ([`batch_before_check`]); a check then falls at the batch's end. The shader adds each sample to a pixel's sums in
+/// sample order, whatever the batches, so the image equals a render of the chosen spp
+/// byte for byte. The decision depends on
 /// float sums: another device may stop at another batch.
 ///
 /// With `adaptive_radius` in the criterion, each check that does not stop the render
@@ -117,6 +119,7 @@ pub fn render_frame(
     let mut done = 0u32;
     let mut gpu_ms = 0.0;
     let first_check = opts.noise.map(|n| n.first_check(spp));
+    let halves = opts.noise.map(|n| n.estimator) == Some(NoiseEstimator::Halves);
     let mut next_check = first_check;
     // (exposure mask, object mask) from the annotation of the first batch.
     let mut masks: Option<(Vec<bool>, Vec<bool>)> = None;
@@ -132,13 +135,8 @@ pub fn render_frame(
     let mut stopped = vec![0u32; tracked as usize];
     let mut sampling: Option<Vec<u32>> = None;
     while done < spp {
-        // The batches before the first check end at it (a first check at 2 with batches
-        // of 4: 2, then 4 at a time), later checks at the first batch end at or after
-        // them.
-        let count = match first_check {
-            Some(first) if done < first => batch.min(first - done),
-            _ => batch.min(spp - done),
-        };
+        let count =
+            batch_before_check(batch, done, next_check, first_check, halves).min(spp - done);
         let timings = {
             let mut g = Graph::new(tracer.context(), "path trace");
             view.record_batch(tracer, &mut g, done, count);
@@ -223,6 +221,41 @@ pub fn render_frame(
         noise_checks: checks,
         labels_from_samples: view.labels_from_samples(),
     })
+}
+
+/// Samples of the next batch after `done`: `batch`, cut to end at the next check `at`
+/// when that comes first and is the first check or at least half a batch away (the
+/// first check at `min_spp` exactly; a check at 6 after one at 2 with batches of 4: 4
+/// samples, not 8). Other checks less than half a batch away fall at the end of a whole
+/// batch, with the "halves" estimate (`halves`) at most up to the next power of two: with
+/// `adaptive_radius` the
+/// next check is where the first pixel still sampling reaches its share, often a sample
+/// or two away, and cutting there would make a tail of one-sample batches each with its
+/// check (a test image: 34 checks where batch ends gave 9). "halves" learns about the
+/// stratification of more samples only when a power of two completes (its checks are
+/// kept at most at the next one, [`NoiseStop::next_check`]): a batch does not run past
+/// it, or an image that its estimate at 64 samples stops would run on to 71.
+pub fn batch_before_check(
+    batch: u32,
+    done: u32,
+    at: Option<u32>,
+    first: Option<u32>,
+    halves: bool,
+) -> u32 {
+    match at {
+        Some(at) if at > done && at - done < batch => {
+            if Some(at) == first || at - done >= batch.div_ceil(2) {
+                at - done
+            } else if halves {
+                // To the next power of two at most (the check is at or before it).
+                let power = (done as u64 + 1).next_power_of_two();
+                batch.min((power - done as u64) as u32)
+            } else {
+                batch
+            }
+        }
+        _ => batch,
+    }
 }
 
 /// Each pixel's samples when some stopped before `done` (`stopped`: the samples a pixel
@@ -311,4 +344,32 @@ pub fn path_trace(
         noise: None,
     };
     render_scene(ctx, scene, settings, backend, tables, opts, progress).map(|f| f.radiance)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::batch_before_check;
+
+    #[test]
+    fn batches_end_at_checks_at_least_half_a_batch_away() {
+        // The first check exactly, however near.
+        assert_eq!(batch_before_check(4, 0, Some(2), Some(2), false), 2);
+        assert_eq!(batch_before_check(8, 8, Some(9), Some(9), false), 1);
+        // A later check half a batch away or more: cut there.
+        assert_eq!(batch_before_check(4, 2, Some(4), Some(2), false), 2);
+        assert_eq!(batch_before_check(4, 4, Some(7), Some(2), false), 3);
+        assert_eq!(batch_before_check(5, 4, Some(7), Some(2), false), 3);
+        // Nearer: a whole batch (the check at its end).
+        assert_eq!(batch_before_check(4, 33, Some(34), Some(8), false), 4);
+        assert_eq!(batch_before_check(5, 4, Some(6), Some(2), false), 5);
+        // With "halves" a near check's batch ends at the next power of two at most.
+        assert_eq!(batch_before_check(8, 63, Some(64), Some(8), true), 1);
+        assert_eq!(batch_before_check(8, 63, Some(64), Some(8), false), 8);
+        assert_eq!(batch_before_check(8, 61, Some(62), Some(8), true), 3);
+        assert_eq!(batch_before_check(8, 33, Some(34), Some(8), true), 8);
+        // Farther than a batch, passed, or no check: a whole batch.
+        assert_eq!(batch_before_check(4, 4, Some(12), Some(4), false), 4);
+        assert_eq!(batch_before_check(4, 8, Some(8), Some(4), false), 4);
+        assert_eq!(batch_before_check(4, 8, None, None, false), 4);
+    }
 }

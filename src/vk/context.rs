@@ -174,8 +174,21 @@ fn cstr_field(chars: &[std::ffi::c_char]) -> String {
         .into_owned()
 }
 
+/// Held while a Vulkan instance and device are made or destroyed: one at a time in the
+/// process. Vulkan lets separate instances live on separate threads, but loaders, layers
+/// and drivers have had races in exactly these calls when threads make and drop devices
+/// at once (test binaries do: each test its own device); a crash of the GPU tests on CI
+/// (SIGSEGV, 2026-11-27, not repeated here) is the reason to rule that out. A run makes
+/// its contexts once, so the lock is not contended there.
+static LIFECYCLE: Mutex<()> = Mutex::new(());
+
+fn lifecycle_lock() -> std::sync::MutexGuard<'static, ()> {
+    LIFECYCLE.lock().unwrap_or_else(|p| p.into_inner())
+}
+
 impl Context {
     pub fn new(opts: &ContextOptions) -> Result<Arc<Context>, VkError> {
+        let _lifecycle = lifecycle_lock();
         // SAFETY: loading the system Vulkan loader; failure is reported as an error.
         let entry = unsafe { ash::Entry::load() }.map_err(|e| VkError::Loader(e.to_string()))?;
         let validation = opts.validation || validation_from_env();
@@ -528,6 +541,7 @@ impl Drop for Context {
             if !owns_device {
                 return;
             }
+            let _lifecycle = lifecycle_lock();
             self.device.destroy_device(None);
             if let Some(di) = &self.debug_instance
                 && self.messenger != vk::DebugUtilsMessengerEXT::null()
