@@ -266,9 +266,8 @@ pub struct RenderSettings {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bsdf_samples: Option<i64>,
     /// Samples per GPU submission, [1, 1024] (scene files' `[render] batch_spp`); default
-    /// 16. With `noise_target` a batch ends at the next check when that comes first
-    /// (`min_spp`, then where the estimate predicts the target), so images stop where
-    /// the checks say whatever the batch; the images do not depend on it.
+    /// 16. With `noise_target` the checks after the first (`min_spp`) fall on batch ends,
+    /// so a smaller batch lets an image stop earlier; the images do not depend on it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub batch_spp: Option<i64>,
 }

@@ -131,7 +131,7 @@ pub const DEFAULT_MIN_SPP: u32 = 64;
 pub const MAX_CHECK_GROWTH: u32 = 4;
 /// The smallest step between two checks, as a fraction of the samples done (1 / this):
 /// bounds the number of readbacks (logarithmic in spp) and the overshoot past the spp
-/// the target needs (at most about 1 / 64 = 1.6 %, plus one sample). A check that lands
+/// the target needs (at most about 1 / 64 = 1.6 %, plus one batch). A check that lands
 /// just above the target (ratio q < sqrt(1 + 1/64)) is followed by this step; with 1/16
 /// five of ten measured images took 5 to 7 % more samples than they needed.
 pub const MIN_CHECK_STEP_DIVISOR: u32 = 64;
@@ -683,8 +683,8 @@ impl NoiseStop {
     /// more sample. With "halves" also at most the next power of two above `done`: the
     /// estimate only learns about the stratification of more samples when a power of two
     /// completes (in between it falls as 1 / n, the prediction itself), and it often
-    /// falls faster there than the prediction assumes. The render's batch ends
-    /// there (`render_frame` cuts a batch that would pass it).
+    /// falls faster there than the prediction assumes. The render checks at the first
+    /// batch end at or after it.
     ///
     /// With a growing target (`growth` g > 0) the prediction is where the falling noise
     /// meets the rising target: ratio sqrt(done / n) = target_at(done) (n / done)^g, n =

@@ -86,9 +86,8 @@ impl Frame {
 /// With `opts.noise`, after the batch that reaches each check (the first at `min_spp`,
 /// the next where the estimate predicts the target, [`NoiseStop::next_check`]) the two
 /// per-pixel sums are read back and the criterion evaluated; the render stops when it is
-/// at most the target, or at `spp`. A batch ends at the next check when that comes
-/// before its `batch_spp` samples, unless less than half a batch away
-/// ([`batch_before_check`]); a check then falls at the batch's end. The shader adds each sample to a pixel's sums in
+/// at most the target, or at `spp`. The first check is at `min_spp` exactly, later ones
+/// at the end of the batch that reaches them ([`batch_before_check`]). The shader adds each sample to a pixel's sums in
 /// sample order, whatever the batches, so the image equals a render of the chosen spp
 /// byte for byte. The decision depends on
 /// float sums: another device may stop at another batch.
@@ -223,18 +222,18 @@ pub fn render_frame(
     })
 }
 
-/// Samples of the next batch after `done`: `batch`, cut to end at the next check `at`
-/// when that comes first and is the first check or at least half a batch away (the
-/// first check at `min_spp` exactly; a check at 6 after one at 2 with batches of 4: 4
-/// samples, not 8). Other checks less than half a batch away fall at the end of a whole
-/// batch, with the "halves" estimate (`halves`) at most up to the next power of two: with
-/// `adaptive_radius` the
-/// next check is where the first pixel still sampling reaches its share, often a sample
-/// or two away, and cutting there would make a tail of one-sample batches each with its
-/// check (a test image: 34 checks where batch ends gave 9). "halves" learns about the
-/// stratification of more samples only when a power of two completes (its checks are
-/// kept at most at the next one, [`NoiseStop::next_check`]): a batch does not run past
-/// it, or an image that its estimate at 64 samples stops would run on to 71.
+/// Samples of the next batch after `done`: `batch`, cut to end at the first check
+/// (`first`, `min_spp`) when that comes before it (`min_spp = 2` with batches of 4: 2
+/// samples, the check, then 4 at a time), and, with the "halves" estimate (`halves`) and
+/// a check to come (`at`), never past the next power of two. Later checks fall at the
+/// end of the batch that reaches them. "halves" learns about the stratification of more
+/// samples only when a power of two completes (its checks are kept at most at the next
+/// one, [`NoiseStop::next_check`]); batches of `batch_spp` from 0 end on the powers of
+/// two from `batch_spp` up, so this changes nothing for a first check at a multiple of the
+/// batch (the recommended paper setting: 4 and 4). Cutting every batch at its check was
+/// tried: with `adaptive_radius` the next check is where the first pixel still sampling
+/// reaches its share, often a sample away, and a test image took 34 checks of
+/// one-sample batches where batch ends gave 9.
 pub fn batch_before_check(
     batch: u32,
     done: u32,
@@ -242,17 +241,11 @@ pub fn batch_before_check(
     first: Option<u32>,
     halves: bool,
 ) -> u32 {
-    match at {
-        Some(at) if at > done && at - done < batch => {
-            if Some(at) == first || at - done >= batch.div_ceil(2) {
-                at - done
-            } else if halves {
-                // To the next power of two at most (the check is at or before it).
-                let power = (done as u64 + 1).next_power_of_two();
-                batch.min((power - done as u64) as u32)
-            } else {
-                batch
-            }
+    match (at, first) {
+        (Some(at), Some(first)) if at == first && at > done => batch.min(at - done),
+        (Some(_), _) if halves => {
+            let power = (done as u64 + 1).next_power_of_two();
+            batch.min((power - done as u64) as u32)
         }
         _ => batch,
     }
@@ -351,25 +344,29 @@ mod tests {
     use super::batch_before_check;
 
     #[test]
-    fn batches_end_at_checks_at_least_half_a_batch_away() {
+    fn the_first_check_cuts_its_batch_and_halves_stops_at_powers_of_two() {
         // The first check exactly, however near.
         assert_eq!(batch_before_check(4, 0, Some(2), Some(2), false), 2);
         assert_eq!(batch_before_check(8, 8, Some(9), Some(9), false), 1);
-        // A later check half a batch away or more: cut there.
-        assert_eq!(batch_before_check(4, 2, Some(4), Some(2), false), 2);
-        assert_eq!(batch_before_check(4, 4, Some(7), Some(2), false), 3);
-        assert_eq!(batch_before_check(5, 4, Some(7), Some(2), false), 3);
-        // Nearer: a whole batch (the check at its end).
-        assert_eq!(batch_before_check(4, 33, Some(34), Some(8), false), 4);
-        assert_eq!(batch_before_check(5, 4, Some(6), Some(2), false), 5);
-        // With "halves" a near check's batch ends at the next power of two at most.
-        assert_eq!(batch_before_check(8, 63, Some(64), Some(8), true), 1);
+        assert_eq!(batch_before_check(4, 0, Some(4), Some(4), false), 4);
+        assert_eq!(batch_before_check(4, 0, Some(8), Some(8), false), 4);
+        // Later checks: a whole batch ...
+        assert_eq!(batch_before_check(4, 2, Some(3), Some(2), false), 4);
+        assert_eq!(batch_before_check(4, 4, Some(7), Some(4), false), 4);
         assert_eq!(batch_before_check(8, 63, Some(64), Some(8), false), 8);
+        // ... with "halves" up to the next power of two at most.
+        assert_eq!(batch_before_check(4, 2, Some(3), Some(2), true), 2);
+        assert_eq!(batch_before_check(8, 63, Some(64), Some(8), true), 1);
         assert_eq!(batch_before_check(8, 61, Some(62), Some(8), true), 3);
         assert_eq!(batch_before_check(8, 33, Some(34), Some(8), true), 8);
-        // Farther than a batch, passed, or no check: a whole batch.
-        assert_eq!(batch_before_check(4, 4, Some(12), Some(4), false), 4);
-        assert_eq!(batch_before_check(4, 8, Some(8), Some(4), false), 4);
-        assert_eq!(batch_before_check(4, 8, None, None, false), 4);
+        // Multiples of the batch from 0 already end on the powers of two.
+        for done in (4..256).step_by(4) {
+            assert_eq!(
+                batch_before_check(4, done, Some(done + 1), Some(4), true),
+                4
+            );
+        }
+        // No check to come: a whole batch.
+        assert_eq!(batch_before_check(4, 2, None, None, true), 4);
     }
 }
