@@ -87,10 +87,10 @@ impl Frame {
 /// the next where the estimate predicts the target, [`NoiseStop::next_check`]) the two
 /// per-pixel sums are read back and the criterion evaluated; the render stops when it is
 /// at most the target, or at `spp`. The first check is at `min_spp` exactly, later ones
-/// at the end of the batch that reaches them ([`batch_before_check`]). The shader adds each sample to a pixel's sums in
-/// sample order, whatever the batches, so the image equals a render of the chosen spp
-/// byte for byte. The decision depends on
-/// float sums: another device may stop at another batch.
+/// at the end of the batch that reaches them ([`batch_before_check`]). The shader adds
+/// each sample to a pixel's sums in sample order, whatever the batches, so the image
+/// equals a render of the chosen spp byte for byte. The decision depends on float sums:
+/// another device may stop at another batch.
 ///
 /// With `adaptive_radius` in the criterion, each check that does not stop the render
 /// also stops the pixels that have the samples their share of the target wants
