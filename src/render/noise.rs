@@ -140,6 +140,13 @@ pub const MIN_CHECK_STEP_DIVISOR: u32 = 64;
 /// to 1.5e-5 of [target, ratio].
 pub const GROWTH_BISECTIONS: u32 = 16;
 
+/// The first power of two above `done` samples: where the "halves" estimate next learns
+/// about the stratification of more samples (its checks come at most there, and a
+/// render's batches do not run past it).
+pub fn next_power_of_two_above(done: u32) -> u64 {
+    (done as u64 + 1).next_power_of_two()
+}
+
 /// One evaluation of the criterion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseEstimate {
@@ -718,8 +725,7 @@ impl NoiseStop {
         let lo = done as f64 + (done.div_ceil(MIN_CHECK_STEP_DIVISOR)).max(1) as f64;
         let mut hi = done as f64 * MAX_CHECK_GROWTH as f64;
         if self.estimator == NoiseEstimator::Halves {
-            let power = (done as u64 + 1).next_power_of_two() as f64;
-            hi = hi.min(power);
+            hi = hi.min(next_power_of_two_above(done) as f64);
         }
         let next = if predicted.is_finite() {
             predicted.clamp(lo, hi.max(lo))

@@ -7,7 +7,9 @@ use std::sync::Arc;
 use super::annotate::Annotation;
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
-use super::noise::{NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, on_check_pool};
+use super::noise::{
+    NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, next_power_of_two_above, on_check_pool,
+};
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use super::view::{View, tile_order};
@@ -134,8 +136,7 @@ pub fn render_frame(
     let mut stopped = vec![0u32; tracked as usize];
     let mut sampling: Option<Vec<u32>> = None;
     while done < spp {
-        let count =
-            batch_before_check(batch, done, next_check, first_check, halves).min(spp - done);
+        let count = batch_before_check(batch, done, first_check, halves).min(spp - done);
         let timings = {
             let mut g = Graph::new(tracer.context(), "path trace");
             view.record_batch(tracer, &mut g, done, count);
@@ -223,30 +224,22 @@ pub fn render_frame(
 }
 
 /// Samples of the next batch after `done`: `batch`, cut to end at the first check
-/// (`first`, `min_spp`) when that comes before it (`min_spp = 2` with batches of 4: 2
-/// samples, the check, then 4 at a time), and, with the "halves" estimate (`halves`) and
-/// a check to come (`at`), never past the next power of two. Later checks fall at the
-/// end of the batch that reaches them. "halves" learns about the stratification of more
-/// samples only when a power of two completes (its checks are kept at most at the next
-/// one, [`NoiseStop::next_check`]); batches of `batch_spp` from 0 end on the powers of
-/// two from `batch_spp` up, so this changes nothing for a first check at a multiple of the
-/// batch (the recommended paper setting: 4 and 4). Cutting every batch at its check was
+/// (`first`, `min_spp`; None without a noise target) when that comes before it
+/// (`min_spp = 2` with batches of 4: 2 samples, the check, then 4 at a time), and, with
+/// the "halves" estimate (`halves`), never past the next power of two. Later checks
+/// fall at the end of the batch that reaches them. "halves" learns about the
+/// stratification of more samples only when a power of two completes (its checks are
+/// kept at most at the next one, [`NoiseStop::next_check`]); batches of `batch_spp` from
+/// 0 end on the powers of two from `batch_spp` up, so this changes nothing for a first
+/// check at a multiple of the batch (the recommended paper setting: 4 and 4). The first
+/// check is the one pending while `done < first`. Cutting every batch at its check was
 /// tried: with `adaptive_radius` the next check is where the first pixel still sampling
 /// reaches its share, often a sample away, and a test image took 34 checks of
 /// one-sample batches where batch ends gave 9.
-pub fn batch_before_check(
-    batch: u32,
-    done: u32,
-    at: Option<u32>,
-    first: Option<u32>,
-    halves: bool,
-) -> u32 {
-    match (at, first) {
-        (Some(at), Some(first)) if at == first && at > done => batch.min(at - done),
-        (Some(_), _) if halves => {
-            let power = (done as u64 + 1).next_power_of_two();
-            batch.min((power - done as u64) as u32)
-        }
+pub fn batch_before_check(batch: u32, done: u32, first: Option<u32>, halves: bool) -> u32 {
+    match first {
+        Some(first) if done < first => batch.min(first - done),
+        _ if halves => batch.min((next_power_of_two_above(done) - done as u64) as u32),
         _ => batch,
     }
 }
@@ -346,27 +339,24 @@ mod tests {
     #[test]
     fn the_first_check_cuts_its_batch_and_halves_stops_at_powers_of_two() {
         // The first check exactly, however near.
-        assert_eq!(batch_before_check(4, 0, Some(2), Some(2), false), 2);
-        assert_eq!(batch_before_check(8, 8, Some(9), Some(9), false), 1);
-        assert_eq!(batch_before_check(4, 0, Some(4), Some(4), false), 4);
-        assert_eq!(batch_before_check(4, 0, Some(8), Some(8), false), 4);
+        assert_eq!(batch_before_check(4, 0, Some(2), false), 2);
+        assert_eq!(batch_before_check(8, 8, Some(9), false), 1);
+        assert_eq!(batch_before_check(4, 0, Some(4), false), 4);
+        assert_eq!(batch_before_check(4, 0, Some(8), false), 4);
         // Later checks: a whole batch ...
-        assert_eq!(batch_before_check(4, 2, Some(3), Some(2), false), 4);
-        assert_eq!(batch_before_check(4, 4, Some(7), Some(4), false), 4);
-        assert_eq!(batch_before_check(8, 63, Some(64), Some(8), false), 8);
+        assert_eq!(batch_before_check(4, 2, Some(2), false), 4);
+        assert_eq!(batch_before_check(4, 4, Some(4), false), 4);
+        assert_eq!(batch_before_check(8, 63, Some(8), false), 8);
         // ... with "halves" up to the next power of two at most.
-        assert_eq!(batch_before_check(4, 2, Some(3), Some(2), true), 2);
-        assert_eq!(batch_before_check(8, 63, Some(64), Some(8), true), 1);
-        assert_eq!(batch_before_check(8, 61, Some(62), Some(8), true), 3);
-        assert_eq!(batch_before_check(8, 33, Some(34), Some(8), true), 8);
+        assert_eq!(batch_before_check(4, 2, Some(2), true), 2);
+        assert_eq!(batch_before_check(8, 63, Some(8), true), 1);
+        assert_eq!(batch_before_check(8, 61, Some(8), true), 3);
+        assert_eq!(batch_before_check(8, 33, Some(8), true), 8);
         // Multiples of the batch from 0 already end on the powers of two.
         for done in (4..256).step_by(4) {
-            assert_eq!(
-                batch_before_check(4, done, Some(done + 1), Some(4), true),
-                4
-            );
+            assert_eq!(batch_before_check(4, done, Some(4), true), 4);
         }
-        // No check to come: a whole batch.
-        assert_eq!(batch_before_check(4, 2, None, None, true), 4);
+        // No noise target: a whole batch.
+        assert_eq!(batch_before_check(4, 2, None, false), 4);
     }
 }
