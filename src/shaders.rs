@@ -11,3 +11,8 @@ pub fn spirv(name: &str) -> Option<Vec<u32>> {
             .collect()
     })
 }
+
+/// Every shader variant's name, e.g. `raycast.sw`.
+pub fn names() -> impl Iterator<Item = &'static str> {
+    SHADERS.iter().map(|(n, _)| *n)
+}

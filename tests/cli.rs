@@ -319,6 +319,37 @@ fn render_with_calibration_lens_and_sensor() {
 /// `synosis bench-gpu` (what `tools/bench-gpu` runs) on lavapipe at a tiny size: the table
 /// with each stage and the GPU busy share, the JSON beside it, and the Chrome trace.
 #[test]
+fn compile_runs_each_backends_pipelines_and_names_them() {
+    // tools/test runs `synosis compile` before the tests, so here the cache is warm and
+    // this is quick; what it shows is that every pass runs on its tiny scene without a
+    // validation message (the command fails on one) and that each backend is reported.
+    let dir = tempfile::tempdir().unwrap();
+    let o = synosis(&["compile", "--accel", "software-wide"], dir.path());
+    let (out, err) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "stdout {out}\nstderr {err}");
+    assert!(
+        err.contains("compiling the pipelines of software-wide on "),
+        "{err}"
+    );
+    assert!(
+        err.lines()
+            .any(|l| l.trim_start().starts_with("software-wide ")),
+        "{err}"
+    );
+    assert!(err.contains("done in "), "{err}");
+    assert!(
+        !err.contains("ray-query"),
+        "only the backend asked for: {err}"
+    );
+    let o = synosis(&["compile", "--accel", "wide"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "clap refuses an unknown backend");
+    assert!(
+        text(&o.stderr).contains("software-wide"),
+        "and names the allowed ones"
+    );
+}
+
+#[test]
 fn bench_gpu_writes_its_table() {
     let dir = tempfile::tempdir().unwrap();
     let dp = dir.path();

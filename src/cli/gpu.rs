@@ -62,6 +62,50 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
 }
 
 #[derive(Args)]
+pub struct CompileArgs {
+    /// Only this backend's pipelines (default: every backend the device supports).
+    #[arg(long, value_enum)]
+    accel: Option<AccelChoice>,
+}
+
+/// Compiles every pipeline into the driver's shader cache, the backends at once.
+pub fn compile_cmd(a: CompileArgs) -> anyhow::Result<()> {
+    use synosis::trace::Backend;
+    let options = ContextOptions {
+        validation: false,
+        ray_query: true,
+    };
+    let ctx = Context::new(&options)?;
+    let backends = match a.accel {
+        Some(choice) => vec![resolve(choice, &ctx.info)?],
+        None => {
+            let mut b = vec![Backend::Software, Backend::SoftwareWide];
+            if ctx.info.ray_query_enabled {
+                b.insert(0, Backend::RayQuery);
+            }
+            b
+        }
+    };
+    let device = ctx.info.name.clone();
+    drop(ctx);
+    eprintln!(
+        "compiling the pipelines of {} on {} (each run once on a 16 x 16 image)",
+        backends
+            .iter()
+            .map(|b| b.name())
+            .collect::<Vec<_>>()
+            .join(", "),
+        device
+    );
+    let start = std::time::Instant::now();
+    synosis::render::pipelines::prepare(&options, &backends, &|b, t| {
+        eprintln!("  {:<14} {:6.1} s", b.name(), t.as_secs_f64());
+    })?;
+    eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());
+    Ok(())
+}
+
+#[derive(Args)]
 pub struct RaycastArgs {
     /// Mesh to raycast (.gltf or .glb).
     mesh: PathBuf,

@@ -26,6 +26,9 @@ pub struct Cli {
 pub enum Command {
     /// Show the Vulkan device, driver, ray-query support and the backend auto picks.
     Info(gpu::InfoArgs),
+    /// Compile every GPU pipeline into the driver's shader cache ahead of a job, several at
+    /// once (lavapipe takes minutes per backend on a cold cache; later runs find them).
+    Compile(gpu::CompileArgs),
     /// Raycast a mesh from above (depth.exr, normals.png): proves import, both backends, the graph.
     Raycast(gpu::RaycastArgs),
     /// Synthesise a milled or sandblasted surface texture (height map + slope/normal map).
@@ -85,6 +88,7 @@ pub fn accel_from_env() -> anyhow::Result<Option<synosis::trace::AccelChoice>> {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => gpu::info(a),
+        Command::Compile(a) => gpu::compile_cmd(a),
         Command::Raycast(a) => gpu::raycast_cmd(a),
         Command::Texture(a) => texture::run(a),
         Command::Defects(a) => defects::run(a),

@@ -8,10 +8,10 @@ use ash::vk;
 
 use super::gpu_scene::label_word;
 use super::view::{Tiling, camera_block};
-use crate::gpu_interface::{AnnotateBinding, CameraBlock, ImagePush, TILE};
+use crate::gpu_interface::{AnnotateBinding, CameraBlock, ImagePush};
 use crate::graph::{BufferRef, Graph, PassTiming};
 use crate::scene::{Camera, Mesh};
-use crate::trace::{TraceRefs, TraceScene, trace_pipeline};
+use crate::trace::{TraceRefs, TraceScene};
 use crate::vk::{Buffer, ComputePipeline, Context, MemoryKind, Profiler, VkError};
 
 /// Default stratified grid per pixel for the coverage fraction (4 x 4 = 16 rays).
@@ -172,9 +172,7 @@ impl AnnotatePass {
                 scene.object().triangle_count
             )));
         }
-        let push = std::mem::size_of::<ImagePush>() as u32;
-        let n = AnnotateBinding::COUNT;
-        let pipeline = trace_pipeline(ctx, "annotate", scene.backend, n, push, [TILE, TILE, 1])?;
+        let pipeline = super::pipelines::annotate(ctx, scene.backend)?;
         let packed: Vec<u32> = mesh.labels.iter().map(label_word).collect();
         let labels = Buffer::from_slice(
             ctx,

@@ -9,6 +9,7 @@ pub mod energy;
 pub mod gpu_scene;
 pub mod noise;
 pub mod path_trace;
+pub mod pipelines;
 pub mod pixels;
 pub mod raycast;
 pub mod sensor;

@@ -6,10 +6,10 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::view::{Tiling, camera_block};
-use crate::gpu_interface::{HitsBinding, HitsPush, ImagePush, RaycastBinding, TILE, Tri};
+use crate::gpu_interface::{HitsBinding, HitsPush, ImagePush, RaycastBinding, Tri};
 use crate::graph::{Graph, PassTiming};
 use crate::scene::Camera;
-use crate::trace::{TraceScene, scramble_multiplier, trace_pipeline};
+use crate::trace::{TraceScene, scramble_multiplier};
 use crate::vk::{Buffer, Context, MemoryKind, Profiler, VkError};
 
 /// A ray for [`trace_rays`]: origin, tmin, direction, tmax.
@@ -149,15 +149,7 @@ pub fn trace_rays_hinted(
         assert_eq!(h.len(), rays.len(), "trace_rays_hinted: one hint a ray");
     }
     let off = TraceScene::binding_kinds(scene.backend).len() as u32;
-    let push_size = std::mem::size_of::<HitsPush>() as u32;
-    let pipeline = trace_pipeline(
-        ctx,
-        "hits",
-        scene.backend,
-        HitsBinding::COUNT,
-        push_size,
-        [64, 1, 1],
-    )?;
+    let pipeline = super::pipelines::hits(ctx, scene.backend)?;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let ray_buf = Buffer::from_slice(ctx, "rays", rays, storage)?;
     let hint_tris: Vec<Tri> = match hints {
@@ -235,9 +227,7 @@ pub fn raycast(
 ) -> Result<RaycastImage, VkError> {
     let (width, height) = (cam.width, cam.height);
     let off = TraceScene::binding_kinds(scene.backend).len() as u32;
-    let push_size = std::mem::size_of::<ImagePush>() as u32;
-    let n = RaycastBinding::COUNT;
-    let pipeline = trace_pipeline(ctx, "raycast", scene.backend, n, push_size, [TILE, TILE, 1])?;
+    let pipeline = super::pipelines::raycast(ctx, scene.backend)?;
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let n = width as u64 * height as u64;
     let depth_buf = Buffer::new(ctx, "depth", n * 4, storage, MemoryKind::Readback)?;

@@ -8,8 +8,7 @@ use ash::vk;
 
 use super::RenderError;
 use super::energy::EnergyTables;
-use crate::gpu_interface::{AnnotateBinding, ImagePush, PathPush, PathTraceBinding, TILE};
-use crate::trace::{Backend, TraceScene, trace_pipeline};
+use crate::trace::{Backend, TraceScene};
 use crate::vk::{Buffer, ComputePipeline, Context};
 
 /// How many path tracers this process has built (each compiles two pipelines); tests
@@ -31,23 +30,8 @@ impl PathTracer {
         backend: Backend,
         tables: &EnergyTables,
     ) -> Result<PathTracer, RenderError> {
-        let tile = [TILE, TILE, 1];
-        let path = trace_pipeline(
-            ctx,
-            "path_trace",
-            backend,
-            PathTraceBinding::COUNT,
-            std::mem::size_of::<PathPush>() as u32,
-            tile,
-        )?;
-        let annotate = trace_pipeline(
-            ctx,
-            "annotate",
-            backend,
-            AnnotateBinding::COUNT,
-            std::mem::size_of::<ImagePush>() as u32,
-            tile,
-        )?;
+        let path = super::pipelines::path_trace(ctx, backend)?;
+        let annotate = super::pipelines::annotate(ctx, backend)?;
         let energy = Buffer::from_slice(
             ctx,
             "energy tables",

@@ -1,0 +1,173 @@
+//! Every compute pipeline the renderer builds, each made by one function here, and
+//! [`prepare`]: every pipeline of some backends run once on a tiny scene, the backends
+//! at once on threads of their own, so the driver's shader cache holds them before the
+//! first image.
+//!
+//! Why: lavapipe compiles a pipeline's machine code at its first dispatch, and the path
+//! tracer's takes minutes on a cold cache (about 150 s a backend on a 2-core machine); a
+//! process that renders meets its pipelines one at a time.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use super::energy::EnergyTables;
+use super::path_trace::{FrameOptions, RenderError};
+use super::raycast::RayIn;
+use crate::gpu_interface::{
+    AnnotateBinding, HitsBinding, HitsPush, ImagePush, PathPush, PathTraceBinding, RaycastBinding,
+    TILE,
+};
+use crate::scene::Camera;
+use crate::scene::assemble::{RenderScene, load_object};
+use crate::scene::config::SceneConfig;
+use crate::trace::{Backend, TraceScene, trace_pipeline};
+use crate::vk::{ComputePipeline, Context, ContextOptions, VkError};
+
+/// The path tracer (`glsl/path_trace.comp`).
+pub fn path_trace(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkError> {
+    let push = std::mem::size_of::<PathPush>() as u32;
+    trace_pipeline(
+        ctx,
+        "path_trace",
+        backend,
+        PathTraceBinding::COUNT,
+        push,
+        [TILE, TILE, 1],
+    )
+}
+
+/// The annotation pass (`glsl/annotate.comp`).
+pub fn annotate(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkError> {
+    let push = std::mem::size_of::<ImagePush>() as u32;
+    trace_pipeline(
+        ctx,
+        "annotate",
+        backend,
+        AnnotateBinding::COUNT,
+        push,
+        [TILE, TILE, 1],
+    )
+}
+
+/// Closest hits of a list of rays (`glsl/hits.comp`).
+pub fn hits(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkError> {
+    let push = std::mem::size_of::<HitsPush>() as u32;
+    trace_pipeline(ctx, "hits", backend, HitsBinding::COUNT, push, [64, 1, 1])
+}
+
+/// Depth and normals of a camera's first hits (`glsl/raycast.comp`).
+pub fn raycast(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkError> {
+    let push = std::mem::size_of::<ImagePush>() as u32;
+    trace_pipeline(
+        ctx,
+        "raycast",
+        backend,
+        RaycastBinding::COUNT,
+        push,
+        [TILE, TILE, 1],
+    )
+}
+
+type Maker = fn(&Arc<Context>, Backend) -> Result<ComputePipeline, VkError>;
+
+/// Every pipeline, by its shader's name (a shader variant is `<name>.<backend suffix>`).
+pub const ALL: [(&str, Maker); 4] = [
+    ("path_trace", path_trace),
+    ("annotate", annotate),
+    ("hits", hits),
+    ("raycast", raycast),
+];
+
+/// Runs every pipeline of `backend` once on a tiny scene (the built-in test body, 16 x 16
+/// pixels, 1 sample, labels from the annotation pass; a raycast; a list of one ray):
+/// lavapipe compiles a pipeline's machine code at its first dispatch, not at its
+/// creation, and keeps it in its shader cache from then on.
+pub fn exercise(
+    ctx: &Arc<Context>,
+    backend: Backend,
+    tables: &EnergyTables,
+) -> Result<(), RenderError> {
+    let mut cfg = SceneConfig::parse("[render]\nspp = 1\nbatch_spp = 1\nlabels = \"pass\"\n")
+        .expect("the warm-up scene parses");
+    cfg.set_resolution(16, 16).expect("16 x 16 is a valid size");
+    let object = load_object(&cfg)?;
+    let scene = RenderScene::assemble(&object, &cfg)?;
+    let opts = FrameOptions {
+        annotate_grid: Some(1),
+        ..Default::default()
+    };
+    let frame = super::render_scene(ctx, &scene, &cfg, backend, tables, opts, |_| {})?;
+    debug_assert!(frame.annotation.is_some() && !frame.labels_from_samples);
+    let traced = TraceScene::build(ctx, &object, backend, None)?;
+    super::raycast::raycast(ctx, &traced, &Camera::framing(&object, 2, 2), None)?;
+    let ray = RayIn {
+        origin: [0.0, 0.0, 1.0e3],
+        tmin: 0.0,
+        dir: [0.0, 0.0, -1.0],
+        tmax: 1.0e30,
+    };
+    super::raycast::trace_rays(ctx, &traced, &[ray], None)?;
+    Ok(())
+}
+
+/// [`exercise`] for each of `backends`, all at once, each on a thread and a device of its
+/// own (lavapipe runs a device's dispatches, and so compiles their code, on that device's
+/// one queue thread; the path tracers' compiles are by far the longest): afterwards the
+/// driver's shader cache holds every pipeline, so later processes on this machine start
+/// rendering at once. Calls `done(backend, time)` as each backend finishes, from its
+/// thread; validation messages are errors; the first error is returned after the others
+/// finish.
+pub fn prepare(
+    options: &ContextOptions,
+    backends: &[Backend],
+    done: &(dyn Fn(Backend, Duration) + Sync),
+) -> Result<(), RenderError> {
+    let tables = EnergyTables::compute();
+    std::thread::scope(|s| {
+        let runs: Vec<_> = backends
+            .iter()
+            .map(|&b| {
+                let tables = &tables;
+                s.spawn(move || {
+                    let t = Instant::now();
+                    let ctx = Context::new(options)?;
+                    exercise(&ctx, b, tables)?;
+                    ctx.check_validation()?;
+                    done(b, t.elapsed());
+                    Ok(())
+                })
+            })
+            .collect();
+        runs.into_iter()
+            .map(|r| r.join().expect("a warm-up thread panicked"))
+            .collect::<Result<Vec<()>, RenderError>>()
+    })?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_shader_has_its_pipeline_here() {
+        // A shader added to glsl/ without a maker here would be compiled on first use only.
+        let names: std::collections::BTreeSet<&str> = ALL.iter().map(|(n, _)| *n).collect();
+        let mut seen = std::collections::BTreeSet::new();
+        for variant in crate::shaders::names() {
+            let (name, suffix) = variant.split_once('.').expect("every shader has variants");
+            assert!(
+                names.contains(name),
+                "{variant}: no pipeline maker in render::pipelines"
+            );
+            assert!(
+                [Backend::RayQuery, Backend::Software, Backend::SoftwareWide]
+                    .iter()
+                    .any(|b| b.shader_suffix() == suffix),
+                "{variant}: not a backend's variant"
+            );
+            seen.insert(name);
+        }
+        assert_eq!(seen, names, "a maker without a shader");
+    }
+}
