@@ -322,7 +322,8 @@ fn render_with_calibration_lens_and_sensor() {
 fn compile_runs_each_backends_pipelines_and_names_them() {
     // tools/test runs `synosis compile` before the tests, so here the cache is warm and
     // this is quick; what it shows is that every pass runs on its tiny scene without a
-    // validation message (the command fails on one) and that each backend is reported.
+    // validation message and that every shader variant of the backend was dispatched (the
+    // command fails on either), and that each backend is reported.
     let dir = tempfile::tempdir().unwrap();
     let o = synosis(&["compile", "--accel", "software-wide"], dir.path());
     let (out, err) = (text(&o.stdout), text(&o.stderr));

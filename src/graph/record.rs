@@ -288,6 +288,7 @@ impl Recorder<'_, '_> {
                     );
                 }
                 dev.cmd_dispatch(cb, groups[0], groups[1], groups[2]);
+                g.ctx.note_dispatch(&pipeline.name);
             },
             PassKind::Copy { src, dst, size } => unsafe {
                 let region = [vk::BufferCopy::default().size(*size)];

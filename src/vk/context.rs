@@ -147,6 +147,9 @@ pub struct Context {
     pub validation: Arc<ValidationLog>,
     pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
     pub(crate) command_pool: Mutex<vk::CommandPool>,
+    /// Names of the pipelines recorded in a dispatch on this context (a warm-up checks
+    /// that it ran every pipeline: `render::pipelines::prepare`).
+    dispatched: Mutex<std::collections::BTreeSet<String>>,
     debug_instance: Option<ash::ext::debug_utils::Instance>,
     messenger: vk::DebugUtilsMessengerEXT,
 }
@@ -314,6 +317,7 @@ impl Context {
             validation: log,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             command_pool: Mutex::new(command_pool),
+            dispatched: Mutex::default(),
             debug_instance,
             messenger,
         }))
@@ -357,6 +361,7 @@ impl Context {
             validation: owner.validation.clone(),
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             command_pool: Mutex::new(command_pool),
+            dispatched: Mutex::default(),
             debug_instance: None,
             messenger: vk::DebugUtilsMessengerEXT::null(),
             owner: Some(owner),
@@ -500,6 +505,23 @@ impl Context {
             // Naming is a debugging aid; a failure must not stop rendering.
             let _ = unsafe { du.set_debug_utils_object_name(&info) };
         }
+    }
+
+    /// Notes that a dispatch of pipeline `name` was recorded on this context.
+    pub(crate) fn note_dispatch(&self, name: &str) {
+        let mut d = self.dispatched.lock().unwrap_or_else(|p| p.into_inner());
+        if !d.contains(name) {
+            d.insert(name.to_owned());
+        }
+    }
+
+    /// The pipelines (by name, e.g. `path_trace.sw`) recorded in a dispatch on this
+    /// context so far.
+    pub fn dispatched_pipelines(&self) -> std::collections::BTreeSet<String> {
+        self.dispatched
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 
     /// Validation errors collected so far (empty when validation is off).
