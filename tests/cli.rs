@@ -316,8 +316,6 @@ fn render_with_calibration_lens_and_sensor() {
     );
 }
 
-/// `synosis bench-gpu` (what `tools/bench-gpu` runs) on lavapipe at a tiny size: the table
-/// with each stage and the GPU busy share, the JSON beside it, and the Chrome trace.
 #[test]
 fn compile_runs_each_backends_pipelines_and_names_them() {
     // tools/test runs `synosis compile` before the tests, so here the cache is warm and
@@ -350,6 +348,8 @@ fn compile_runs_each_backends_pipelines_and_names_them() {
     );
 }
 
+/// `synosis bench-gpu` (what `tools/bench-gpu` runs) on lavapipe at a tiny size: the table
+/// with each stage and the GPU busy share, the JSON beside it, and the Chrome trace.
 #[test]
 fn bench_gpu_writes_its_table() {
     let dir = tempfile::tempdir().unwrap();
