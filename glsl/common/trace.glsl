@@ -3,7 +3,8 @@
 //                      the object and the view's second level (instance custom index =
 //                      first triangle index of the level)
 //   TRACE_SOFTWARE   - stack traversal of two flattened obvhs BVH2s, the object's
-//                      (bindings 0, 1) and the second level's (bindings 2, 3)
+//                      (bindings 0, 1) and the second level's (bindings 2, 3), read
+//                      through their device addresses (binding 4)
 //   TRACE_SOFTWARE_WIDE - the same with compressed wide BVHs (obvhs CWBVH, eight
 //                      children a node, src/trace/software_bvh.rs)
 // Both answer trace_query (a closest hit, the first light, shadow tests: TQ_* below) and
@@ -128,7 +129,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
 }
 
 #elif defined(TRACE_SOFTWARE)
-#define TRACE_BINDING_COUNT 4
+#define TRACE_BINDING_COUNT 5
 // Triangles in BVH leaf order; v0.w holds the original triangle index.
 struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
 #if defined(TRACE_WIDE)
@@ -144,10 +145,18 @@ struct BvhNode { vec4 l_min; vec4 l_max; vec4 r_min; vec4 r_max; };
 #define TRACE_NODE BvhNode
 #define TRACE_STACK 64
 #endif
-layout(std430, set = 0, binding = 0) readonly buffer TraceNodes { TRACE_NODE trace_nodes[]; };
-layout(std430, set = 0, binding = 1) readonly buffer TraceTris { BvhTri trace_tris[]; };
-layout(std430, set = 0, binding = 2) readonly buffer TraceNodes2 { TRACE_NODE trace_nodes2[]; };
-layout(std430, set = 0, binding = 3) readonly buffer TraceTris2 { BvhTri trace_tris2[]; };
+// Bindings 0-3 hold the object's nodes and triangles and the second level's (bound so
+// that the pass's reads of them are declared), binding 4 their device addresses, in that
+// order (src/trace/mod.rs); the traversal reads the levels through the addresses: lavapipe
+// (Mesa 25.0) loads a storage buffer at a per-lane offset one lane and one word at a time,
+// each behind a bounds branch, a buffer reference as one masked gather per word
+// (docs/architecture.md, "Trace backends").
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_control_flow_attributes : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TraceNodeRef { TRACE_NODE n[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TraceTriRef { BvhTri t[]; };
+layout(std430, set = 0, binding = 4) readonly buffer TraceLevels { uvec2 trace_level_addr[4]; };
 
 // Slab test; the far distance is widened by 3 ulps-worth (Ize 2013) so rounding never
 // drops a box that the ray grazes.

@@ -1,16 +1,16 @@
 // The BVH traversal of either level (`level` 0: the object, bindings 0 and 1; 1: the
-// view's second level, bindings 2 and 3), included by trace.glsl. One function for both
-// levels, the level a value: a shader compiles one traversal per call site of
-// trace_query (lavapipe inlines every call; two per level and query cost it minutes of
-// LLVM compile).
+// view's second level, bindings 2 and 3; both read through their device addresses,
+// binding 4), included by trace.glsl. One function for both levels, the level a value:
+// a shader compiles one traversal per call site of trace_query (lavapipe inlines every
+// call; two per level and query cost it minutes of LLVM compile).
 BvhTri trace_tri(uint level, uint i) {
-    if (level == 0u) return trace_tris[i];
-    return trace_tris2[i];
+    [[dont_flatten]] if (level == 0u) return TraceTriRef(trace_level_addr[1]).t[i];
+    return TraceTriRef(trace_level_addr[3]).t[i];
 }
 
 TRACE_NODE trace_node(uint level, uint i) {
-    if (level == 0u) return trace_nodes[i];
-    return trace_nodes2[i];
+    [[dont_flatten]] if (level == 0u) return TraceNodeRef(trace_level_addr[0]).n[i];
+    return TraceNodeRef(trace_level_addr[2]).n[i];
 }
 
 // The watertight test of one triangle (corners v0, v1, v2, original index `prim`, of

@@ -105,14 +105,19 @@ pub fn auto_backend(ctx_info: &crate::vk::DeviceInfo) -> (Backend, &'static str)
 }
 
 /// Resolves a choice against a device; ray-query on a device without it is an error.
+/// A software backend on a device without buffer device addresses is an error too.
 pub fn resolve(choice: AccelChoice, info: &crate::vk::DeviceInfo) -> Result<Backend, VkError> {
-    match choice {
-        AccelChoice::Auto => Ok(auto_backend(info).0),
-        AccelChoice::Software => Ok(Backend::Software),
-        AccelChoice::SoftwareWide => Ok(Backend::SoftwareWide),
-        AccelChoice::RayQuery if info.ray_query_enabled => Ok(Backend::RayQuery),
-        AccelChoice::RayQuery => Err(VkError::RayQueryUnavailable),
+    let backend = match choice {
+        AccelChoice::Auto => auto_backend(info).0,
+        AccelChoice::Software => Backend::Software,
+        AccelChoice::SoftwareWide => Backend::SoftwareWide,
+        AccelChoice::RayQuery if info.ray_query_enabled => Backend::RayQuery,
+        AccelChoice::RayQuery => return Err(VkError::RayQueryUnavailable),
+    };
+    if backend.is_software() && !info.buffer_device_address {
+        return Err(VkError::NoBufferDeviceAddress);
     }
+    Ok(backend)
 }
 
 /// Per-triangle corner positions in original order (3 x vec4), for shading.
@@ -242,6 +247,12 @@ impl TraceGeometry {
                 Data::RayQuery(Some(blas))
             }
             Backend::Software | Backend::SoftwareWide => {
+                if !ctx.info.buffer_device_address {
+                    return Err(VkError::NoBufferDeviceAddress);
+                }
+                // Read by the traversal through their device addresses (TraceScene's
+                // address table).
+                let addressed = storage | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
                 let tris = software_bvh::obvhs_triangles(positions, triangles);
                 let wide = backend == Backend::SoftwareWide;
                 let build = || software_bvh::gpu_level(&tris, quality, wide);
@@ -258,8 +269,8 @@ impl TraceGeometry {
                 }
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
-                        nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, storage)?,
-                        tris: Buffer::from_slice(ctx, "bvh triangles", &gtris, storage)?,
+                        nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, addressed)?,
+                        tris: Buffer::from_slice(ctx, "bvh triangles", &gtris, addressed)?,
                     })
                 })?
             }
@@ -284,6 +295,9 @@ pub struct TraceScene {
     object: Arc<TraceGeometry>,
     second: TraceGeometry,
     tlas: Option<Tlas>,
+    /// Software backends: the device addresses of the object's nodes and triangles and
+    /// the second level's, in that order (u64 each; binding 4, glsl/common/trace.glsl).
+    addresses: Option<Buffer>,
     /// Triangles of both levels.
     pub triangle_count: usize,
     /// Build time of both levels (and the TLAS), ms.
@@ -293,7 +307,8 @@ pub struct TraceScene {
 /// Handles of a TraceScene inside one graph.
 pub enum TraceRefs {
     RayQuery(AccelRef),
-    Software([BufferRef; 4]),
+    /// The object's nodes and triangles, the second level's, and their address table.
+    Software([BufferRef; 5]),
 }
 
 impl TraceRefs {
@@ -301,7 +316,9 @@ impl TraceRefs {
     pub fn bind<'g, 'a>(&self, d: DispatchBuilder<'g, 'a>) -> DispatchBuilder<'g, 'a> {
         match self {
             TraceRefs::RayQuery(a) => d.accel(0, *a),
-            TraceRefs::Software([n, t, n2, t2]) => d.read(0, n).read(1, t).read(2, n2).read(3, t2),
+            TraceRefs::Software([n, t, n2, t2, a]) => {
+                d.read(0, n).read(1, t).read(2, n2).read(3, t2).read(4, a)
+            }
         }
     }
 }
@@ -356,6 +373,24 @@ impl TraceScene {
             }
             _ => None,
         };
+        let addresses = match (&object.data, &second.data) {
+            (
+                Data::Software { nodes, tris },
+                Data::Software {
+                    nodes: n2,
+                    tris: t2,
+                },
+            ) => {
+                let a = [nodes, tris, n2, t2].map(|b| b.device_address());
+                Some(Buffer::from_slice(
+                    ctx,
+                    "bvh addresses",
+                    &a,
+                    vk::BufferUsageFlags::STORAGE_BUFFER,
+                )?)
+            }
+            _ => None,
+        };
         let build_ms = second.build_ms + start.elapsed().as_secs_f64() * 1e3;
         Ok(TraceScene {
             backend,
@@ -364,6 +399,7 @@ impl TraceScene {
             object,
             second,
             tlas,
+            addresses,
         })
     }
 
@@ -382,11 +418,13 @@ impl TraceScene {
         &self.second.shade_tris
     }
 
-    /// Descriptor kinds of the backend's bindings (they come first in every pipeline).
+    /// Descriptor kinds of the backend's bindings (they come first in every pipeline):
+    /// the software backends' four level buffers and their address table (as
+    /// TRACE_BINDING_COUNT in glsl/common/trace.glsl).
     pub fn binding_kinds(backend: Backend) -> Vec<BindingKind> {
         match backend {
             Backend::RayQuery => vec![BindingKind::AccelerationStructure],
-            Backend::Software | Backend::SoftwareWide => vec![BindingKind::StorageBuffer; 4],
+            Backend::Software | Backend::SoftwareWide => vec![BindingKind::StorageBuffer; 5],
         }
     }
 
@@ -401,7 +439,19 @@ impl TraceScene {
                     tris: t2,
                 },
                 None,
-            ) => TraceRefs::Software([g.import(nodes), g.import(tris), g.import(n2), g.import(t2)]),
+            ) => {
+                let addresses = self
+                    .addresses
+                    .as_ref()
+                    .expect("software levels have an address table");
+                TraceRefs::Software([
+                    g.import(nodes),
+                    g.import(tris),
+                    g.import(n2),
+                    g.import(t2),
+                    g.import(addresses),
+                ])
+            }
             _ => unreachable!("both levels are built for one backend"),
         }
     }

@@ -37,6 +37,9 @@ pub struct DeviceInfo {
     pub vulkan_version: String,
     pub ray_query_supported: bool,
     pub ray_query_enabled: bool,
+    /// Buffer device addresses (`bufferDeviceAddress`, core in Vulkan 1.2 and required
+    /// from 1.3) are on: the software trace backends read their BVHs through them.
+    pub buffer_device_address: bool,
     pub is_cpu: bool,
     pub timestamp_period_ns: f32,
     pub timestamps_supported: bool,
@@ -287,7 +290,7 @@ impl Context {
             device: device.clone(),
             physical_device: physical,
             debug_settings: Default::default(),
-            buffer_device_address: accel_enabled,
+            buffer_device_address: info.buffer_device_address,
             allocation_sizes: Default::default(),
         })?;
         let pool_info = vk::CommandPoolCreateInfo::default()
@@ -339,7 +342,7 @@ impl Context {
             device: owner.device.clone(),
             physical_device: owner.physical,
             debug_settings: Default::default(),
-            buffer_device_address: owner.accel.is_some(),
+            buffer_device_address: owner.info.buffer_device_address,
             allocation_sizes: Default::default(),
         })?;
         let pool_info = vk::CommandPoolCreateInfo::default()
@@ -426,15 +429,17 @@ impl Context {
         let mut rq_feat = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
         let mut as_feat = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
-        let ray_query_supported = rq_exts.iter().all(|e| has_ext(e)) && {
+        {
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12);
+            unsafe { instance.get_physical_device_features2(physical, &mut f2) };
+        }
+        let buffer_device_address = v12.buffer_device_address == vk::TRUE;
+        let ray_query_supported = buffer_device_address && rq_exts.iter().all(|e| has_ext(e)) && {
             let mut f2 = vk::PhysicalDeviceFeatures2::default()
                 .push_next(&mut rq_feat)
-                .push_next(&mut as_feat)
-                .push_next(&mut v12);
+                .push_next(&mut as_feat);
             unsafe { instance.get_physical_device_features2(physical, &mut f2) };
-            rq_feat.ray_query == vk::TRUE
-                && as_feat.acceleration_structure == vk::TRUE
-                && v12.buffer_device_address == vk::TRUE
+            rq_feat.ray_query == vk::TRUE && as_feat.acceleration_structure == vk::TRUE
         };
         let ray_query_enabled = opts.ray_query && ray_query_supported;
 
@@ -452,7 +457,7 @@ impl Context {
             .queue_priorities(&priorities)];
         let mut v12_on = vk::PhysicalDeviceVulkan12Features::default()
             .host_query_reset(true)
-            .buffer_device_address(ray_query_enabled);
+            .buffer_device_address(buffer_device_address);
         let mut rq_on = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let mut as_on = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
             .acceleration_structure(true);
@@ -478,6 +483,7 @@ impl Context {
             vulkan_version: version_string(props.api_version),
             ray_query_supported,
             ray_query_enabled,
+            buffer_device_address,
             is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,

@@ -98,7 +98,7 @@ impl Buffer {
         alignment: u64,
     ) -> Result<Buffer, VkError> {
         let size = size.max(4);
-        if !ctx.info.ray_query_enabled {
+        if !ctx.info.buffer_device_address {
             usage &= !vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
         }
         let info = vk::BufferCreateInfo::default()

@@ -30,6 +30,10 @@ pub enum VkError {
         "the ray-query backend was asked for but this device has no VK_KHR_ray_query / acceleration structures; use --accel software"
     )]
     RayQueryUnavailable,
+    #[error(
+        "the software trace backends read their BVHs through buffer device addresses, which this device does not offer (Vulkan 1.2 feature bufferDeviceAddress, required from Vulkan 1.3); use --accel ray-query"
+    )]
+    NoBufferDeviceAddress,
     #[error("buffer {0:?} is not host-visible")]
     NotMappable(String),
     /// The software backend's BVH cannot be traversed (src/trace/software_bvh.rs).
