@@ -38,6 +38,10 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         "ray query:       {}",
         if i.ray_query_supported { "yes" } else { "no" }
     );
+    println!(
+        "buffer addresses: {} (the software backends read their BVHs through them)",
+        if i.buffer_device_address { "yes" } else { "no" }
+    );
     println!("auto backend:    {} ({why})", auto.name());
     println!(
         "timestamps:      {} (period {} ns)",

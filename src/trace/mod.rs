@@ -490,3 +490,68 @@ pub fn scramble_multiplier(count: u32) -> u32 {
     }
     (m % count.max(1) as u64).max(1) as u32
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vk::DeviceInfo;
+
+    fn device(ray_query: bool, buffer_device_address: bool) -> DeviceInfo {
+        DeviceInfo {
+            name: "test device".into(),
+            device_type: "DISCRETE_GPU".into(),
+            driver_name: String::new(),
+            driver_info: String::new(),
+            vulkan_version: "1.2.0".into(),
+            ray_query_supported: ray_query,
+            ray_query_enabled: ray_query,
+            buffer_device_address,
+            is_cpu: false,
+            timestamp_period_ns: 1.0,
+            timestamps_supported: true,
+            queue_count: 1,
+            max_storage_buffer_range: u32::MAX,
+            max_workgroup_count: [65_535; 3],
+            memory_heaps: Vec::new(),
+            validation: false,
+        }
+    }
+
+    /// The software backends read their BVHs through buffer device addresses: a device
+    /// without them is refused by name for every choice that would pick one, and still
+    /// traces with its ray query.
+    #[test]
+    fn software_backends_need_buffer_device_addresses() {
+        let without = device(false, false);
+        for choice in [
+            AccelChoice::Auto,
+            AccelChoice::Software,
+            AccelChoice::SoftwareWide,
+        ] {
+            let e = resolve(choice, &without).unwrap_err();
+            assert!(
+                matches!(e, VkError::NoBufferDeviceAddress),
+                "{choice:?}: {e}"
+            );
+            assert!(e.to_string().contains("bufferDeviceAddress"), "{e}");
+        }
+        let with = device(false, true);
+        assert_eq!(
+            resolve(AccelChoice::Auto, &with).unwrap(),
+            Backend::SoftwareWide
+        );
+        assert_eq!(
+            resolve(AccelChoice::Software, &with).unwrap(),
+            Backend::Software
+        );
+        let rq = device(true, true);
+        assert_eq!(
+            resolve(AccelChoice::RayQuery, &rq).unwrap(),
+            Backend::RayQuery
+        );
+        assert!(matches!(
+            resolve(AccelChoice::RayQuery, &with).unwrap_err(),
+            VkError::RayQueryUnavailable
+        ));
+    }
+}
