@@ -518,8 +518,8 @@ mod tests {
     }
 
     /// The software backends read their BVHs through buffer device addresses: a device
-    /// without them is refused by name for every choice that would pick one, and still
-    /// traces with its ray query.
+    /// without them is refused by name for every choice that would pick one; with them
+    /// the choices resolve as before (ray query only where the device has it).
     #[test]
     fn software_backends_need_buffer_device_addresses() {
         let without = device(false, false);
