@@ -80,15 +80,18 @@ pub fn compile_cmd(a: CompileArgs) -> anyhow::Result<()> {
         ray_query: true,
     };
     let ctx = Context::new(&options)?;
-    let backends = match a.accel {
+    // Without --accel: every backend the device can run, as `resolve` decides it (ray
+    // query needs the extension, the software backends buffer device addresses).
+    let backends: Vec<Backend> = match a.accel {
         Some(choice) => vec![resolve(choice, &ctx.info)?],
-        None => {
-            let mut b = vec![Backend::Software, Backend::SoftwareWide];
-            if ctx.info.ray_query_enabled {
-                b.insert(0, Backend::RayQuery);
-            }
-            b
-        }
+        None => [
+            AccelChoice::RayQuery,
+            AccelChoice::Software,
+            AccelChoice::SoftwareWide,
+        ]
+        .into_iter()
+        .filter_map(|c| resolve(c, &ctx.info).ok())
+        .collect(),
     };
     let device = ctx.info.name.clone();
     drop(ctx);
