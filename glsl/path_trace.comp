@@ -1,4 +1,6 @@
 #version 460
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
 // object (materials per region: common/material.glsl), Lambertian table, lights (area
@@ -18,11 +20,29 @@
 
 layout(local_size_x = TILE, local_size_y = TILE) in;
 
-layout(std430, set = 0, binding = PT_GEOMETRY) readonly buffer Geometry { Tri tris[]; };
-layout(std430, set = 0, binding = PT_MATERIALS) readonly buffer Materials { uint mats[]; };
-layout(std430, set = 0, binding = PT_LIGHT_GEOMETRY) readonly buffer LightGeometry { Tri light_tris[]; };
-// Per light triangle: x: its emitter, y: float bits of the inclusive area CDF within it.
-layout(std430, set = 0, binding = PT_LIGHTS) readonly buffer Lights { uvec2 lights[]; };
+// The scene's buffers are read through their device addresses (PathTraceBinding's
+// Addresses in src/gpu_interface.in: one uvec2 per binding, in binding order; the
+// bindings stay bound so that the graph sees the reads): lavapipe (Mesa 25.0) loads a
+// storage buffer at a per-lane index one lane and one word at a time behind branches,
+// a buffer reference as one masked gather per word. Params, the sums, the label targets
+// and the pixel list stay storage buffers (read at a lane-uniform or consecutive index).
+layout(std430, set = 0, binding = PT_ADDRESSES) readonly buffer Addresses { uvec2 pt_addr[]; };
+#define PT_ADDR(b) pt_addr[(b) - TRACE_BINDING_COUNT]
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TriRef { Tri v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer UintRef { uint v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Uvec2Ref { uvec2 v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatRef { float v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MapHeaderRef { MapHeader v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer CurvedMapRef { CurvedMapBlock v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SurfaceRef { SurfaceBlock v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightBlockRef { LightBlock v[]; };
+// Geometry: the object's triangles (Tri), Materials: their material words,
+// LightGeometry: the view's light triangles (Tri), Lights: per light triangle, x its
+// emitter, y float bits of the inclusive area CDF within it.
+#define OBJECT_TRIS TriRef(PT_ADDR(PT_GEOMETRY)).v
+#define LIGHT_TRIS TriRef(PT_ADDR(PT_LIGHT_GEOMETRY)).v
+#define MATERIAL_WORDS UintRef(PT_ADDR(PT_MATERIALS)).v
+#define LIGHT_TRI_WORDS Uvec2Ref(PT_ADDR(PT_LIGHTS)).v
 #include "common/ggx.glsl"
 
 // See PathParams in src/gpu_interface.in.
@@ -37,8 +57,9 @@ layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
 // NOISE_OFF: a placeholder of one float, never written.
 layout(std430, set = 0, binding = PT_NOISE_SUMS) buffer NoiseSums { float noise_sums[]; };
 // Labels from the path tracer's own samples (pc.labels = n != 0): the per-triangle label
-// words (face | class << 8 | instance << 16, as annotate.comp reads them) and the
-// annotation targets; otherwise one-word placeholders never written.
+// words (face | class << 8 | instance << 16, as annotate.comp reads them; declared for
+// their count, read through their address) and the annotation targets; otherwise
+// one-word placeholders never written.
 layout(std430, set = 0, binding = PT_LABEL_WORDS) readonly buffer LabelWords { uint label_words[]; };
 layout(std430, set = 0, binding = PT_LABEL_IDS) writeonly buffer LabelIds { uint label_ids[]; };
 layout(std430, set = 0, binding = PT_LABEL_COVERAGE) writeonly buffer LabelCoverage { float label_coverage_out[]; };
@@ -51,16 +72,13 @@ layout(std430, set = 0, binding = PT_PIXEL_LIST) readonly buffer PixelList { uin
 // planar region r of the object; see src/render/slope.rs. MapHeader: origin (xyz map
 // centre, world mm; w texels per mm), axis_x (map x axis), axis_up (map up axis, -y),
 // dims (width, height, first texel, buffer + 1 | MAP_WRAP; 0 = no map).
-layout(std430, set = 0, binding = PT_MAP_HEADERS) readonly buffer MapHeaders { MapHeader map_headers[]; };
-// Texels of up to three distinct maps, one buffer each: two f16 slopes [dh/dx, dh/dy]
-// per uint.
-layout(std430, set = 0, binding = PT_SLOPES0) readonly buffer Slopes0 { uint slopes0[]; };
-layout(std430, set = 0, binding = PT_SLOPES1) readonly buffer Slopes1 { uint slopes1[]; };
-layout(std430, set = 0, binding = PT_SLOPES2) readonly buffer Slopes2 { uint slopes2[]; };
+#define MAP_HEADERS MapHeaderRef(PT_ADDR(PT_MAP_HEADERS)).v
+// Texels of up to three distinct maps, one buffer each (Slopes0-2): two f16 slopes
+// [dh/dx, dh/dy] per uint.
 
 // Curved patches' projections (MAP_REVOLVED slots), one per slot; see
 // src/scene/curved.rs and CurvedMapBlock in src/gpu_interface.in.
-layout(std430, set = 0, binding = PT_CURVED_MAPS) readonly buffer CurvedMaps { CurvedMapBlock curved_maps[]; };
+#define CURVED_MAPS CurvedMapRef(PT_ADDR(PT_CURVED_MAPS)).v
 
 // Map-plane coordinates of p (mm along the map's x and up axes from its centre): the
 // planar projection, or on a curved patch u = arc radius * theta about the axis and v
@@ -68,7 +86,7 @@ layout(std430, set = 0, binding = PT_CURVED_MAPS) readonly buffer CurvedMaps { C
 vec2 map_plane(uint slot, MapHeader m, vec3 p) {
     vec3 d = p - m.origin.xyz;
     if ((m.dims.w & MAP_REVOLVED) == 0u) return vec2(dot(d, m.axis_x.xyz), dot(d, m.axis_up.xyz));
-    CurvedMapBlock c = curved_maps[slot];
+    CurvedMapBlock c = CURVED_MAPS[slot];
     vec3 a = m.axis_up.xyz;
     float h = dot(d, a);
     vec3 r = d - h * a;
@@ -83,7 +101,7 @@ void map_axes(uint slot, MapHeader m, vec3 p, out vec3 ax, out vec3 up) {
     ax = m.axis_x.xyz;
     up = m.axis_up.xyz;
     if ((m.dims.w & MAP_REVOLVED) != 0u) {
-        CurvedMapBlock c = curved_maps[slot];
+        CurvedMapBlock c = CURVED_MAPS[slot];
         vec3 d = p - m.origin.xyz;
         vec3 r = d - dot(d, up) * up;
         float rl = length(r);
@@ -94,11 +112,8 @@ void map_axes(uint slot, MapHeader m, vec3 p, out vec3 ax, out vec3 up) {
 }
 
 vec2 slope_texel(uint buf, uint i) {
-    uint w;
-    if (buf == 1u) w = slopes0[i];
-    else if (buf == 2u) w = slopes1[i];
-    else w = slopes2[i];
-    return unpackHalf2x16(w);
+    uvec2 a = buf == 1u ? PT_ADDR(PT_SLOPES0) : buf == 2u ? PT_ADDR(PT_SLOPES1) : PT_ADDR(PT_SLOPES2);
+    return unpackHalf2x16(UintRef(a).v[i]);
 }
 
 layout(push_constant) uniform Push { PathPush pc; };
@@ -114,10 +129,10 @@ float power_heuristic(float a, float b) {
 Tri fetch_tri(uint prim) {
     Tri t;
     if (prim < prm.light_first) {
-        t.a = tris[prim].a; t.b = tris[prim].b; t.c = tris[prim].c;
+        t.a = OBJECT_TRIS[prim].a; t.b = OBJECT_TRIS[prim].b; t.c = OBJECT_TRIS[prim].c;
     } else {
         uint k = prim - prm.light_first;
-        t.a = light_tris[k].a; t.b = light_tris[k].b; t.c = light_tris[k].c;
+        t.a = LIGHT_TRIS[k].a; t.b = LIGHT_TRIS[k].b; t.c = LIGHT_TRIS[k].c;
     }
     return t;
 }
@@ -125,7 +140,7 @@ Tri fetch_tri(uint prim) {
 // Material in the low byte, slope-map slot above it (MAT_MAP_SHIFT); light triangles are
 // MAT_LIGHT.
 uint mat_word(uint prim) {
-    return prim < prm.light_first ? mats[prim] : MAT_LIGHT;
+    return prim < prm.light_first ? MATERIAL_WORDS[prim] : MAT_LIGHT;
 }
 
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
@@ -181,7 +196,7 @@ vec2 slopes_at(MapHeader m, vec2 q) {
 
 // Bilinear slopes at p on a planar or revolved slot (zero without a map).
 vec2 map_slopes(uint slot, vec3 p) {
-    MapHeader m = map_headers[slot];
+    MapHeader m = MAP_HEADERS[slot];
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return vec2(0.0);
     return slopes_at(m, map_plane(slot, m, p));
 }
@@ -200,8 +215,8 @@ vec3 oct_decode(float code) {
 
 // The smooth normal of an object triangle of a triplanar patch at barycentrics bary.
 vec3 smooth_normal(uint prim, vec2 bary) {
-    vec3 n = oct_decode(tris[prim].a.w) * (1.0 - bary.x - bary.y)
-        + oct_decode(tris[prim].b.w) * bary.x + oct_decode(tris[prim].c.w) * bary.y;
+    vec3 n = oct_decode(OBJECT_TRIS[prim].a.w) * (1.0 - bary.x - bary.y)
+        + oct_decode(OBJECT_TRIS[prim].b.w) * bary.x + oct_decode(OBJECT_TRIS[prim].c.w) * bary.y;
     float l = length(n);
     return l > 0.0 ? n / l : n;
 }
@@ -226,7 +241,7 @@ vec3 triplanar_normal(uint slot, MapHeader m, vec3 p, vec3 ng, vec3 ns) {
     float sum = w.x + w.y + w.z;
     w = sum > 0.0 ? w / sum : vec3(0.0, 0.0, 1.0);
     vec3 d = p - m.origin.xyz;
-    vec2 place = curved_maps[slot].place.xy;
+    vec2 place = CURVED_MAPS[slot].place.xy;
     vec3 delta = vec3(0.0);
     for (uint k = 0u; k < 3u; k++) {
         float wk = k == 0u ? w.x : k == 1u ? w.y : w.z;
@@ -250,7 +265,7 @@ vec3 triplanar_normal(uint slot, MapHeader m, vec3 p, vec3 ng, vec3 ns) {
 // projected into the triangle's plane, so triangles that are not coplanar with the
 // region (defect patches given to it) still get a normal in their own hemisphere.
 vec3 shading_normal(uint slot, vec3 p, vec3 ng, uint prim, vec2 bary) {
-    MapHeader m = map_headers[slot];
+    MapHeader m = MAP_HEADERS[slot];
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
     if ((m.dims.w & MAP_TRIPLANAR) != 0u) {
         return triplanar_normal(slot, m, p, ng, smooth_normal(prim, bary));
@@ -273,14 +288,10 @@ vec3 shading_normal(uint slot, vec3 p, vec3 ng, uint prim, vec2 bary) {
 // maps"; CPU mirror: lookup_lean in src/render/slope.rs). Per map a pyramid of slope
 // moments, levels 1 up to 1 x 1 (level k: ceil(w / 2^k) x ceil(h / 2^k) texels), three
 // uints a texel: f16 [mean dh/dx, mean dh/dy], [var dh/dx, var dh/dy], [cov, 0].
-layout(std430, set = 0, binding = PT_MOMENTS0) readonly buffer Moments0 { uint moments0[]; };
-layout(std430, set = 0, binding = PT_MOMENTS1) readonly buffer Moments1 { uint moments1[]; };
-layout(std430, set = 0, binding = PT_MOMENTS2) readonly buffer Moments2 { uint moments2[]; };
-
+// (Moments0-2, one buffer per map as the slopes.)
 uint moment_word(uint buf, uint i) {
-    if (buf == 1u) return moments0[i];
-    if (buf == 2u) return moments1[i];
-    return moments2[i];
+    uvec2 a = buf == 1u ? PT_ADDR(PT_MOMENTS0) : buf == 2u ? PT_ADDR(PT_MOMENTS1) : PT_ADDR(PT_MOMENTS2);
+    return UintRef(a).v[i];
 }
 
 // Smallest |cos| between the primary ray and the surface in the footprint.
@@ -296,7 +307,7 @@ uint lean_top(MapHeader m) {
 bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
     mean = vec2(0.0);
     var = 0.0;
-    MapHeader m = map_headers[slot];
+    MapHeader m = MAP_HEADERS[slot];
     uint buf = m.dims.w & MAP_BUFFER_MASK;
     uint w = (m.dims.x + (1u << k) - 1u) >> k;
     uint ht = (m.dims.y + (1u << k) - 1u) >> k;
@@ -356,7 +367,7 @@ bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
 vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
     var = 0.0;
     vec2 m0 = map_slopes(slot, p);
-    MapHeader m = map_headers[slot];
+    MapHeader m = MAP_HEADERS[slot];
     uint top = lean_top(m);
     if (!(lambda > 0.0) || top == 0u) return m0;
     float l = min(lambda, float(top));
@@ -394,7 +405,7 @@ vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
 // variance under the footprint (0 where the map does not apply).
 vec3 shading_normal_lean(uint slot, vec3 p, vec3 ng, float lambda, out float var) {
     var = 0.0;
-    MapHeader m = map_headers[slot];
+    MapHeader m = MAP_HEADERS[slot];
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
     if (dot(cross(m.axis_x.xyz, m.axis_up.xyz), ng) <= 0.0) return ng;
     vec2 s = lean_slopes(slot, p, lambda, var);
@@ -431,7 +442,7 @@ vec3 surface_normal(Hit h, vec3 d, vec3 p, vec3 ng, uint word, uint depth, inout
     uint mat = word & 0xffu;
     uint slot = (word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK;
     if (mat == MAT_TABLE || slot == 0u || ((word & MAT_LABELLED) == 0u
-            && (map_headers[slot].dims.w & MAP_LABELLED_ONLY) != 0u)) {
+            && (MAP_HEADERS[slot].dims.w & MAP_LABELLED_ONLY) != 0u)) {
         return ng;
     }
     // LEAN at the primary hit: footprint = the pixel cone's width at the hit (its angle
@@ -440,10 +451,10 @@ vec3 surface_normal(Hit h, vec3 d, vec3 p, vec3 ng, uint word, uint depth, inout
     // done: lean_level uses the planar projection).
     float lambda = 0.0;
     if (prm.texture_filter == FILTER_LEAN && depth == 0u
-            && (map_headers[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
+            && (MAP_HEADERS[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
         float c = max(dot(d, prm.cam.forward.xyz), 0.1);
         float width = prm.pixel_angle * c * sqrt(c) * h.t / max(abs(dot(ng, d)), LEAN_MIN_COS);
-        lambda = log2(width * map_headers[slot].origin.w * prm.filter_scale);
+        lambda = log2(width * MAP_HEADERS[slot].origin.w * prm.filter_scale);
     }
     if (lambda > 0.0) {
         float var;
@@ -527,9 +538,9 @@ void pixel_plane_init(uint px, uint py) {
     Hit h = trace(o, d, 0.0, 3.0e38);
     if (h.prim == NO_HIT) return;
     if (h.prim < prm.light_first) {
-        pix_hint.a = tris[h.prim].a.xyz;
-        pix_hint.b = tris[h.prim].b.xyz;
-        pix_hint.c = tris[h.prim].c.xyz;
+        pix_hint.a = OBJECT_TRIS[h.prim].a.xyz;
+        pix_hint.b = OBJECT_TRIS[h.prim].b.xyz;
+        pix_hint.c = OBJECT_TRIS[h.prim].c.xyz;
         pix_hint.prim = h.prim;
     }
     uint word = mat_word(h.prim);
@@ -611,7 +622,7 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
     if (k >= 32u || (mask & (1u << k)) == 0u) return 0.0;
     float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
     if (!(cos_l > 0.0)) return 0.0;
-    return emitters[k].emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
+    return EMITTERS[k].emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
         / float(max(prm.bsdf_samples, 1u));
 }
 
@@ -657,7 +668,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         if (stop) break;
         if (want_label && depth == 0u && h.prim != NO_HIT
                 && h.prim < uint(label_words.length())) {
-            label_word = label_words[h.prim];
+            label_word = UintRef(PT_ADDR(PT_LABEL_WORDS)).v[h.prim];
         }
         if (label_only) return 0.0;
         if (h.prim == NO_HIT) break;   // no environment light
@@ -710,7 +721,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         for (uint k = 0u; k < nl && prm.emitter_count > 0u; k++) {
             float ue = sample_1d(rng);
             uint ei = choose_emitter(ue);
-            LightBlock e = emitters[ei];
+            LightBlock e = EMITTERS[ei];
             vec2 ul = sample_2d(rng);
             // The sample's shadow ray (one trace for both kinds of light, below) and what
             // it adds where nothing blocks it.

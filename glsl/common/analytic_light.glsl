@@ -352,7 +352,7 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
 // the ring's bounding cone and farthest distance): where these hold, the light triangle
 // a ray meets first with occluders ignored is the ring's where the ray meets the ring.
 bool ring_cv_valid(uint k, vec3 x) {
-    LightBlock e = emitters[k];
+    LightBlock e = EMITTERS[k];
     vec3 d = e.pos.xyz - x;
     float big_r = e.pos.w, r = e.dir.w;
     float h = abs(dot(e.dir.xyz, d));
@@ -365,7 +365,7 @@ bool ring_cv_valid(uint k, vec3 x) {
     float far_k = dist + big_r + r;
     float cone_k = asin(sin_k);
     for (uint j = 0u; j < prm.emitter_count; j++) {
-        LightBlock o = emitters[j];
+        LightBlock o = EMITTERS[j];
         if (j == k || o.reach.y < 0.0) continue;   // itself, or a spot (nothing to hit)
         vec3 dj = o.pos.xyz - x;
         float lj = length(dj);
@@ -390,7 +390,7 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
     mask = 0u;
     float a = 0.0;
     for (uint k = 0u; k < min(prm.emitter_count, 32u); k++) {
-        LightBlock e = emitters[k];
+        LightBlock e = EMITTERS[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;
         float integral = ring_integral(e, l, x, ns, ng, divisor, -1, ok);
@@ -427,7 +427,7 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
     unused.t1 = unused.t2 = unused.r = ng;
     unused.a1 = unused.a2 = unused.c = 1.0;
     for (uint k = 0u; k < min(prm.emitter_count, 32u) && rec_rings < REC_RINGS; k++) {
-        LightBlock e = emitters[k];
+        LightBlock e = EMITTERS[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;
         ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ok);

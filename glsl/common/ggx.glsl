@@ -75,8 +75,10 @@ vec3 cosine_hemisphere(float u1, float u2) {
 #ifndef PT_ENERGY
 #error "include interface.glsl (after trace.glsl) before ggx.glsl"
 #endif
-layout(std430, set = 0, binding = PT_ENERGY) readonly buffer Energy { float energy_table[]; };
-float energy_at(uint i) { return energy_table[i]; }
+#ifndef PT_ADDR
+#error "ggx.glsl reads the Energy binding through path_trace.comp's PT_ADDR"
+#endif
+float energy_at(uint i) { return FloatRef(PT_ADDR(PT_ENERGY)).v[i]; }
 
 void energy_alpha_coord(float alpha, out uint j0, out float f) {
     float x = min(clamp(alpha, 0.0, 1.0) * float(ENERGY_N - 1), float(ENERGY_N - 1));

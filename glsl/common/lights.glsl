@@ -1,46 +1,47 @@
 // The scene's lights for path_trace.comp (docs/rendering.md, "Lights"). Included after
 // the Params, Lights and LightGeometry buffers and fetch_tri / tri_normal.
 //
-// `emitters[e]` (LightBlock, src/gpu_interface.in) describes light e: its triangles
+// `EMITTERS[e]` (LightBlock, src/gpu_interface.in) describes light e: its triangles
 // (shape.x: first light triangle, counted from prm.light_first; shape.y: how many),
 // shape.z its sampling (LIGHT_UNIFORM: by area; LIGHT_FACING: ring segments, shape.w of
 // them; LIGHT_SPOT: a point light, no triangles), emit.x its radiance (area light) or
 // intensity times 1e6 mm^2/m^2 (spot), emit.y its area (mm^2), emit.w the inclusive CDF
 // of choosing it (by power); pos / dir the spot's position and axis, w: cos of the cone
-// edge and of the inner edge of the soft falloff. `lights[k]`: emitter of light triangle
+// edge and of the inner edge of the soft falloff. `LIGHT_TRI_WORDS[k]`: emitter of light triangle
 // k (x) and the inclusive area CDF of k within its emitter (y, float bits).
 
-layout(std430, set = 0, binding = PT_LIGHT_LIST) readonly buffer LightList { LightBlock emitters[]; };
+// (LightList, read through its address as path_trace.comp's other buffers.)
+#define EMITTERS LightBlockRef(PT_ADDR(PT_LIGHT_LIST)).v
 
 // Probability of choosing emitter e.
 float emitter_pdf(uint e) {
-    float lo = e == 0u ? 0.0 : emitters[e - 1u].emit.w;
-    return emitters[e].emit.w - lo;
+    float lo = e == 0u ? 0.0 : EMITTERS[e - 1u].emit.w;
+    return EMITTERS[e].emit.w - lo;
 }
 
 // Chooses an emitter with u in [0, 1) by the CDF and rescales u to [0, 1) within the
 // chosen interval (one light: u unchanged).
 uint choose_emitter(inout float u) {
     uint e = 0u;
-    while (e + 1u < prm.emitter_count && !(u < emitters[e].emit.w)) e++;
-    float lo = e == 0u ? 0.0 : emitters[e - 1u].emit.w;
-    float p = emitters[e].emit.w - lo;
+    while (e + 1u < prm.emitter_count && !(u < EMITTERS[e].emit.w)) e++;
+    float lo = e == 0u ? 0.0 : EMITTERS[e - 1u].emit.w;
+    float p = EMITTERS[e].emit.w - lo;
     if (p > 0.0) u = clamp((u - lo) / p, 0.0, 0.99999994);
     return e;
 }
 
 // Emitter of scene triangle `tri` (a light triangle).
-uint emitter_of(uint tri) { return lights[tri - prm.light_first].x; }
+uint emitter_of(uint tri) { return LIGHT_TRI_WORDS[tri - prm.light_first].x; }
 
 // Radiance of light triangle `tri`.
-float tri_radiance(uint tri) { return emitters[emitter_of(tri)].emit.x; }
+float tri_radiance(uint tri) { return EMITTERS[emitter_of(tri)].emit.x; }
 
 // A triangle of area light e by area, from its CDF.
 uint pick_area_tri(LightBlock e, float u) {
     uint lo = e.shape.x, hi = e.shape.x + e.shape.y - 1u;
     while (lo < hi) {
         uint mid = (lo + hi) / 2u;
-        if (u < uintBitsToFloat(lights[mid].y)) hi = mid; else lo = mid + 1u;
+        if (u < uintBitsToFloat(LIGHT_TRI_WORDS[mid].y)) hi = mid; else lo = mid + 1u;
     }
     return prm.light_first + lo;
 }
@@ -101,7 +102,7 @@ float segment_weight_memo(uint base, uint segment_tris, vec3 x, vec3 n) {
 float light_area_pdf(uint tri, vec3 x, vec3 n) {
     if (tri < prm.light_first) return 0.0;
     uint ei = emitter_of(tri);
-    LightBlock e = emitters[ei];
+    LightBlock e = EMITTERS[ei];
     float sel = emitter_pdf(ei);
     if (e.shape.z != LIGHT_FACING) return (1.0 / e.emit.y) * sel;
     uint segments = e.shape.w;

@@ -9,7 +9,9 @@
 #error "include interface.glsl before material.glsl"
 #endif
 
-layout(std430, set = 0, binding = PT_SURFACES) readonly buffer Surfaces { SurfaceBlock surfaces[]; };
+#ifndef PT_ADDR
+#error "material.glsl reads the Surfaces binding through path_trace.comp's PT_ADDR"
+#endif
 
 struct Surface {
     bool diffuse;    // Lambertian with `albedo`; else the conductor `c`
@@ -26,7 +28,7 @@ Surface surface_of(uint mat, Conductor object) {
     s.albedo = prm.table_albedo;
     s.c = object;
     if (mat >= MAT_REGION_FIRST) {
-        SurfaceBlock b = surfaces[mat - MAT_REGION_FIRST];
+        SurfaceBlock b = SurfaceRef(PT_ADDR(PT_SURFACES)).v[mat - MAT_REGION_FIRST];
         s.diffuse = b.kind == SURFACE_DIFFUSE;
         s.albedo = b.albedo;
         s.c.alpha = clamp(b.alpha, 1e-4, 1.0);

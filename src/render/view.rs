@@ -66,6 +66,18 @@ fn group_chunks(groups: u32, max_groups: u32) -> impl Iterator<Item = (u32, u32)
         .map(move |base| (base, max.min(groups - base)))
 }
 
+/// The path tracer's address table (`PathTraceBinding::Addresses`): per binding, in
+/// binding order, the device address of the buffer given for it as two u32 (low, high),
+/// zero for the bindings not given (those the shader reads as storage buffers).
+fn address_table(buffers: &[(B, &Buffer)]) -> Vec<[u32; 2]> {
+    let mut table = vec![[0u32; 2]; B::COUNT];
+    for &(binding, buffer) in buffers {
+        let a = buffer.device_address();
+        table[binding as usize] = [a as u32, (a >> 32) as u32];
+    }
+    table
+}
+
 /// The camera as the shaders take it.
 pub fn camera_block(cam: &Camera) -> crate::gpu_interface::CameraBlock {
     crate::gpu_interface::CameraBlock {
@@ -110,6 +122,9 @@ pub struct View<'s> {
     tiling: Tiling,
     /// (sampler kind, seed) of the path tracer, which the thin-lens annotation follows.
     sampling: (u32, u32),
+    /// The device addresses the path tracer reads the scene's buffers through
+    /// (`PathTraceBinding::Addresses`, [`address_table`]).
+    addresses: Buffer,
 }
 
 impl<'s> View<'s> {
@@ -195,11 +210,35 @@ impl<'s> View<'s> {
         );
         let usage = storage | vk::BufferUsageFlags::TRANSFER_DST;
         let n = width as u64 * height as u64;
+        let lights = Buffer::from_slice(ctx, "lights", &light_words, storage)?;
+        let emitters = Buffer::from_slice(ctx, "light list", &blocks, storage)?;
+        let (headers, texels) = scene.map_buffers();
+        let moments = scene.moment_buffers();
+        let table = address_table(&[
+            (B::Geometry, trace.shade_tris()),
+            (B::Materials, &scene.materials),
+            (B::Lights, &lights),
+            (B::Energy, &tracer.energy),
+            (B::MapHeaders, headers),
+            (B::Slopes0, &texels[0]),
+            (B::Slopes1, &texels[1]),
+            (B::Slopes2, &texels[2]),
+            (B::LightGeometry, trace.second_shade_tris()),
+            (B::LightList, &emitters),
+            (B::Surfaces, &scene.surfaces),
+            (B::CurvedMaps, scene.curved_buffer()),
+            (B::Moments0, &moments[0]),
+            (B::Moments1, &moments[1]),
+            (B::Moments2, &moments[2]),
+            (B::LabelWords, &scene.labels),
+        ]);
+        let addresses = Buffer::from_slice(ctx, "path tracer addresses", &table, storage)?;
         Ok(View {
             scene,
             trace,
-            lights: Buffer::from_slice(ctx, "lights", &light_words, storage)?,
-            emitters: Buffer::from_slice(ctx, "light list", &blocks, storage)?,
+            lights,
+            emitters,
+            addresses,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
             noise_sums: {
@@ -326,6 +365,7 @@ impl<'s> View<'s> {
             )
         });
         let list = g.import(&self.pixel_list.0);
+        let addr = g.import(&self.addresses);
         let pixel_count = if start == 0 { 0 } else { self.pixel_list.1 };
         let dispatches: Vec<(TileBlock, u32)> = if pixel_count == 0 {
             self.tiling.dispatches().collect()
@@ -363,6 +403,7 @@ impl<'s> View<'s> {
                 .write(B::LabelIds.at(off), &mut ids)
                 .write(B::LabelCoverage.at(off), &mut cov)
                 .read(B::PixelList.at(off), &list)
+                .read(B::Addresses.at(off), &addr)
                 .push(&push)
                 .submit();
         }

@@ -98,8 +98,12 @@ impl Buffer {
         alignment: u64,
     ) -> Result<Buffer, VkError> {
         let size = size.max(4);
+        // Every storage buffer has a device address where the device offers them: the
+        // software traversal and the path tracer read theirs through it.
         if !ctx.info.buffer_device_address {
             usage &= !vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
+        } else if usage.contains(vk::BufferUsageFlags::STORAGE_BUFFER) {
+            usage |= vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
         }
         let info = vk::BufferCreateInfo::default()
             .size(size)
