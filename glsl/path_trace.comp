@@ -36,6 +36,7 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Ma
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer CurvedMapRef { CurvedMapBlock v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SurfaceRef { SurfaceBlock v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightBlockRef { LightBlock v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightTriRef { LightTri v[]; };
 // Geometry: the object's triangles (Tri), Materials: their material words,
 // LightGeometry: the view's light triangles (Tri), Lights: per light triangle, x its
 // emitter, y float bits of the inclusive area CDF within it.
@@ -43,6 +44,8 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Li
 #define LIGHT_TRIS TriRef(PT_ADDR(PT_LIGHT_GEOMETRY)).v
 #define MATERIAL_WORDS UintRef(PT_ADDR(PT_MATERIALS)).v
 #define LIGHT_TRI_WORDS Uvec2Ref(PT_ADDR(PT_LIGHTS)).v
+// LightWeights: per light triangle its centroid, twice its area and unit normal (LightTri).
+#define LIGHT_TRI_WEIGHTS LightTriRef(PT_ADDR(PT_LIGHT_WEIGHTS)).v
 #include "common/ggx.glsl"
 
 // See PathParams in src/gpu_interface.in.

@@ -94,10 +94,12 @@ mod tests {
         assert_eq!(std::mem::size_of::<PathPush>(), 32);
         // Push constants: 128 bytes is all Vulkan guarantees.
         assert_eq!(std::mem::size_of::<ImagePush>(), 128);
-        assert_eq!(PathTraceBinding::COUNT, 23);
+        assert_eq!(PathTraceBinding::COUNT, 24);
         assert_eq!(PathTraceBinding::LabelCoverage.at(2), 22);
         assert_eq!(PathTraceBinding::PixelList.at(2), 23);
-        assert_eq!(PathTraceBinding::Addresses.at(2), 24);
+        assert_eq!(PathTraceBinding::LightWeights.at(2), 24);
+        assert_eq!(PathTraceBinding::Addresses.at(2), 25);
+        assert_eq!(std::mem::size_of::<LightTri>(), 32);
         assert_eq!(std::mem::offset_of!(PathPush, pixel_count), 12);
         assert_eq!(std::mem::offset_of!(PathPush, labels), 8);
         assert_eq!(PathTraceBinding::NoiseSums.at(2), 19);

@@ -486,7 +486,8 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     vec3 prev0 = first0, prev1 = first1;
     float sum0 = 0.0, sum1 = 0.0;
     bool ab0 = first0.z > 0.0, ab1 = first1.z > 0.0;
-    for (uint j = 1u; j < rec_n[i]; j++) {
+    uint n = rec_n[i];
+    for (uint j = 1u; j < n; j++) {
         w = rec_w[base + j];
         vec3 v0 = recorded_point(w, t10, t20, l0.r);
         vec3 v1 = recorded_point(w, t11, t21, l1.r);

@@ -1,5 +1,6 @@
 // The scene's lights for path_trace.comp (docs/rendering.md, "Lights"). Included after
-// the Params, Lights and LightGeometry buffers and fetch_tri / tri_normal.
+// the Params block, the Lights, LightGeometry and LightWeights addresses and fetch_tri /
+// tri_normal.
 //
 // `EMITTERS[e]` (LightBlock, src/gpu_interface.in) describes light e: its triangles
 // (shape.x: first light triangle, counted from prm.light_first; shape.y: how many),
@@ -50,16 +51,18 @@ uint pick_area_tri(LightBlock e, float u) {
 // estimate of its contribution from the centroid: area cos_l cos_x / d^2, each cosine
 // floored at 0.05 so every triangle keeps a non-zero probability (unbiased even where
 // the centroid faces away but part of the triangle does not).
+// The triangle's centroid, area and unit normal come made per view (LightTri: 7 words
+// read where its corners are 9, no cross product or square root per weight; the same
+// weights to float rounding, docs/benchmarks/rendering.md, "The path tracer's buffers
+// through device addresses").
 float light_weight(uint tri, vec3 x, vec3 n) {
-    Tri lt = fetch_tri(tri);
-    vec3 nl = tri_normal(lt);
-    float area2 = length(nl);
-    vec3 to = (lt.a.xyz + lt.b.xyz + lt.c.xyz) * (1.0 / 3.0) - x;
+    LightTri lt = LIGHT_TRI_WEIGHTS[tri - prm.light_first];
+    vec3 to = lt.center.xyz - x;
     float d2 = max(dot(to, to), 1e-12);
     vec3 w = to * inversesqrt(d2);
-    float cl = max(-dot(nl, w) / area2, 0.0) + 0.05;
+    float cl = max(-dot(lt.normal.xyz, w), 0.0) + 0.05;
     float cx = max(dot(n, w), 0.0) + 0.05;
-    return area2 * cl * cx / d2;
+    return lt.center.w * cl * cx / d2;
 }
 
 // Sum of the weights of one ring segment's triangles (segment_tris each, from `base`).

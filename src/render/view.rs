@@ -11,14 +11,14 @@ use super::noise::{NoiseEstimator, PixelSamples, mean_image, noise_floats_per_pi
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
-    LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, NOISE_HALVES, NOISE_OFF, NOISE_SQUARES,
-    PathParams, PathPush, PathTraceBinding as B, TILE, TileBlock,
+    LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, LightTri, NOISE_HALVES, NOISE_OFF,
+    NOISE_SQUARES, PathParams, PathPush, PathTraceBinding as B, TILE, TileBlock,
 };
 use crate::graph::Graph;
 use crate::scene::Camera;
 use crate::scene::assemble::{EmitterSampling, LightGeometry, ViewSetup};
 use crate::scene::lights::MM2_PER_M2;
-use crate::trace::{TraceScene, scramble_multiplier};
+use crate::trace::{TraceScene, TriangleSoup, scramble_multiplier};
 use crate::vk::{Buffer, MemoryKind, Profiler};
 
 /// The image's tiles and how many dispatches cover them (a device allows only so many
@@ -101,6 +101,8 @@ pub struct View<'s> {
     scene: &'s GpuScene,
     trace: TraceScene,
     lights: Buffer,
+    /// Per light triangle, what the facing sampler's weight takes ([`light_tri_blocks`]).
+    light_weights: Buffer,
     emitters: Buffer,
     params: Buffer,
     accum: Buffer,
@@ -212,6 +214,12 @@ impl<'s> View<'s> {
         let n = width as u64 * height as u64;
         let lights = Buffer::from_slice(ctx, "lights", &light_words, storage)?;
         let emitters = Buffer::from_slice(ctx, "light list", &blocks, storage)?;
+        let light_weights = Buffer::from_slice(
+            ctx,
+            "light triangle weights",
+            &light_tri_blocks(&light.tris),
+            storage,
+        )?;
         let (headers, texels) = scene.map_buffers();
         let moments = scene.moment_buffers();
         let table = address_table(&[
@@ -231,12 +239,14 @@ impl<'s> View<'s> {
             (B::Moments1, &moments[1]),
             (B::Moments2, &moments[2]),
             (B::LabelWords, &scene.labels),
+            (B::LightWeights, &light_weights),
         ]);
         let addresses = Buffer::from_slice(ctx, "path tracer addresses", &table, storage)?;
         Ok(View {
             scene,
             trace,
             lights,
+            light_weights,
             emitters,
             addresses,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
@@ -366,6 +376,7 @@ impl<'s> View<'s> {
         });
         let list = g.import(&self.pixel_list.0);
         let addr = g.import(&self.addresses);
+        let weights = g.import(&self.light_weights);
         let pixel_count = if start == 0 { 0 } else { self.pixel_list.1 };
         let dispatches: Vec<(TileBlock, u32)> = if pixel_count == 0 {
             self.tiling.dispatches().collect()
@@ -403,6 +414,7 @@ impl<'s> View<'s> {
                 .write(B::LabelIds.at(off), &mut ids)
                 .write(B::LabelCoverage.at(off), &mut cov)
                 .read(B::PixelList.at(off), &list)
+                .read(B::LightWeights.at(off), &weights)
                 .read(B::Addresses.at(off), &addr)
                 .push(&push)
                 .submit();
@@ -518,6 +530,32 @@ pub fn pixel_angle(cam: &Camera) -> f32 {
 
 /// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,
 /// `View::new` turns next-event estimation off (as it always was for zero radiance).
+/// Per light triangle (`LightGeometry::tris`, in the order the shader numbers them from
+/// `first`): its centroid, twice its area and its unit normal (`LightTri`), what
+/// glsl/common/lights.glsl `light_weight` takes; one zero block when there is none (a
+/// binding may not be empty; never read).
+fn light_tri_blocks(tris: &TriangleSoup) -> Vec<LightTri> {
+    let p = &tris.positions;
+    let mut blocks: Vec<LightTri> = tris
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| p[i as usize]);
+            let n = (b - a).cross(c - a);
+            let area2 = n.length();
+            let unit = if area2 > 0.0 { n / area2 } else { n * 0.0 };
+            LightTri {
+                center: ((a + b + c) * (1.0 / 3.0)).extend(area2).into(),
+                normal: unit.extend(0.0).into(),
+            }
+        })
+        .collect();
+    if blocks.is_empty() {
+        blocks.push(LightTri::default());
+    }
+    blocks
+}
+
 fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
     let sel = light.selection();
     // Inclusive CDF; from the last light that can be chosen on, exactly 1.
@@ -577,4 +615,40 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// The facing sampler's per-triangle data: the corners' mean, twice the area and the
+    /// unit normal of cross(b - a, c - a); a degenerate triangle weighs nothing (zero
+    /// area, zero normal), and no triangle still gives the one block a binding needs.
+    #[test]
+    fn light_tri_blocks_hold_centroid_area_and_normal() {
+        let tris = TriangleSoup {
+            positions: vec![
+                Vec3::new(0.0, 0.0, 1.0),
+                Vec3::new(2.0, 0.0, 1.0),
+                Vec3::new(0.0, 3.0, 1.0),
+                Vec3::new(4.0, 0.0, 1.0),
+            ],
+            triangles: vec![[0, 1, 2], [0, 1, 3]],
+        };
+        let b = light_tri_blocks(&tris);
+        assert_eq!(b.len(), 2);
+        let want = [2.0 / 3.0, 1.0, 1.0, 6.0];
+        for (got, want) in b[0].center.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{:?}", b[0].center);
+        }
+        assert_eq!(b[0].normal, [0.0, 0.0, 1.0, 0.0]);
+        assert_eq!(b[1].center[3], 0.0);
+        assert_eq!(b[1].normal, [0.0; 4]);
+        let none = TriangleSoup {
+            positions: vec![],
+            triangles: vec![],
+        };
+        assert_eq!(light_tri_blocks(&none), vec![LightTri::default()]);
+    }
 }
