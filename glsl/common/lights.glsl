@@ -8,8 +8,8 @@
 // them; LIGHT_SPOT: a point light, no triangles), emit.x its radiance (area light) or
 // intensity times 1e6 mm^2/m^2 (spot), emit.y its area (mm^2), emit.w the inclusive CDF
 // of choosing it (by power); pos / dir the spot's position and axis, w: cos of the cone
-// edge and of the inner edge of the soft falloff. `LIGHT_TRI_WORDS[k]`: emitter of light triangle
-// k (x) and the inclusive area CDF of k within its emitter (y, float bits).
+// edge and of the inner edge of the soft falloff. `LIGHT_TRI_WORDS[k]`: emitter of light
+// triangle k (x) and the inclusive area CDF of k within its emitter (y, float bits).
 
 // (LightList, read through its address as path_trace.comp's other buffers.)
 #define EMITTERS LightBlockRef(PT_ADDR(PT_LIGHT_LIST)).v

@@ -528,8 +528,6 @@ pub fn pixel_angle(cam: &Camera) -> f32 {
     (4.0 * cam.tan_half_w * cam.tan_half_h / (cam.width as f32 * cam.height as f32)).sqrt()
 }
 
-/// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,
-/// `View::new` turns next-event estimation off (as it always was for zero radiance).
 /// Per light triangle (`LightGeometry::tris`, in the order the shader numbers them from
 /// `first`): its centroid, twice its area and its unit normal (`LightTri`), what
 /// glsl/common/lights.glsl `light_weight` takes; one zero block when there is none (a
@@ -556,6 +554,8 @@ fn light_tri_blocks(tris: &TriangleSoup) -> Vec<LightTri> {
     blocks
 }
 
+/// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,
+/// `View::new` turns next-event estimation off (as it always was for zero radiance).
 fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
     let sel = light.selection();
     // Inclusive CDF; from the last light that can be chosen on, exactly 1.
