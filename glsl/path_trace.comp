@@ -114,9 +114,15 @@ void map_axes(uint slot, MapHeader m, vec3 p, out vec3 ax, out vec3 up) {
     }
 }
 
+// The address of map buffer `buf` (1 to 3, MAP_BUFFER_MASK) of the three consecutive
+// bindings from `first` (Slopes0-2, Moments0-2), picked by selects of lane-uniform reads
+// (an index into the table that differs per lane would be read lane by lane).
+uvec2 map_buffer_addr(uint first, uint buf) {
+    return buf == 1u ? PT_ADDR(first) : buf == 2u ? PT_ADDR(first + 1u) : PT_ADDR(first + 2u);
+}
+
 vec2 slope_texel(uint buf, uint i) {
-    uvec2 a = buf == 1u ? PT_ADDR(PT_SLOPES0) : buf == 2u ? PT_ADDR(PT_SLOPES1) : PT_ADDR(PT_SLOPES2);
-    return unpackHalf2x16(UintRef(a).v[i]);
+    return unpackHalf2x16(UintRef(map_buffer_addr(PT_SLOPES0, buf)).v[i]);
 }
 
 layout(push_constant) uniform Push { PathPush pc; };
@@ -293,8 +299,7 @@ vec3 shading_normal(uint slot, vec3 p, vec3 ng, uint prim, vec2 bary) {
 // uints a texel: f16 [mean dh/dx, mean dh/dy], [var dh/dx, var dh/dy], [cov, 0].
 // (Moments0-2, one buffer per map as the slopes.)
 uint moment_word(uint buf, uint i) {
-    uvec2 a = buf == 1u ? PT_ADDR(PT_MOMENTS0) : buf == 2u ? PT_ADDR(PT_MOMENTS1) : PT_ADDR(PT_MOMENTS2);
-    return UintRef(a).v[i];
+    return UintRef(map_buffer_addr(PT_MOMENTS0, buf)).v[i];
 }
 
 // Smallest |cos| between the primary ray and the surface in the footprint.

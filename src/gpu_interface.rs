@@ -100,6 +100,16 @@ mod tests {
         assert_eq!(PathTraceBinding::LightWeights.at(2), 24);
         assert_eq!(PathTraceBinding::Addresses.at(2), 25);
         assert_eq!(std::mem::size_of::<LightTri>(), 32);
+        // path_trace.comp's map_buffer_addr picks a map's buffer among three consecutive
+        // bindings.
+        assert_eq!(
+            PathTraceBinding::Slopes2.at(0),
+            PathTraceBinding::Slopes0.at(0) + 2
+        );
+        assert_eq!(
+            PathTraceBinding::Moments2.at(0),
+            PathTraceBinding::Moments0.at(0) + 2
+        );
         assert_eq!(std::mem::offset_of!(PathPush, pixel_count), 12);
         assert_eq!(std::mem::offset_of!(PathPush, labels), 8);
         assert_eq!(PathTraceBinding::NoiseSums.at(2), 19);

@@ -39,7 +39,7 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         if i.ray_query_supported { "yes" } else { "no" }
     );
     println!(
-        "buffer addresses: {} (the software backends read their BVHs through them)",
+        "buffer addresses: {} (the path tracer and the software backends read their buffers through them)",
         if i.buffer_device_address { "yes" } else { "no" }
     );
     println!("auto backend:    {} ({why})", auto.name());

@@ -251,8 +251,7 @@ impl TraceGeometry {
                     return Err(VkError::NoBufferDeviceAddress);
                 }
                 // Read by the traversal through their device addresses (TraceScene's
-                // address table).
-                let addressed = storage | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
+                // address table; every storage buffer has one, `Buffer::new`).
                 let tris = software_bvh::obvhs_triangles(positions, triangles);
                 let wide = backend == Backend::SoftwareWide;
                 let build = || software_bvh::gpu_level(&tris, quality, wide);
@@ -269,8 +268,8 @@ impl TraceGeometry {
                 }
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
-                        nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, addressed)?,
-                        tris: Buffer::from_slice(ctx, "bvh triangles", &gtris, addressed)?,
+                        nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, storage)?,
+                        tris: Buffer::from_slice(ctx, "bvh triangles", &gtris, storage)?,
                     })
                 })?
             }

@@ -38,7 +38,8 @@ pub struct DeviceInfo {
     pub ray_query_supported: bool,
     pub ray_query_enabled: bool,
     /// Buffer device addresses (`bufferDeviceAddress`, core in Vulkan 1.2 and required
-    /// from 1.3) are on: the software trace backends read their BVHs through them.
+    /// from 1.3) are on: the path tracer and the software trace backends read their
+    /// buffers through them (ray query needs them too).
     pub buffer_device_address: bool,
     pub is_cpu: bool,
     pub timestamp_period_ns: f32,

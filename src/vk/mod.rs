@@ -31,7 +31,7 @@ pub enum VkError {
     )]
     RayQueryUnavailable,
     #[error(
-        "the software trace backends read their BVHs through buffer device addresses, which this device does not offer (Vulkan 1.2 feature bufferDeviceAddress, required from Vulkan 1.3); use --accel ray-query"
+        "this device does not offer buffer device addresses (Vulkan 1.2 feature bufferDeviceAddress, required from Vulkan 1.3), through which the path tracer and the software trace backends read their buffers (ray query needs them too), so no trace backend can run on it"
     )]
     NoBufferDeviceAddress,
     #[error("buffer {0:?} is not host-visible")]
