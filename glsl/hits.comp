@@ -15,6 +15,12 @@ layout(std430, set = 0, binding = HT_HITS) writeonly buffer Hits { vec4 hits[]; 
 // NO_HIT none), which must not change the hit (tests).
 layout(std430, set = 0, binding = HT_HINTS) readonly buffer Hints { Tri hints[]; };
 
+// With pc.hinted 2: each ray's camera-ray bundle (trace_bundle_init's arguments), built
+// before its query, which must not change the hit either; BundleUse says what became of
+// it (0: none built, 1: built, the object traversed, 2: the hit taken from it).
+layout(std430, set = 0, binding = HT_BUNDLES) readonly buffer Bundles { BundleBlock bundles[]; };
+layout(std430, set = 0, binding = HT_BUNDLE_USE) writeonly buffer BundleUse { uint bundle_use[]; };
+
 layout(push_constant) uniform Push { HitsPush pc; };
 
 void main() {
@@ -29,7 +35,16 @@ void main() {
         hint.c = hints[i].c.xyz;
         hint.prim = floatBitsToUint(hints[i].a.w);
     }
+    trace_bundle_clear();
+    if (pc.hinted == 2u) {
+        BundleBlock b = bundles[i];
+        trace_bundle_init(b.eye.xyz, b.right.xyz, b.up.xyz, b.fwd.xyz, b.eye.w, b.fwd.w,
+                          b.footprint, b.plane_p.xyz, b.plane_n.xyz);
+    }
     Hit h = trace_query_hinted(TQ_CLOSEST, r.o_tmin.xyz, r.d_tmax.xyz, r.o_tmin.w, r.d_tmax.w,
                                0.0, hint).h;
+    if (pc.hinted == 2u) {
+        bundle_use[i] = trace_bundle_size() == 0u ? 0u : trace_bundle_answered ? 2u : 1u;
+    }
     hits[i] = vec4(h.prim == NO_HIT ? -1.0 : h.t, uintBitsToFloat(h.prim), h.bary);
 }

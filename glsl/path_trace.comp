@@ -550,6 +550,15 @@ void pixel_plane_init(uint px, uint py) {
         pix_hint.b = OBJECT_TRIS[h.prim].b.xyz;
         pix_hint.c = OBJECT_TRIS[h.prim].c.xyz;
         pix_hint.prim = h.prim;
+        // The pixel's camera rays as one bundle (their object hits among a few triangles).
+        vec3 right = normalize(prm.cam.right.xyz), up = normalize(prm.cam.up.xyz);
+        vec3 fwd = prm.cam.forward.xyz;
+        float lens = prm.cam.eye.w;
+        float zf = lens > 0.0 ? prm.cam.forward.w : 1.0;
+        vec4 q = camera_pixel_footprint(prm.cam, vec2(px, py), vec2(prm.width, prm.height),
+                                        right, up, fwd, zf);
+        trace_bundle_init(prm.cam.eye.xyz, right, up, fwd, lens, zf, q, pix_hint.a,
+                          cross(pix_hint.b - pix_hint.a, pix_hint.c - pix_hint.a));
     }
     uint word = mat_word(h.prim);
     uint mat = word & 0xffu;
@@ -935,6 +944,7 @@ void main() {
     // the pass would), so a first batch of fewer samples needs no pass either.
     uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
     pix_hint = trace_no_hint();
+    trace_bundle_clear();
     if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();

@@ -4,7 +4,9 @@ mod common;
 
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
-use synosis::render::raycast::{HitOut, RayHint, RayIn, trace_rays, trace_rays_hinted};
+use synosis::render::raycast::{
+    BundleUse, HitOut, RayBundle, RayHint, RayIn, trace_rays, trace_rays_bundled, trace_rays_hinted,
+};
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::trace::TraceScene;
 use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
@@ -247,6 +249,176 @@ fn a_hint_never_changes_the_closest_hit() {
             hinted[differ[0]],
             plain[differ[0]]
         );
+    }
+    common::assert_clean(&ctx);
+}
+
+/// The path tracer's camera rays of a pixel take their object hit from a bundle: the few
+/// triangles whose leaf boxes meet every ray the pixel can send (from the lens's aperture
+/// through its footprint on the plane of focus) up to the deepest point where such a ray
+/// meets the plane of the pixel centre's triangle (glsl/common/trace.glsl,
+/// trace_bundle_init). Whatever the camera (thin lens, pinhole), footprint and plane (the
+/// centre's triangle, any other), and for rays aimed at vertices (ties between
+/// triangles), the hit must be the same bit for bit as the traversal's; with the
+/// software traversals thousands of rays must have been answered from their bundle
+/// (a third or more with the wide BVH, less with the BVH2's larger leaves, which
+/// overflow the bundle's 16 triangles more often) and some traversed.
+#[test]
+fn a_pixel_bundle_never_changes_the_closest_hit() {
+    let ctx = common::gpu();
+    let mesh = bumpy_sphere(96, 41, 10.0, 0.05);
+    let n = mesh.triangles.len();
+    let (lo, hi) = mesh.bounds();
+    let centre = (lo + hi) * 0.5;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(17);
+    let bits = |h: &HitOut| (h.t.to_bits(), h.prim, h.bary.map(f32::to_bits));
+    // (lens radius, depth of focus): a thin lens focused on the sphere's front, one
+    // focused behind it, a pinhole.
+    for (lens, zf) in [(1.0f32, 30.0f32), (0.6, 45.0), (0.0, 1.0)] {
+        let eye = centre + Vec3::new(3.0, -2.0, 40.0);
+        let forward = (centre - eye).normalize();
+        let right = forward.cross(Vec3::Y).normalize();
+        let up = right.cross(forward);
+        // Pixels: a 40 x 40 grid over the sphere and its silhouette, at depth zf, each a
+        // quarter of its cell wide (a tenth of a triangle: a camera's pixels are far
+        // smaller than a part's flat triangles).
+        let half = 12.0 / 40.0 * zf;
+        let cell = 2.0 * half / 40.0;
+        let size = 0.25 * cell;
+        let mut pixels = Vec::new();
+        for j in 0..40 {
+            for i in 0..40 {
+                let x0 = -half + i as f32 * cell;
+                let y0 = -half + j as f32 * cell;
+                pixels.push([x0, x0 + size, y0, y0 + size]);
+            }
+        }
+        // ... and one around each of 400 vertices' images (pinhole: a ray through the
+        // vertex itself, below).
+        let vertex_of: Vec<Option<Vec3>> = (0..400)
+            .map(|_| {
+                let v = mesh.positions[rng.random_range(0..mesh.positions.len())];
+                let r = v - eye;
+                let at = r * (zf / r.dot(forward));
+                let (x, y) = (at.dot(right), at.dot(up));
+                let h = rng.random_range(0.02..0.5) * size;
+                pixels.push([x - h, x + h, y - h, y + h]);
+                Some(v)
+            })
+            .collect();
+        let vertex_of: Vec<Option<Vec3>> =
+            std::iter::repeat_n(None, 1600).chain(vertex_of).collect();
+        let through = |x: f32, y: f32, l: (f32, f32)| {
+            let o = eye + l.0 * right + l.1 * up;
+            let target = eye + x * right + y * up + zf * forward;
+            RayIn {
+                origin: o.into(),
+                tmin: 0.0,
+                dir: (target - o).normalize().into(),
+                tmax: 1e30,
+            }
+        };
+        let centres: Vec<RayIn> = pixels
+            .iter()
+            .map(|q| through(0.5 * (q[0] + q[1]), 0.5 * (q[2] + q[3]), (0.0, 0.0)))
+            .collect();
+        for backend in common::BACKENDS {
+            let scene = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
+            let (centre_hits, _) = trace_rays(&ctx, &scene, &centres, None).unwrap();
+            let (mut rays, mut hints, mut bundles) = (Vec::new(), Vec::new(), Vec::new());
+            for (k, q) in pixels.iter().enumerate() {
+                let own = centre_hits[k].is_hit().then_some(centre_hits[k].prim);
+                // The plane: the centre's triangle's, every fifth pixel another's.
+                let plane_tri = match own {
+                    Some(p) if k % 5 != 4 => p as usize,
+                    _ => rng.random_range(0..n),
+                };
+                let [a, b, c] = mesh.corners(plane_tri);
+                let hint = own.map_or(
+                    RayHint {
+                        corners: [[0.0; 3]; 3],
+                        prim: None,
+                    },
+                    |p| RayHint {
+                        corners: mesh.corners(p as usize).map(|v| v.into()),
+                        prim: Some(p),
+                    },
+                );
+                let bundle = RayBundle {
+                    eye: eye.into(),
+                    right: right.into(),
+                    up: up.into(),
+                    forward: forward.into(),
+                    lens_radius: lens,
+                    focus_depth: zf,
+                    footprint: *q,
+                    plane_point: a.into(),
+                    plane_normal: (b - a).cross(c - a).into(),
+                };
+                for s in 0..8 {
+                    let ray = match vertex_of[k] {
+                        // A pinhole's ray through the vertex itself.
+                        Some(v) if lens == 0.0 && s == 0 => RayIn {
+                            origin: eye.into(),
+                            tmin: 0.0,
+                            dir: (v - eye).normalize().into(),
+                            tmax: 1e30,
+                        },
+                        _ => {
+                            let (r, phi) = (
+                                lens * rng.random::<f32>().sqrt(),
+                                rng.random_range(0.0..std::f32::consts::TAU),
+                            );
+                            through(
+                                rng.random_range(q[0]..q[1]),
+                                rng.random_range(q[2]..q[3]),
+                                (r * phi.cos(), r * phi.sin()),
+                            )
+                        }
+                    };
+                    rays.push(ray);
+                    hints.push(hint);
+                    bundles.push(bundle);
+                }
+            }
+            let (plain, _) = trace_rays(&ctx, &scene, &rays, None).unwrap();
+            let (bundled, uses) =
+                trace_rays_bundled(&ctx, &scene, &rays, &hints, &bundles).unwrap();
+            let differ: Vec<usize> = (0..rays.len())
+                .filter(|&i| bits(&plain[i]) != bits(&bundled[i]))
+                .collect();
+            assert!(
+                differ.is_empty(),
+                "{} (lens {lens}, focus {zf}): {} of {} rays hit otherwise with a bundle; first: ray {} {:?} against {:?}",
+                backend.name(),
+                differ.len(),
+                rays.len(),
+                differ[0],
+                bundled[differ[0]],
+                plain[differ[0]]
+            );
+            let count = |u: BundleUse| uses.iter().filter(|&&x| x == u).count();
+            let (answered, traversed, none) = (
+                count(BundleUse::Answered),
+                count(BundleUse::Traversed),
+                count(BundleUse::None),
+            );
+            eprintln!(
+                "{} (lens {lens}, focus {zf}): {} rays, answered {answered}, traversed {traversed}, no bundle {none}",
+                backend.name(),
+                rays.len()
+            );
+            if backend == synosis::trace::Backend::RayQuery {
+                assert_eq!(none, rays.len(), "the ray query builds no bundle");
+            } else {
+                assert!(
+                    answered * 20 > rays.len() && traversed > 0,
+                    "{}: answered {answered}, traversed {traversed} of {}",
+                    backend.name(),
+                    rays.len()
+                );
+            }
+        }
     }
     common::assert_clean(&ctx);
 }

@@ -41,6 +41,23 @@ vec3 camera_dir(CameraBlock c, vec2 pixel_pos, vec2 size) {
                      - (xu.y / tan_half.y) * c.up.xyz);
 }
 
+// The bounding box (x0, x1, y0, y1) of pixel `p`'s footprint (p to p + 1, pixels) on the
+// plane at depth zf along the unit forward axis `fwd`, in coordinates along the unit
+// `right` and `up` axes from the eye: its corners' rays there, widened by a tenth of its
+// size (a lens's distortion bends a pixel's edges by far less). The camera rays' bundle
+// of path_trace.comp (trace_bundle_init).
+vec4 camera_pixel_footprint(CameraBlock c, vec2 p, vec2 size, vec3 right, vec3 up, vec3 fwd,
+                            float zf) {
+    vec4 q = vec4(3.0e38, -3.0e38, 3.0e38, -3.0e38);
+    for (uint k = 0u; k < 4u; k++) {
+        vec3 d = camera_dir(c, p + vec2(float(k & 1u), float(k >> 1u)), size);
+        vec2 xy = vec2(dot(d, right), dot(d, up)) * (zf / dot(d, fwd));
+        q = vec4(min(q.x, xy.x), max(q.y, xy.x), min(q.z, xy.y), max(q.w, xy.y));
+    }
+    float pad = 0.1 * max(q.y - q.x, q.w - q.z);
+    return q + vec4(-pad, pad, -pad, pad);
+}
+
 // Shirley-Chiu concentric map of [0, 1)^2 onto the unit disc (keeps stratification).
 vec2 concentric_disc(vec2 u) {
     vec2 o = 2.0 * u - 1.0;

@@ -92,6 +92,14 @@ Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask, bool any) {
     return h;
 }
 
+// A pixel's camera-ray bundle (the software traversal's; see there): the ray query
+// traverses in hardware and takes none.
+void trace_bundle_clear() {}
+uint trace_bundle_size() { return 0u; }
+bool trace_bundle_answered = false;
+void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, float zf, vec4 q,
+                       vec3 plane_p, vec3 plane_n) {}
+
 // The query `kind` (TQ_*) of ray o + t d, t in [tmin, tmax]. The view's lights are the
 // instances of mask 0x02 (src/trace/mod.rs), the object's 0x01. A shadow test: the
 // lights' closest hit first, then a query of the object that ends at its first hit up
@@ -217,8 +225,115 @@ TraceRay trace_setup(vec3 o, vec3 d) {
     return r;
 }
 
+// A pixel's camera rays as one bundle (trace_bundle_init): every ray leaves the lens's
+// aperture (a disc of radius `lens` about the eye, in the plane of the right and up
+// axes) through the pixel's footprint on the plane of focus (depth zf along the forward
+// axis). Such a bundle lies, up to the plane of focus, inside four planes from the
+// lens's bounding square to the footprint's bounding box, and beyond it inside four
+// more (it narrows to the footprint, then widens again). One traversal per pixel
+// collects the object's triangles whose leaf boxes meet the bundle up to a depth zfar
+// (at most TRACE_BUNDLE_MAX of them; more: no bundle); a camera ray of the pixel then
+// tests those alone, and where the closest of them lies no deeper than zfar it is the
+// ray's closest hit on the object (a nearer triangle would meet the bundle nearer than
+// zfar, so its leaf would have been collected): the same hit as the traversal's, ties
+// included (trace_tri_test). Rays whose hit among them lies deeper, or none, traverse
+// the object bounded by it. zfar: the deepest point where a ray of the bundle meets the
+// plane of the pixel centre's triangle. Every test is widened by TRACE_BUNDLE_SLACK so
+// that rounding only ever keeps a box.
+#define TRACE_BUNDLE_MAX 16u
+const float TRACE_BUNDLE_SLACK = 1e-3;   // scene units (mm)
+uint trace_bundle_tri[TRACE_BUNDLE_MAX];  // level-0 triangles, BVH leaf order
+uint trace_bundle_n = 0u;                 // how many; 0: no bundle
+vec4 trace_bundle_plane[8];               // n.p + w >= 0: 0-3 up to the plane of focus, 4-7 beyond
+vec4 trace_bundle_axis;                   // xyz: unit forward; w: -dot(forward, eye): depth = dot(xyz, p) + w
+float trace_bundle_zf;
+float trace_bundle_zfar;
+
+// Whether the last camera-ray query took its object hit from the bundle (tests).
+bool trace_bundle_answered = false;
+
+void trace_bundle_clear() { trace_bundle_n = 0u; }
+uint trace_bundle_size() { return trace_bundle_n; }
+
+// Whether box [bmin, bmax] may meet the bundle no deeper than zfar (conservative).
+bool trace_bundle_box(vec3 bmin, vec3 bmax) {
+    vec3 c = 0.5 * (bmin + bmax);
+    vec3 e = 0.5 * (bmax - bmin);
+    float zc = dot(trace_bundle_axis.xyz, c) + trace_bundle_axis.w;
+    float ze = dot(abs(trace_bundle_axis.xyz), e);
+    float s = TRACE_BUNDLE_SLACK;
+    bool near = zc + ze >= -s && zc - ze <= min(trace_bundle_zf, trace_bundle_zfar) + s;
+    bool far = zc + ze >= trace_bundle_zf - s && zc - ze <= trace_bundle_zfar + s;
+    [[unroll]] for (uint k = 0u; k < 4u; k++) {
+        vec4 pn = trace_bundle_plane[k];
+        vec4 pf = trace_bundle_plane[k + 4u];
+        near = near && dot(pn.xyz, c) + dot(abs(pn.xyz), e) + pn.w >= -s;
+        far = far && dot(pf.xyz, c) + dot(abs(pf.xyz), e) + pf.w >= -s;
+    }
+    return near || far;
+}
+
+// Adds `count` consecutive level-0 triangles from `first` to the bundle's list; false
+// once it would overflow (the list is then dropped).
+bool trace_bundle_add(uint first, uint count) {
+    if (trace_bundle_n + count > TRACE_BUNDLE_MAX) return false;
+    for (uint k = 0u; k < count; k++) trace_bundle_tri[trace_bundle_n + k] = first + k;
+    trace_bundle_n += count;
+    return true;
+}
 
 #include "trace_bvh.glsl"
+
+// Sets the pixel's bundle (above): eye, unit right, up and forward axes, the aperture's
+// radius `lens` (0: a pinhole) and the depth of the plane of focus zf (any positive
+// depth for a pinhole), the footprint's bounding box on it in the right and up
+// coordinates (q: x0, x1, y0, y1), and the plane of the pixel centre's triangle (a point
+// and a normal of any length). No bundle (trace_bundle_n 0) where a ray of the bundle
+// could meet that plane behind the lens or along it, or too many triangles meet it.
+void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, float zf, vec4 q,
+                       vec3 plane_p, vec3 plane_n) {
+    trace_bundle_n = 0u;
+    // The deepest point of the plane on a ray from a corner of the lens's square to a
+    // corner of the footprint's box: where a ray's depth on the plane is largest
+    // (a ratio of functions linear in each end point takes its extremes at corners).
+    float zfar = 0.0;
+    bool ok = true;
+    float dir_sign = 0.0;
+    for (uint k = 0u; k < 16u; k++) {
+        vec2 l = vec2((k & 1u) != 0u ? lens : -lens, (k & 2u) != 0u ? lens : -lens);
+        vec2 f = vec2((k & 4u) != 0u ? q.y : q.x, (k & 8u) != 0u ? q.w : q.z);
+        vec3 from = eye + l.x * right + l.y * up;
+        vec3 to = eye + f.x * right + f.y * up + zf * fwd;
+        float den = dot(plane_n, to - from);
+        float s = dot(plane_n, plane_p - from) / den;
+        float sg = sign(den);
+        ok = ok && sg != 0.0 && (k == 0u || sg == dir_sign) && s > 0.0;
+        dir_sign = sg;
+        zfar = max(zfar, s * zf);
+    }
+    if (!ok) return;
+    trace_bundle_zf = zf;
+    trace_bundle_zfar = zfar * 1.00001;
+    trace_bundle_axis = vec4(fwd, -dot(fwd, eye));
+    // x >= m + k z and x <= m' + k' z in the right / up coordinates x, depth z: from the
+    // lens's edge (+-lens at depth 0) to the footprint's (at zf), and beyond zf from the
+    // opposite edge of the lens.
+    for (uint a = 0u; a < 2u; a++) {
+        vec3 ax = a == 0u ? right : up;
+        float lo = a == 0u ? q.x : q.z;
+        float hi = a == 0u ? q.y : q.w;
+        for (uint part = 0u; part < 2u; part++) {
+            float m = part == 0u ? lens : -lens;   // the lens edge's side, up to zf / beyond
+            // lower bound: x - k z + m >= 0, k = (lo + m) / zf
+            vec3 n0 = ax - ((lo + m) / zf) * fwd;
+            trace_bundle_plane[part * 4u + a * 2u] = vec4(n0, -dot(n0, eye) + m);
+            // upper bound: -x + k' z + m >= 0, k' = (hi - m) / zf
+            vec3 n1 = -ax + ((hi - m) / zf) * fwd;
+            trace_bundle_plane[part * 4u + a * 2u + 1u] = vec4(n1, -dot(n1, eye) + m);
+        }
+    }
+    if (!trace_bundle_collect()) trace_bundle_n = 0u;
+}
 
 // The traversal's view of ray (o, d): reciprocal direction for the slab tests (zero
 // components nudged: 0 * inf would give NaN) and the watertight test's shear.
@@ -249,11 +364,26 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     uint level = kind == TQ_CLOSEST || kind == TQ_BLOCKED ? 0u : 1u;
     bool any = kind == TQ_BLOCKED;
     Hit h = hit_none(tmax);
+    // A camera ray of the bundle's pixel (the hint's): its closest hit on the object
+    // among the bundle's triangles, taken without the object's traversal where it lies
+    // no deeper than the bundle reaches.
+    bool skip_object = false;
     if (kind == TQ_CLOSEST && hint.prim != NO_HIT) {
-        trace_tri_test(hint.a, hint.b, hint.c, hint.prim, 0u, tr, tmin, h);
+        if (trace_bundle_n > 0u) {
+            for (uint k = 0u; k < trace_bundle_n; k++) {
+                BvhTri t = trace_tri(0u, trace_bundle_tri[k]);
+                trace_tri_test(t.v0.xyz, t.v1.xyz, t.v2.xyz, floatBitsToUint(t.v0.w), 0u, tr, tmin, h);
+            }
+            float depth = dot(trace_bundle_axis.xyz, o) + trace_bundle_axis.w
+                + h.t * dot(trace_bundle_axis.xyz, d);
+            skip_object = h.prim != NO_HIT && depth <= trace_bundle_zfar;
+            trace_bundle_answered = skip_object;
+        } else {
+            trace_tri_test(hint.a, hint.b, hint.c, hint.prim, 0u, tr, tmin, h);
+        }
     }
     for (uint step = 0u; step < 2u; step++) {
-        trace_bvh(level, o, inv_d, tr, tmin, h, any);
+        if (!(step == 0u && skip_object)) trace_bvh(level, o, inv_d, tr, tmin, h, any);
         if (step == 1u) break;
         if (kind == TQ_CLOSEST) {
             level = 1u;

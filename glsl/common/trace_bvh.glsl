@@ -104,6 +104,60 @@ void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hi
         }
     }
 }
+
+// The bundle's triangles (trace_bundle_init, glsl/common/trace.glsl): every object leaf
+// whose box meets the bundle, in any order; false where they are more than
+// TRACE_BUNDLE_MAX.
+bool trace_bundle_collect() {
+    uvec2 stack[TRACE_WIDE_STACK];
+    int sp = 0;
+    uvec2 group = uvec2(0u, 0x80000000u);
+    while (true) {
+        if ((group.y & 0xff000000u) != 0u) {
+            uint hits = group.y;
+            uint bit = uint(findMSB(hits));
+            group.y &= ~(1u << bit);
+            if ((group.y & 0xff000000u) != 0u) {
+                if (sp >= TRACE_WIDE_STACK) return false;
+                stack[sp] = group;
+                ++sp;
+            }
+            uint slot = bit - 24u;   // children in slot order (octant 0)
+            uint node = group.x + uint(bitCount(hits & ~(0xffffffffu << slot)));
+            WideNode n = trace_node(0u, node);
+            vec3 nmin = uintBitsToFloat(n.head.xyz);
+            uint ew = n.head.w;
+            vec3 cell = uintBitsToFloat(uvec3(ew & 0xffu, (ew >> 8u) & 0xffu, (ew >> 16u) & 0xffu) << 23u);
+            uint hitmask = 0u;
+            for (uint k = 0u; k < 8u; ++k) {
+                uint sh = (k & 3u) * 8u;
+                bool hi = k >= 4u;
+                uint meta = ((hi ? n.meta.w : n.meta.z) >> sh) & 0xffu;
+                uvec3 qlo = hi ? uvec3(n.qx.y, n.qy.y, n.qz.y) : uvec3(n.qx.x, n.qy.x, n.qz.x);
+                uvec3 qhi = hi ? uvec3(n.qx.w, n.qy.w, n.qz.w) : uvec3(n.qx.z, n.qy.z, n.qz.z);
+                vec3 bmin = nmin + vec3((qlo >> sh) & 0xffu) * cell;
+                vec3 bmax = nmin + vec3((qhi >> sh) & 0xffu) * cell;
+                uint at = meta & 0x1fu;
+                hitmask |= meta != 0u && trace_bundle_box(bmin, bmax) ? ((meta >> 5u) & 7u) << at : 0u;
+            }
+            group = uvec2(n.meta.x, (hitmask & 0xff000000u) | (ew >> 24u));
+            uint tris = hitmask & 0x00ffffffu;
+            while (tris != 0u) {
+                int b = findLSB(tris);
+                tris &= ~(1u << uint(b));
+                if (!trace_bundle_add(n.meta.y + uint(b), 1u)) return false;
+            }
+        } else {
+            group = uvec2(0u);
+        }
+        if ((group.y & 0xff000000u) == 0u) {
+            if (sp == 0) break;
+            --sp;
+            group = stack[sp];
+        }
+    }
+    return true;
+}
 #else
 // Closest hit in a child-pair BVH2; with `any` the first hit found: an occlusion test.
 void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
@@ -146,5 +200,40 @@ void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hi
             if (!found) break;
         }
     }
+}
+
+// The bundle's triangles (trace_bundle_init, glsl/common/trace.glsl): every object leaf
+// whose box meets the bundle, in any order; false where they are more than
+// TRACE_BUNDLE_MAX.
+bool trace_bundle_collect() {
+    uint stack[TRACE_STACK];
+    int sp = 0;
+    uint node = 0u;
+    while (true) {
+        BvhNode n = trace_node(0u, node);
+        bool hl = trace_bundle_box(n.l_min.xyz, n.l_max.xyz);
+        bool hr = trace_bundle_box(n.r_min.xyz, n.r_max.xyz);
+        uint lc = floatBitsToUint(n.l_max.w);
+        uint rc = floatBitsToUint(n.r_max.w);
+        uint li = floatBitsToUint(n.l_min.w);
+        uint ri = floatBitsToUint(n.r_min.w);
+        if (hl && lc > 0u) { if (!trace_bundle_add(li, lc)) return false; hl = false; }
+        if (hr && rc > 0u) { if (!trace_bundle_add(ri, rc)) return false; hr = false; }
+        if (hl && hr) {
+            if (sp >= TRACE_STACK) return false;
+            stack[sp] = ri;
+            ++sp;
+            node = li;
+        } else if (hl) {
+            node = li;
+        } else if (hr) {
+            node = ri;
+        } else {
+            if (sp == 0) break;
+            --sp;
+            node = stack[sp];
+        }
+    }
+    return true;
 }
 #endif

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::view::{Tiling, camera_block};
-use crate::gpu_interface::{HitsBinding, HitsPush, ImagePush, RaycastBinding, Tri};
+use crate::gpu_interface::{BundleBlock, HitsBinding, HitsPush, ImagePush, RaycastBinding, Tri};
 use crate::graph::{Graph, PassTiming};
 use crate::scene::Camera;
 use crate::trace::{TraceScene, scramble_multiplier};
@@ -145,8 +145,70 @@ pub fn trace_rays_hinted(
     hints: Option<&[RayHint]>,
     profiler: Option<&Profiler>,
 ) -> Result<(Vec<HitOut>, PassTiming), VkError> {
+    trace_rays_with(ctx, scene, rays, hints, None, profiler).map(|(h, _, t)| (h, t))
+}
+
+/// A pixel's camera-ray bundle for [`trace_rays_bundled`] (glsl/common/trace.glsl
+/// `trace_bundle_init`): the camera's eye, unit right, up and forward axes, its aperture's
+/// radius (0: a pinhole) and the depth of its plane of focus, the pixel's footprint box on
+/// that plane (`[x0, x1, y0, y1]` along right and up, from the eye), and a point and a
+/// normal of the plane of the triangle the pixel's centre ray met.
+#[derive(Clone, Copy, Debug)]
+pub struct RayBundle {
+    pub eye: [f32; 3],
+    pub right: [f32; 3],
+    pub up: [f32; 3],
+    pub forward: [f32; 3],
+    pub lens_radius: f32,
+    pub focus_depth: f32,
+    pub footprint: [f32; 4],
+    pub plane_point: [f32; 3],
+    pub plane_normal: [f32; 3],
+}
+
+/// What became of a ray's bundle in [`trace_rays_bundled`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BundleUse {
+    /// None was built (a ray of it could meet the plane behind the lens or along it, or
+    /// too many triangles meet it).
+    None,
+    /// Built; the ray's hit lay beyond it, so the object was traversed.
+    Traversed,
+    /// The ray's hit was taken from the bundle's triangles, without the traversal.
+    Answered,
+}
+
+/// [`trace_rays_hinted`] with, for each ray, its pixel's camera-ray bundle, built before
+/// its query as the path tracer builds one per pixel: the hit must be the same. Each ray
+/// needs a hint (the bundle is used for hinted queries only). Returns the hits and what
+/// became of each bundle (the ray-query backend builds none).
+///
+/// # Panics
+/// If `hints` or `bundles` are not as many as `rays`.
+pub fn trace_rays_bundled(
+    ctx: &Arc<Context>,
+    scene: &TraceScene,
+    rays: &[RayIn],
+    hints: &[RayHint],
+    bundles: &[RayBundle],
+) -> Result<(Vec<HitOut>, Vec<BundleUse>), VkError> {
+    trace_rays_with(ctx, scene, rays, Some(hints), Some(bundles), None).map(|(h, u, _)| (h, u))
+}
+
+fn trace_rays_with(
+    ctx: &Arc<Context>,
+    scene: &TraceScene,
+    rays: &[RayIn],
+    hints: Option<&[RayHint]>,
+    bundles: Option<&[RayBundle]>,
+    profiler: Option<&Profiler>,
+) -> Result<(Vec<HitOut>, Vec<BundleUse>, PassTiming), VkError> {
     if let Some(h) = hints {
         assert_eq!(h.len(), rays.len(), "trace_rays_hinted: one hint a ray");
+    }
+    if let Some(b) = bundles {
+        assert_eq!(b.len(), rays.len(), "trace_rays_bundled: one bundle a ray");
+        assert!(hints.is_some(), "trace_rays_bundled: bundles need hints");
     }
     let off = TraceScene::binding_kinds(scene.backend).len() as u32;
     let pipeline = super::pipelines::hits(ctx, scene.backend)?;
@@ -167,6 +229,30 @@ pub fn trace_rays_hinted(
         None => vec![bytemuck::Zeroable::zeroed()],
     };
     let hint_buf = Buffer::from_slice(ctx, "ray hints", &hint_tris, storage)?;
+    let v4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
+    let bundle_blocks: Vec<BundleBlock> = match bundles {
+        Some(b) => b
+            .iter()
+            .map(|b| BundleBlock {
+                eye: v4(b.eye, b.lens_radius),
+                right: v4(b.right, 0.0),
+                up: v4(b.up, 0.0),
+                fwd: v4(b.forward, b.focus_depth),
+                footprint: b.footprint,
+                plane_p: v4(b.plane_point, 0.0),
+                plane_n: v4(b.plane_normal, 0.0),
+            })
+            .collect(),
+        None => vec![bytemuck::Zeroable::zeroed()],
+    };
+    let bundle_buf = Buffer::from_slice(ctx, "ray bundles", &bundle_blocks, storage)?;
+    let use_buf = Buffer::new(
+        ctx,
+        "bundle use",
+        bundle_blocks.len() as u64 * 4,
+        storage,
+        MemoryKind::Readback,
+    )?;
     let hit_buf = Buffer::new(
         ctx,
         "hits",
@@ -180,21 +266,41 @@ pub fn trace_rays_hinted(
         count: rays.len() as u32,
         groups,
         mult: scramble_multiplier(groups),
-        hinted: u32::from(hints.is_some()),
+        hinted: if bundles.is_some() {
+            2
+        } else {
+            u32::from(hints.is_some())
+        },
     };
     let mut g = Graph::new(ctx, "trace rays");
     let refs = scene.import(&mut g);
     let r = g.import(&ray_buf);
     let hb = g.import(&hint_buf);
     let mut h = g.import(&hit_buf);
+    let bb = g.import(&bundle_buf);
+    let mut ub = g.import(&use_buf);
     refs.bind(g.dispatch("trace", &pipeline, [groups, 1, 1]))
         .read(HitsBinding::Rays.at(off), &r)
         .read(HitsBinding::Hints.at(off), &hb)
+        .read(HitsBinding::Bundles.at(off), &bb)
         .write(HitsBinding::Hits.at(off), &mut h)
+        .write(HitsBinding::BundleUse.at(off), &mut ub)
         .push(&push)
         .submit();
     let timings = g.execute(profiler)?;
     let raw: Vec<[f32; 4]> = crate::vk::timed(profiler, "readback", || hit_buf.read())?;
+    let uses: Vec<BundleUse> = match bundles {
+        Some(_) => use_buf
+            .read::<u32>()?
+            .iter()
+            .map(|&u| match u {
+                0 => BundleUse::None,
+                1 => BundleUse::Traversed,
+                _ => BundleUse::Answered,
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     let hits = raw
         .iter()
         .map(|v| HitOut {
@@ -207,7 +313,7 @@ pub fn trace_rays_hinted(
         name: "trace".into(),
         gpu_ms: f64::NAN,
     });
-    Ok((hits, timing))
+    Ok((hits, uses, timing))
 }
 
 /// Depth (hit distance, 0 = miss) and packed RGBA8 normals of a raycast image.
