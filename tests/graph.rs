@@ -53,15 +53,27 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
     use synosis::trace::{Backend, TraceScene, trace_pipeline};
     use synosis::vk::{BindingKind, VkError};
     let ctx = common::gpu();
-    // Software backend: its own bindings first, then rays, hits, hints; 16-byte push block.
+    // Software backend: its own bindings first, then rays, hits, hints, bundles, bundle
+    // use; 16-byte push block.
+    use synosis::gpu_interface::HitsBinding;
     let off = TraceScene::binding_kinds(Backend::Software).len() as u32;
-    let pipe = trace_pipeline(&ctx, "hits", Backend::Software, 3, 16, [64, 1, 1]).unwrap();
+    let pipe = trace_pipeline(
+        &ctx,
+        "hits",
+        Backend::Software,
+        HitsBinding::COUNT,
+        16,
+        [64, 1, 1],
+    )
+    .unwrap();
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let out = Buffer::new(&ctx, "out", 256, usage, MemoryKind::Readback).unwrap();
+    let used = Buffer::new(&ctx, "used", 256, usage, MemoryKind::Readback).unwrap();
     let run = |name: &str, bind_rays: bool, push: &[u32; 4], words: usize, groups: [u32; 3]| {
         let mut g = Graph::new(&ctx, "misuse");
         let a = g.create_buffer("a", 256).unwrap();
         let mut o = g.import(&out);
+        let mut u = g.import(&used);
         let mut d = g.dispatch(name, &pipe, groups);
         for b in 0..off {
             d = d.read(b, &a);
@@ -73,8 +85,10 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
             4 => d.push(push),
             _ => d.push(&[push[0], push[1], push[2]]),
         }
-        .write(off + 1, &mut o)
-        .read(off + 2, &a)
+        .write(HitsBinding::Hits.at(off), &mut o)
+        .read(HitsBinding::Hints.at(off), &a)
+        .read(HitsBinding::Bundles.at(off), &a)
+        .write(HitsBinding::BundleUse.at(off), &mut u)
         .submit();
         g.execute(None)
     };

@@ -246,20 +246,10 @@ fn trace_rays_with(
         None => vec![bytemuck::Zeroable::zeroed()],
     };
     let bundle_buf = Buffer::from_slice(ctx, "ray bundles", &bundle_blocks, storage)?;
-    let use_buf = Buffer::new(
-        ctx,
-        "bundle use",
-        bundle_blocks.len() as u64 * 4,
-        storage,
-        MemoryKind::Readback,
-    )?;
-    let hit_buf = Buffer::new(
-        ctx,
-        "hits",
-        rays.len() as u64 * 16,
-        storage,
-        MemoryKind::Readback,
-    )?;
+    let readback =
+        |name: &str, bytes: u64| Buffer::new(ctx, name, bytes, storage, MemoryKind::Readback);
+    let use_buf = readback("bundle use", bundle_blocks.len() as u64 * 4)?;
+    let hit_buf = readback("hits", rays.len() as u64 * 16)?;
     // More groups than one dispatch allows: the graph refuses it (VkError::WorkgroupLimit).
     let groups = (rays.len() as u32).div_ceil(64);
     let push = HitsPush {
