@@ -35,7 +35,6 @@ void main() {
         hint.c = hints[i].c.xyz;
         hint.prim = floatBitsToUint(hints[i].a.w);
     }
-    trace_bundle_clear();
     if (pc.hinted == 2u) {
         BundleBlock b = bundles[i];
         trace_bundle_init(b.eye.xyz, b.right.xyz, b.up.xyz, b.fwd.xyz, b.eye.w, b.fwd.w,

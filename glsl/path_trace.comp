@@ -944,7 +944,6 @@ void main() {
     // the pass would), so a first batch of fewer samples needs no pass either.
     uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
     pix_hint = trace_no_hint();
-    trace_bundle_clear();
     if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();

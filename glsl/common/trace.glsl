@@ -94,7 +94,6 @@ Hit trace_masked(vec3 o, vec3 d, float tmin, float tmax, uint mask, bool any) {
 
 // A pixel's camera-ray bundle (the software traversal's; see there): the ray query
 // traverses in hardware and takes none.
-void trace_bundle_clear() {}
 uint trace_bundle_size() { return 0u; }
 bool trace_bundle_answered = false;
 void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, float zf, vec4 q,
@@ -243,7 +242,7 @@ TraceRay trace_setup(vec3 o, vec3 d) {
 #define TRACE_BUNDLE_MAX 16u
 const float TRACE_BUNDLE_SLACK = 1e-3;   // scene units (mm)
 uint trace_bundle_tri[TRACE_BUNDLE_MAX];  // level-0 triangles, BVH leaf order
-uint trace_bundle_n = 0u;                 // how many; 0: no bundle
+uint trace_bundle_n = 0u;                 // how many; 0: no bundle (each invocation starts without)
 vec4 trace_bundle_plane[8];               // n.p + w >= 0: 0-3 up to the plane of focus, 4-7 beyond
 vec4 trace_bundle_axis;                   // xyz: unit forward; w: -dot(forward, eye): depth = dot(xyz, p) + w
 float trace_bundle_zf;
@@ -252,7 +251,6 @@ float trace_bundle_zfar;
 // Whether the last camera-ray query took its object hit from the bundle (tests).
 bool trace_bundle_answered = false;
 
-void trace_bundle_clear() { trace_bundle_n = 0u; }
 uint trace_bundle_size() { return trace_bundle_n; }
 
 // Whether box [bmin, bmax] may meet the bundle no deeper than zfar (conservative).
