@@ -161,9 +161,21 @@ struct BvhNode { vec4 l_min; vec4 l_max; vec4 r_min; vec4 r_max; };
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_EXT_buffer_reference_uvec2 : require
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TraceNodeRef { TRACE_NODE n[]; };
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TraceTriRef { BvhTri t[]; };
 layout(std430, set = 0, binding = 4) readonly buffer TraceLevels { uvec2 trace_level_addr[4]; };
+
+// The levels' nodes and triangles are read eight bytes a load: lavapipe (Mesa 25.0) turns
+// each component of a load through an address into one masked gather of that
+// component's size, so 64-bit words halve the gathers of 32-bit ones (0.91 of the
+// path tracing's time with Mitsuba's sampling; docs/benchmarks/rendering.md). The device
+// needs shaderInt64 (checked by trace::resolve).
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Words64Ref { uint64_t w[]; };
+
+// The 16 bytes at `addr` + 16 i.
+uvec4 words_uvec4(uvec2 addr, uint i) {
+    Words64Ref r = Words64Ref(addr);
+    return uvec4(unpackUint2x32(r.w[2u * i]), unpackUint2x32(r.w[2u * i + 1u]));
+}
 
 // Slab test; the far distance is widened by 3 ulps-worth (Ize 2013) so rounding never
 // drops a box that the ray grazes.

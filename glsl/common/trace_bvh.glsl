@@ -4,13 +4,36 @@
 // a shader compiles one traversal per call site of trace_query (lavapipe inlines every
 // call; two per level and query cost it minutes of LLVM compile).
 BvhTri trace_tri(uint level, uint i) {
-    [[dont_flatten]] if (level == 0u) return TraceTriRef(trace_level_addr[1]).t[i];
-    return TraceTriRef(trace_level_addr[3]).t[i];
+    uvec4 q[3];
+    [[dont_flatten]] if (level == 0u) {
+        [[unroll]] for (uint k = 0u; k < 3u; ++k) q[k] = words_uvec4(trace_level_addr[1], 3u * i + k);
+    } else {
+        [[unroll]] for (uint k = 0u; k < 3u; ++k) q[k] = words_uvec4(trace_level_addr[3], 3u * i + k);
+    }
+    return BvhTri(uintBitsToFloat(q[0]), uintBitsToFloat(q[1]), uintBitsToFloat(q[2]));
 }
 
+// A node: 5 (wide) or 4 (BVH2) times 16 bytes.
+#if defined(TRACE_WIDE)
+#define TRACE_NODE_VEC4S 5u
+#else
+#define TRACE_NODE_VEC4S 4u
+#endif
 TRACE_NODE trace_node(uint level, uint i) {
-    [[dont_flatten]] if (level == 0u) return TraceNodeRef(trace_level_addr[0]).n[i];
-    return TraceNodeRef(trace_level_addr[2]).n[i];
+    uvec4 q[TRACE_NODE_VEC4S];
+    [[dont_flatten]] if (level == 0u) {
+        [[unroll]] for (uint k = 0u; k < TRACE_NODE_VEC4S; ++k)
+            q[k] = words_uvec4(trace_level_addr[0], TRACE_NODE_VEC4S * i + k);
+    } else {
+        [[unroll]] for (uint k = 0u; k < TRACE_NODE_VEC4S; ++k)
+            q[k] = words_uvec4(trace_level_addr[2], TRACE_NODE_VEC4S * i + k);
+    }
+#if defined(TRACE_WIDE)
+    return WideNode(q[0], q[1], q[2], q[3], q[4]);
+#else
+    return BvhNode(uintBitsToFloat(q[0]), uintBitsToFloat(q[1]), uintBitsToFloat(q[2]),
+                   uintBitsToFloat(q[3]));
+#endif
 }
 
 // The watertight test of one triangle (corners v0, v1, v2, original index `prim`, of

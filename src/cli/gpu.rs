@@ -42,6 +42,10 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         "buffer addresses: {} (the path tracer and the software backends read their buffers through them)",
         if i.buffer_device_address { "yes" } else { "no" }
     );
+    println!(
+        "64-bit integers: {} (the software backends load their BVH eight bytes at a time)",
+        if i.shader_int64 { "yes" } else { "no" }
+    );
     println!("auto backend:    {} ({why})", auto.name());
     println!(
         "timestamps:      {} (period {} ns)",

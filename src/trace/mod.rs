@@ -105,7 +105,8 @@ pub fn auto_backend(ctx_info: &crate::vk::DeviceInfo) -> (Backend, &'static str)
 }
 
 /// Resolves a choice against a device; ray-query on a device without it is an error.
-/// A software backend on a device without buffer device addresses is an error too.
+/// A software backend on a device without buffer device addresses or 64-bit shader
+/// integers is an error too.
 pub fn resolve(choice: AccelChoice, info: &crate::vk::DeviceInfo) -> Result<Backend, VkError> {
     let backend = match choice {
         AccelChoice::Auto => auto_backend(info).0,
@@ -116,6 +117,9 @@ pub fn resolve(choice: AccelChoice, info: &crate::vk::DeviceInfo) -> Result<Back
     };
     if backend.is_software() && !info.buffer_device_address {
         return Err(VkError::NoBufferDeviceAddress);
+    }
+    if backend.is_software() && !info.shader_int64 {
+        return Err(VkError::NoShaderInt64);
     }
     Ok(backend)
 }
@@ -249,6 +253,9 @@ impl TraceGeometry {
             Backend::Software | Backend::SoftwareWide => {
                 if !ctx.info.buffer_device_address {
                     return Err(VkError::NoBufferDeviceAddress);
+                }
+                if !ctx.info.shader_int64 {
+                    return Err(VkError::NoShaderInt64);
                 }
                 // Read by the traversal through their device addresses (TraceScene's
                 // address table; every storage buffer has one, `Buffer::new`).
@@ -496,6 +503,14 @@ mod tests {
     use crate::vk::DeviceInfo;
 
     fn device(ray_query: bool, buffer_device_address: bool) -> DeviceInfo {
+        device_int64(ray_query, buffer_device_address, true)
+    }
+
+    fn device_int64(
+        ray_query: bool,
+        buffer_device_address: bool,
+        shader_int64: bool,
+    ) -> DeviceInfo {
         DeviceInfo {
             name: "test device".into(),
             device_type: "DISCRETE_GPU".into(),
@@ -505,6 +520,7 @@ mod tests {
             ray_query_supported: ray_query,
             ray_query_enabled: ray_query,
             buffer_device_address,
+            shader_int64,
             is_cpu: false,
             timestamp_period_ns: 1.0,
             timestamps_supported: true,
@@ -552,5 +568,28 @@ mod tests {
             resolve(AccelChoice::RayQuery, &with).unwrap_err(),
             VkError::RayQueryUnavailable
         ));
+    }
+
+    /// The software backends load their BVH eight bytes at a time: a device without
+    /// 64-bit shader integers is refused by name for each of them (and for `auto` where
+    /// it would pick one); ray query does not need them.
+    #[test]
+    fn software_backends_need_64_bit_integers() {
+        let without = device_int64(false, true, false);
+        for choice in [
+            AccelChoice::Auto,
+            AccelChoice::Software,
+            AccelChoice::SoftwareWide,
+        ] {
+            let e = resolve(choice, &without).unwrap_err();
+            assert!(matches!(e, VkError::NoShaderInt64), "{choice:?}: {e}");
+            assert!(e.to_string().contains("shaderInt64"), "{e}");
+        }
+        let rq = device_int64(true, true, false);
+        assert_eq!(resolve(AccelChoice::Auto, &rq).unwrap(), Backend::RayQuery);
+        assert_eq!(
+            resolve(AccelChoice::RayQuery, &rq).unwrap(),
+            Backend::RayQuery
+        );
     }
 }

@@ -41,6 +41,9 @@ pub struct DeviceInfo {
     /// from 1.3) are on: the path tracer and the software trace backends read their
     /// buffers through them (ray query needs them too).
     pub buffer_device_address: bool,
+    /// 64-bit integers in shaders (`shaderInt64`) are on: the software trace backends
+    /// load their BVH eight bytes at a time.
+    pub shader_int64: bool,
     pub is_cpu: bool,
     pub timestamp_period_ns: f32,
     pub timestamps_supported: bool,
@@ -462,8 +465,14 @@ impl Context {
         let mut rq_on = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let mut as_on = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
             .acceleration_structure(true);
+        // 64-bit integers: the software traversal loads its nodes and triangles eight
+        // bytes at a time (glsl/common/trace.glsl, `words_uvec4`).
+        let shader_int64 =
+            unsafe { instance.get_physical_device_features(physical) }.shader_int64 == vk::TRUE;
+        let features = vk::PhysicalDeviceFeatures::default().shader_int64(shader_int64);
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
+            .enabled_features(&features)
             .enabled_extension_names(&ext_names)
             .push_next(&mut v12_on);
         if ray_query_enabled {
@@ -485,6 +494,7 @@ impl Context {
             ray_query_supported,
             ray_query_enabled,
             buffer_device_address,
+            shader_int64,
             is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,

@@ -34,6 +34,10 @@ pub enum VkError {
         "this device does not offer buffer device addresses (Vulkan 1.2 feature bufferDeviceAddress, required from Vulkan 1.3), through which the path tracer and the software trace backends read their buffers (ray query needs them too), so no trace backend can run on it"
     )]
     NoBufferDeviceAddress,
+    #[error(
+        "this device does not offer 64-bit integers in shaders (Vulkan 1.0 feature shaderInt64), with which the software trace backends load their BVH; use --accel ray-query where the device has ray query"
+    )]
+    NoShaderInt64,
     #[error("buffer {0:?} is not host-visible")]
     NotMappable(String),
     /// The software backend's BVH cannot be traversed (src/trace/software_bvh.rs).
