@@ -84,7 +84,7 @@ void trace_leaf(uint level, uint first, uint count, TraceRay r, float tmin, inou
 // it stops at the first hit found: an occlusion test.
 void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hit h, bool any) {
     uint oct_inv = (inv_d.x < 0.0 ? 0u : 4u) | (inv_d.y < 0.0 ? 0u : 2u) | (inv_d.z < 0.0 ? 0u : 1u);
-    uvec2 stack[TRACE_WIDE_STACK + 1];   // the last: a spare slot written when full
+    uint64_t stack[TRACE_WIDE_STACK + 1];   // the last: a spare slot written when full
     int sp = 0;
     uvec2 group = uvec2(0u, 0x80000000u);   // the root, as the only child of a virtual node
     uvec2 tris = uvec2(0u);
@@ -100,8 +100,10 @@ void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hi
             uint bit = uint(findMSB(hits));
             group.y &= ~(1u << bit);
             // Pushed without a branch (lanes run both sides of one on lavapipe): the
-            // entry is written always and kept only if the group has more children.
-            stack[min(sp, TRACE_WIDE_STACK)] = group;
+            // entry is written always and kept only if the group has more children. One
+            // 64-bit word an entry: lavapipe writes a private array lane by lane, each
+            // component apart (0.95 of the path tracing's time against a uvec2 entry).
+            stack[min(sp, TRACE_WIDE_STACK)] = packUint2x32(group);
             sp += (group.y & 0xff000000u) != 0u && sp < TRACE_WIDE_STACK ? 1 : 0;
             uint slot = (bit - 24u) ^ oct_inv;
             uint node = group.x + uint(bitCount(hits & ~(0xffffffffu << slot)));
@@ -123,7 +125,7 @@ void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hi
         if (tris.y == 0u && (group.y & 0xff000000u) == 0u) {
             if (sp == 0) break;
             --sp;
-            group = stack[sp];
+            group = unpackUint2x32(stack[sp]);
         }
     }
 }
