@@ -13,6 +13,14 @@ use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
 
 /// 100k rays: a third random through the volume, a third aimed exactly at vertices, a
 /// third at points on edges (where two triangles meet and intersectors disagree most).
+/// The rays whose hits differ in any bit (distance, triangle, barycentrics).
+fn rays_that_differ(a: &[HitOut], b: &[HitOut]) -> Vec<usize> {
+    let bits = |h: &HitOut| (h.t.to_bits(), h.prim, h.bary.map(f32::to_bits));
+    (0..a.len())
+        .filter(|&i| bits(&a[i]) != bits(&b[i]))
+        .collect()
+}
+
 fn rays(mesh: &synosis::scene::Mesh, n: usize, seed: u64) -> Vec<RayIn> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let (lo, hi) = mesh.bounds();
@@ -216,7 +224,6 @@ fn a_hint_never_changes_the_closest_hit() {
         corners: [[0.0; 3]; 3],
         prim: None,
     };
-    let bits = |h: &HitOut| (h.t.to_bits(), h.prim, h.bary.map(f32::to_bits));
     for backend in common::BACKENDS {
         let scene = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
         let (plain, _) = trace_rays(&ctx, &scene, &rays, None).unwrap();
@@ -235,9 +242,7 @@ fn a_hint_never_changes_the_closest_hit() {
             })
             .collect();
         let (hinted, _) = trace_rays_hinted(&ctx, &scene, &rays, Some(&hints), None).unwrap();
-        let differ: Vec<usize> = (0..rays.len())
-            .filter(|&i| bits(&plain[i]) != bits(&hinted[i]))
-            .collect();
+        let differ = rays_that_differ(&plain, &hinted);
         assert!(
             differ.is_empty(),
             "{}: {} of {} rays hit otherwise with a hint; first: ray {} (hint mode {}) {:?} against {:?}",
@@ -271,7 +276,6 @@ fn a_pixel_bundle_never_changes_the_closest_hit() {
     let (lo, hi) = mesh.bounds();
     let centre = (lo + hi) * 0.5;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(17);
-    let bits = |h: &HitOut| (h.t.to_bits(), h.prim, h.bary.map(f32::to_bits));
     // (lens radius, depth of focus): a thin lens focused on the sphere's front, one
     // focused behind it, a pinhole.
     for (lens, zf) in [(1.0f32, 30.0f32), (0.6, 45.0), (0.0, 1.0)] {
@@ -384,9 +388,7 @@ fn a_pixel_bundle_never_changes_the_closest_hit() {
             let (plain, _) = trace_rays(&ctx, &scene, &rays, None).unwrap();
             let (bundled, uses) =
                 trace_rays_bundled(&ctx, &scene, &rays, &hints, &bundles).unwrap();
-            let differ: Vec<usize> = (0..rays.len())
-                .filter(|&i| bits(&plain[i]) != bits(&bundled[i]))
-                .collect();
+            let differ = rays_that_differ(&plain, &bundled);
             assert!(
                 differ.is_empty(),
                 "{} (lens {lens}, focus {zf}): {} of {} rays hit otherwise with a bundle; first: ray {} {:?} against {:?}",
