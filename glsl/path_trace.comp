@@ -735,112 +735,130 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         float fnl = float(nl);
         uint nb = depth == 0u ? max(prm.bsdf_samples, 1u) : 1u;
         float fnb = float(nb);
-        for (uint k = 0u; k < nl && prm.emitter_count > 0u; k++) {
-            float ue = sample_1d(rng);
-            uint ei = choose_emitter(ue);
-            LightBlock e = EMITTERS[ei];
-            vec2 ul = sample_2d(rng);
-            // The sample's shadow ray (one trace for both kinds of light, below) and what
-            // it adds where nothing blocks it.
+        // The first vertex's direct light in one loop with one trace call (lavapipe
+        // inlines a whole traversal at each call site): steps 0 to nl - 1 the light
+        // samples and their shadow rays, step nl the path's own BSDF sample (no trace),
+        // then the nb - 1 more BSDF directions and the first light each meets. The same
+        // samples drawn and the same terms added in the same order as one loop each.
+        uint lights = prm.emitter_count > 0u ? nl : 0u;
+        uint steps = prm.emitter_count > 0u ? nl + nb : 1u;
+        vec3 wi = vec3(0.0);
+        float weight = 0.0, pdf = 0.0;
+        bool sampled = false;
+        vec3 d_next = vec3(0.0);
+        for (uint k = 0u; k < steps; k++) {
+            // This step's trace: its query, direction, bounds, and whether it is made.
             uint shadow = TQ_BLOCKED;
             vec3 shadow_d = vec3(0.0);
             float shadow_max = 0.0, shadow_light = 0.0, add = 0.0;
             bool test = false;
-            if (e.shape.z == LIGHT_SPOT) {
-                vec3 to = e.pos.xyz - origin;
-                float dist2 = dot(to, to);
-                float dist = sqrt(dist2);
-                vec3 wi_w = to / dist;
-                float I = spot_intensity(e, -wi_w);
-                vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
-                if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
-                    float pdf_b;
-                    float f = surface_eval(surf, wo, wi, pdf_b);
-                    if (f > 0.0) {
+            float weight_j = 0.0, pdf_j = 0.0;
+            if (k < lights) {
+                float ue = sample_1d(rng);
+                uint ei = choose_emitter(ue);
+                LightBlock e = EMITTERS[ei];
+                vec2 ul = sample_2d(rng);
+                // The sample's shadow ray (one trace for both kinds of light, below) and what
+                // it adds where nothing blocks it.
+                if (e.shape.z == LIGHT_SPOT) {
+                    vec3 to = e.pos.xyz - origin;
+                    float dist2 = dot(to, to);
+                    float dist = sqrt(dist2);
+                    vec3 wi_w = to / dist;
+                    float I = spot_intensity(e, -wi_w);
+                    vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                    if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
+                        float pdf_b;
+                        float f = surface_eval(surf, wo, wi, pdf_b);
+                        if (f > 0.0) {
+                            test = true;
+                            shadow_d = wi_w;
+                            shadow_max = dist;
+                            add = T * f * I / (dist2 * emitter_pdf(ei) * fnl);
+                        }
+                    }
+                } else {
+                    float area_pdf;
+                    uint li = choose_light_pdf(e, ue, origin, ng, emitter_pdf(ei), area_pdf);
+                    Tri lt = fetch_tri(li);
+                    float su = sqrt(ul.x);
+                    float u2 = ul.y;
+                    vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
+                    vec3 to = q - origin;
+                    float dist2 = dot(to, to);
+                    float dist = sqrt(dist2);
+                    vec3 wi_w = to / dist;
+                    float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
+                    vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                    bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
+                    // The control variate's light sample: on a ring it uses (cv_rings; such a
+                    // ring lies above both horizons, so the sample is also lit, up to rounding).
+                    bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0;
+                    float pdf_b = 0.0;
+                    float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
+                    float pdf_light = dist2 / cos_l * area_pdf;
+                    if (cv_light) {
+                        // The control variate's light sample: MIS weight times c D Le / pdf.
+                        cv_nee_val += pdf_light > 0.0
+                            ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
+                                * e.emit.x / (pdf_light * fnl)
+                            : 0.0;
+                    }
+                    if (lit && f > 0.0) {
+                        // Visible: nothing up to the sampled point, or a light triangle no
+                        // nearer than it (up to rounding).
                         test = true;
+                        shadow = TQ_LIGHT_VISIBLE;
                         shadow_d = wi_w;
-                        shadow_max = dist;
-                        add = T * f * I / (dist2 * emitter_pdf(ei) * fnl);
+                        shadow_max = dist * 1.001;
+                        shadow_light = dist * 0.999;
+                        add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
                     }
                 }
+            } else if (k == lights) {
+                // BSDF sampling continues the path.
+                float u_lobe = sample_1d(rng);
+                vec3 u = vec3(u_lobe, sample_2d(rng));
+                sampled = surface_sample(surf, wo, u, wi, weight, pdf);
+                d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
+                if (cv_rings != 0u) {
+                    cv_mask = cv_rings;
+                    L += cv_a - cv_nee_val;
+                    cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
+                }
             } else {
-                float area_pdf;
-                uint li = choose_light_pdf(e, ue, origin, ng, emitter_pdf(ei), area_pdf);
-                Tri lt = fetch_tri(li);
-                float su = sqrt(ul.x);
-                float u2 = ul.y;
-                vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
-                vec3 to = q - origin;
-                float dist2 = dot(to, to);
-                float dist = sqrt(dist2);
-                vec3 wi_w = to / dist;
-                float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
-                vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
-                bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
-                // The control variate's light sample: on a ring it uses (cv_rings; such a
-                // ring lies above both horizons, so the sample is also lit, up to rounding).
-                bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0;
-                float pdf_b = 0.0;
-                float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
-                float pdf_light = dist2 / cos_l * area_pdf;
-                if (cv_light) {
-                    // The control variate's light sample: MIS weight times c D Le / pdf.
-                    cv_nee_val += pdf_light > 0.0
-                        ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
-                            * e.emit.x / (pdf_light * fnl)
-                        : 0.0;
+                // More BSDF samples for the direct light alone (`[render] bsdf_samples` =
+                // M at the camera ray's first hit): each of M directions (the path's own
+                // and M - 1 more) adds the light it meets with its MIS weight over M, and
+                // the control variate's term likewise; only the path's own direction goes
+                // on. The trace: the first light on the ray with occluders ignored, and
+                // whether the object hides it (the answer the closest hit would give, as
+                // a light sample's shadow test).
+                vec3 uj = vec3(sample_1d(rng), sample_2d(rng));
+                vec3 wj;
+                test = surface_sample(surf, wo, uj, wj, weight_j, pdf_j);
+                if (test) shadow_d = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
+                shadow = TQ_LIGHT_SEEN;
+                shadow_max = 3.0e38;
+            }
+            TraceResult seen;
+            seen.blocked = true;
+            seen.light = hit_none(3.0e38);
+            if (test) seen = trace_query(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light);
+            if (k < lights) {
+                if (test && !seen.blocked) L += add;
+            } else if (k > lights && test && seen.light.prim != NO_HIT) {
+                // Counted where the light met faces the ray above the surface.
+                Hit lj = seen.light;
+                vec3 dj = shadow_d;
+                float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
+                if (cos_j > 0.0 && dot(dj, ng) > 0.0 && !seen.blocked) {
+                    L += T * weight_j * tri_radiance(lj.prim)
+                        * bsdf_mis_weight(lj.prim, lj.t, cos_j, origin, ng, pdf_j) / fnb;
                 }
-                if (lit && f > 0.0) {
-                    // Visible: nothing up to the sampled point, or a light triangle no
-                    // nearer than it (up to rounding).
-                    test = true;
-                    shadow = TQ_LIGHT_VISIBLE;
-                    shadow_d = wi_w;
-                    shadow_max = dist * 1.001;
-                    shadow_light = dist * 0.999;
-                    add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
+                if (cv_rings != 0u) {
+                    L -= cv_bsdf_weight(origin, dj, pdf_j, ng, lj, cv_rings) * lobe.c * lobe_d(lobe, dj) / pdf_j;
                 }
-            }
-            if (test && !trace_query(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light).blocked) {
-                L += add;
-            }
-        }
-
-        // BSDF sampling continues the path.
-        float u_lobe = sample_1d(rng);
-        vec3 u = vec3(u_lobe, sample_2d(rng));
-        vec3 wi;
-        float weight, pdf;
-        bool sampled = surface_sample(surf, wo, u, wi, weight, pdf);
-        vec3 d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
-        if (cv_rings != 0u) {
-            cv_mask = cv_rings;
-            L += cv_a - cv_nee_val;
-            cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
-        }
-        // More BSDF samples for the direct light alone (`[render] bsdf_samples` = K at
-        // the camera ray's first hit): each of M directions (the path's own and M - 1
-        // more) adds the light it meets with its MIS weight over M, and the control
-        // variate's term likewise; only the path's own direction goes on.
-        for (uint j = 1u; j < nb && prm.emitter_count > 0u; j++) {
-            vec3 uj = vec3(sample_1d(rng), sample_2d(rng));
-            vec3 wj;
-            float weight_j, pdf_j;
-            if (!surface_sample(surf, wo, uj, wj, weight_j, pdf_j)) continue;
-            vec3 dj = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
-            // The first light on the ray with occluders ignored, and whether the object
-            // hides it (the answer the closest hit would give, as a light sample's shadow
-            // test), counted where that light faces the ray above the surface.
-            TraceResult seen = trace_query(TQ_LIGHT_SEEN, origin, dj, 0.0, 3.0e38, 0.0);
-            Hit lj = seen.light;
-            if (lj.prim == NO_HIT) continue;
-            float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
-            if (cos_j > 0.0 && dot(dj, ng) > 0.0 && !seen.blocked) {
-                L += T * weight_j * tri_radiance(lj.prim)
-                    * bsdf_mis_weight(lj.prim, lj.t, cos_j, origin, ng, pdf_j) / fnb;
-            }
-            if (cv_rings != 0u) {
-                L -= cv_bsdf_weight(origin, dj, pdf_j, ng, lj, cv_rings) * lobe.c * lobe_d(lobe, dj) / pdf_j;
             }
         }
         if (!sampled) break;
