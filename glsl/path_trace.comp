@@ -742,7 +742,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         // samples drawn and the same terms added in the same order as one loop each.
         uint lights = prm.emitter_count > 0u ? nl : 0u;
         uint steps = prm.emitter_count > 0u ? nl + nb : 1u;
-        vec3 wi = vec3(0.0);
+        // The path's own BSDF sample (step nl): its direction (local), weight and pdf.
+        vec3 wi_path = vec3(0.0);
         float weight = 0.0, pdf = 0.0;
         bool sampled = false;
         vec3 d_next = vec3(0.0);
@@ -819,8 +820,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                 // BSDF sampling continues the path.
                 float u_lobe = sample_1d(rng);
                 vec3 u = vec3(u_lobe, sample_2d(rng));
-                sampled = surface_sample(surf, wo, u, wi, weight, pdf);
-                d_next = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * ns) : vec3(0.0);
+                sampled = surface_sample(surf, wo, u, wi_path, weight, pdf);
+                d_next = sampled ? normalize(wi_path.x * tb + wi_path.y * bt + wi_path.z * ns) : vec3(0.0);
                 if (cv_rings != 0u) {
                     cv_mask = cv_rings;
                     L += cv_a - cv_nee_val;
