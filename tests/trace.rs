@@ -11,8 +11,6 @@ use synosis::scene::procedural::bumpy_sphere;
 use synosis::trace::TraceScene;
 use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
 
-/// 100k rays: a third random through the volume, a third aimed exactly at vertices, a
-/// third at points on edges (where two triangles meet and intersectors disagree most).
 /// The rays whose hits differ in any bit (distance, triangle, barycentrics).
 fn rays_that_differ(a: &[HitOut], b: &[HitOut]) -> Vec<usize> {
     let bits = |h: &HitOut| (h.t.to_bits(), h.prim, h.bary.map(f32::to_bits));
@@ -21,6 +19,8 @@ fn rays_that_differ(a: &[HitOut], b: &[HitOut]) -> Vec<usize> {
         .collect()
 }
 
+/// 100k rays: a third random through the volume, a third aimed exactly at vertices, a
+/// third at points on edges (where two triangles meet and intersectors disagree most).
 fn rays(mesh: &synosis::scene::Mesh, n: usize, seed: u64) -> Vec<RayIn> {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let (lo, hi) = mesh.bounds();
