@@ -154,6 +154,18 @@ uint mat_word(uint prim) {
 
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 
+// Whether no other light triangle can hide light triangle `li` from point x: x lies in
+// a cell of the light cover's grid that the triangle's mask marks (LightTri::cover,
+// src/scene/light_cover.rs; outside the grid: no).
+bool light_unhidden(uint li, vec3 x) {
+    vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
+    float side = float(LIGHT_COVER_SIDE);
+    if (!all(greaterThanEqual(c, vec3(0.0))) || !all(lessThan(c, vec3(side)))) return false;
+    uvec3 ci = uvec3(c);
+    uint bit = ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
+    return ((LIGHT_TRI_WEIGHTS[li - prm.light_first].cover.x >> bit) & 1u) != 0u;
+}
+
 #include "common/lights.glsl"
 #include "common/analytic_light.glsl"
 
@@ -754,6 +766,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             float shadow_max = 0.0, shadow_light = 0.0, add = 0.0;
             bool test = false;
             float weight_j = 0.0, pdf_j = 0.0;
+            TraceHint light_j = trace_no_hint();
             if (k < lights) {
                 float ue = sample_1d(rng);
                 uint ei = choose_emitter(ue);
@@ -813,6 +826,12 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                         shadow_d = wi_w;
                         shadow_max = dist * 1.001;
                         shadow_light = dist * 0.999;
+                        // No other light triangle can hide this one from the origin's
+                        // cell: the trace tests it alone for the lights' part.
+                        if (light_unhidden(li, origin)) {
+                            light_j.a = lt.a.xyz; light_j.b = lt.b.xyz; light_j.c = lt.c.xyz;
+                            light_j.prim = li;
+                        }
                         add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
                     }
                 }
@@ -845,7 +864,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             TraceResult seen;
             seen.blocked = true;
             seen.light = hit_none(3.0e38);
-            if (test) seen = trace_query(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light);
+            if (test) seen = trace_query_hinted(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light, light_j);
             if (k < lights) {
                 if (test && !seen.blocked) L += add;
             } else if (k > lights && test && seen.light.prim != NO_HIT) {

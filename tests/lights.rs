@@ -6,10 +6,12 @@
 mod common;
 
 use glam::Vec3;
+use synosis::gpu_interface::LIGHT_COVER_CELLS;
 use synosis::render::energy::EnergyTables;
 use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object, path_trace};
 use synosis::scene::assemble::{EmitterSampling, LightGeometry};
 use synosis::scene::config::SceneConfig;
+use synosis::scene::light_cover::{light_cover, seen_box};
 use synosis::trace::Backend;
 
 /// The paper camera's field of view at `w` x `h`, straight above face A (30 x 25 mm of
@@ -150,6 +152,64 @@ fn each_kind_matches_the_irradiance_integral() {
                 assert!((a / b - 1.0).abs() > 0.1, "spot edge not in view: {a} {b}");
             }
         }
+    }
+}
+
+/// A fat ring light low over the plate hides parts of its tube from much of it (the far
+/// side's inner face behind the near side): the software backends, whose shadow rays
+/// test a light triangle alone where the view's light cover says nothing can hide it
+/// (src/scene/light_cover.rs), render the image the ray query renders (which traverses
+/// the lights for every shadow ray), to the bounds of `backends_agree` (tests/render.rs).
+/// The cover marks some cells of some triangles and not others, so both ways are taken.
+#[test]
+fn a_ring_hiding_itself_renders_as_with_ray_query() {
+    let ring = "[[light]]\nkind = \"ring\"\nposition_mm = [0, 0, 34]\ndirection = [0, 0, -1]\nmajor_radius_mm = 22\nminor_radius_mm = 16\nsegments_major = 48\nsegments_minor = 16\nsampling = \"uniform\"\n";
+    let cfg = plate_cfg(ring, 32, 24, 16);
+    let (s, reference) = render_plate(&cfg, Backend::RayQuery);
+    let tris = &s.stage.mesh;
+    let object = tris
+        .positions
+        .iter()
+        .fold([Vec3::INFINITY, Vec3::NEG_INFINITY], |[lo, hi], p| {
+            [lo.min(*p), hi.max(*p)]
+        });
+    let grid = seen_box(&s.view.camera, object);
+    let cover = light_cover(&s.view.light.tris, grid);
+    let all = (1u32 << LIGHT_COVER_CELLS) - 1;
+    let full = cover.masks.iter().filter(|&&m| m == all).count();
+    let partial = cover.masks.iter().filter(|&&m| m != all).count();
+    println!("cover: {full} triangles clear from every cell, {partial} not");
+    assert!(full > 0 && partial > 0, "{full} / {partial}");
+    let m = mean(&reference.data);
+    for backend in [Backend::Software, Backend::SoftwareWide] {
+        let img = render_plate(&cfg, backend).1;
+        let diff = reference
+            .data
+            .iter()
+            .zip(&img.data)
+            .map(|(x, y)| (x - y).abs() as f64)
+            .sum::<f64>()
+            / img.data.len() as f64;
+        let differing = reference
+            .data
+            .iter()
+            .zip(&img.data)
+            .filter(|(x, y)| (*x - *y).abs() > 1e-4 * (x.abs() + 1e-3))
+            .count();
+        println!(
+            "{}: mean {m:.5}, mean |diff| {diff:.2e}, {differing} pixels differ",
+            backend.name()
+        );
+        assert!(
+            diff < 1e-6 * m,
+            "{}: differs by {diff} (mean {m})",
+            backend.name()
+        );
+        assert!(
+            differing <= 3,
+            "{}: {differing} pixels differ",
+            backend.name()
+        );
     }
 }
 

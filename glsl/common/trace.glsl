@@ -55,11 +55,14 @@ struct TraceResult {
     bool blocked;
 };
 
-// A closest-hit query's hint (TQ_CLOSEST only): an object triangle (level 0; corners in
+// A closest-hit query's hint (TQ_CLOSEST): an object triangle (level 0; corners in
 // original order, as the BVH's leaves hold them) the ray is likely to hit first, or
 // prim NO_HIT. The software traversal tests it before the BVH, so it starts with that
 // hit as its bound and skips what lies behind; the answer is the same (the closest hit,
-// ties to the lower index, whatever the order). The ray query ignores it.
+// ties to the lower index, whatever the order). A shadow test's (TQ_LIGHT_VISIBLE): the
+// sampled light triangle (level 1, corners in original order) where no other light
+// triangle can hide it from the ray's origin, which then stands for the lights'
+// traversal. The ray query ignores it.
 struct TraceHint { vec3 a; vec3 b; vec3 c; uint prim; };
 
 TraceHint trace_no_hint() {
@@ -377,7 +380,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     // A camera ray of the bundle's pixel (the hint's): its closest hit on the object
     // among the bundle's triangles, taken without the object's traversal where it lies
     // no deeper than the bundle reaches.
-    bool skip_object = false;
+    bool skip_first = false;   // the first level's traversal answered without it
     if (kind == TQ_CLOSEST && hint.prim != NO_HIT) {
         if (trace_bundle_n > 0u) {
             for (uint k = 0u; k < trace_bundle_n; k++) {
@@ -386,14 +389,23 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
             }
             float depth = dot(trace_bundle_axis.xyz, o) + trace_bundle_axis.w
                 + h.t * dot(trace_bundle_axis.xyz, d);
-            skip_object = h.prim != NO_HIT && depth <= trace_bundle_zfar;
-            trace_bundle_answered = skip_object;
+            skip_first = h.prim != NO_HIT && depth <= trace_bundle_zfar;
+            trace_bundle_answered = skip_first;
         } else {
             trace_tri_test(hint.a, hint.b, hint.c, hint.prim, 0u, tr, tmin, h);
         }
     }
+    // A shadow test toward a light triangle no other can hide from the ray's origin (the
+    // hint's; src/scene/light_cover.rs): the lights' closest hit is that triangle's,
+    // found by testing it alone; where the test misses it (rounding at its edges) or
+    // meets it nearer than t_light, the lights' traversal as always.
+    if (kind == TQ_LIGHT_VISIBLE && hint.prim != NO_HIT) {
+        trace_tri_test(hint.a, hint.b, hint.c, hint.prim, 1u, tr, tmin, h);
+        skip_first = h.prim != NO_HIT && h.t >= t_light;
+        if (!skip_first) h = hit_none(tmax);
+    }
     for (uint step = 0u; step < 2u; step++) {
-        if (!(step == 0u && skip_object)) trace_bvh(level, o, inv_d, tr, tmin, h, any);
+        if (!(step == 0u && skip_first)) trace_bvh(level, o, inv_d, tr, tmin, h, any);
         if (step == 1u) break;
         if (kind == TQ_CLOSEST) {
             level = 1u;

@@ -17,9 +17,10 @@ use crate::gpu_interface::{
 use crate::graph::Graph;
 use crate::scene::Camera;
 use crate::scene::assemble::{EmitterSampling, LightGeometry, ViewSetup};
+use crate::scene::light_cover::{LightCover, light_cover, seen_box};
 use crate::scene::lights::MM2_PER_M2;
 use crate::trace::{TraceScene, TriangleSoup, scramble_multiplier};
-use crate::vk::{Buffer, MemoryKind, Profiler};
+use crate::vk::{Buffer, MemoryKind, Profiler, timed};
 
 /// The image's tiles and how many dispatches cover them (a device allows only so many
 /// workgroups per dispatch: 65,535 on lavapipe).
@@ -190,7 +191,13 @@ impl<'s> View<'s> {
                 message: "texture_filter = \"lean\" needs the maps' moment pyramids: upload them with GpuScene::set_face_maps_filtered".into(),
             }));
         }
+        let cover = timed(profiler, "light cover", || {
+            let grid = scene.geometry.bounds.and_then(|b| seen_box(cam, b));
+            light_cover(&light.tris, grid)
+        });
         let mut params = path_params(scene, cam, light, settings);
+        params.cover_lo = cover.lo.extend(0.0).into();
+        params.cover_cell = cover.cell.extend(0.0).into();
         if !emitting {
             params.emitter_count = 0;
         }
@@ -217,7 +224,7 @@ impl<'s> View<'s> {
         let light_weights = Buffer::from_slice(
             ctx,
             "light triangle weights",
-            &light_tri_blocks(&light.tris),
+            &light_tri_blocks(&light.tris, &cover),
             storage,
         )?;
         let (headers, texels) = scene.map_buffers();
@@ -532,12 +539,13 @@ pub fn pixel_angle(cam: &Camera) -> f32 {
 /// `first`): its centroid, twice its area and its unit normal (`LightTri`), what
 /// glsl/common/lights.glsl `light_weight` takes; one zero block when there is none (a
 /// binding may not be empty; never read).
-fn light_tri_blocks(tris: &TriangleSoup) -> Vec<LightTri> {
+fn light_tri_blocks(tris: &TriangleSoup, cover: &LightCover) -> Vec<LightTri> {
     let p = &tris.positions;
     let mut blocks: Vec<LightTri> = tris
         .triangles
         .iter()
-        .map(|t| {
+        .zip(&cover.masks)
+        .map(|(t, &mask)| {
             let [a, b, c] = t.map(|i| p[i as usize]);
             let n = (b - a).cross(c - a);
             let area2 = n.length();
@@ -545,6 +553,7 @@ fn light_tri_blocks(tris: &TriangleSoup) -> Vec<LightTri> {
             LightTri {
                 center: ((a + b + c) * (1.0 / 3.0)).extend(area2).into(),
                 normal: unit.extend(0.0).into(),
+                cover: [mask, 0, 0, 0],
             }
         })
         .collect();
@@ -636,7 +645,11 @@ mod tests {
             ],
             triangles: vec![[0, 1, 2], [0, 1, 3]],
         };
-        let b = light_tri_blocks(&tris);
+        let cover = LightCover {
+            masks: vec![5, 0],
+            ..LightCover::none(2)
+        };
+        let b = light_tri_blocks(&tris, &cover);
         assert_eq!(b.len(), 2);
         let want = [2.0 / 3.0, 1.0, 1.0, 6.0];
         for (got, want) in b[0].center.iter().zip(want) {
@@ -649,6 +662,10 @@ mod tests {
             positions: vec![],
             triangles: vec![],
         };
-        assert_eq!(light_tri_blocks(&none), vec![LightTri::default()]);
+        assert_eq!(b[0].cover, [5, 0, 0, 0]);
+        assert_eq!(
+            light_tri_blocks(&none, &LightCover::none(0)),
+            vec![LightTri::default()]
+        );
     }
 }

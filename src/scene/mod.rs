@@ -8,6 +8,7 @@ pub mod config;
 pub mod flange;
 pub mod gltf_io;
 pub mod inspect;
+pub mod light_cover;
 pub mod lights;
 pub mod materials;
 pub mod mesh;

@@ -182,6 +182,8 @@ pub struct TraceGeometry {
     pub shade_tris: Buffer,
     pub triangle_count: usize,
     pub first_prim: u32,
+    /// The lower and upper corner of the box around its triangles (None: none).
+    pub bounds: Option<[Vec3; 2]>,
     /// CPU time of the BVH build (software) or device time of the BLAS build.
     pub build_ms: f64,
 }
@@ -240,6 +242,14 @@ impl TraceGeometry {
             shade
         };
         let shade_tris = Buffer::from_slice(ctx, "shade triangles", &shade, storage)?;
+        let bounds = (!triangles.is_empty()).then(|| {
+            triangles
+                .iter()
+                .flatten()
+                .fold([Vec3::INFINITY, Vec3::NEG_INFINITY], |[lo, hi], &i| {
+                    [lo.min(positions[i as usize]), hi.max(positions[i as usize])]
+                })
+        });
         let start = std::time::Instant::now();
         let data = match backend {
             Backend::RayQuery if triangles.is_empty() => Data::RayQuery(None),
@@ -287,6 +297,7 @@ impl TraceGeometry {
             shade_tris,
             triangle_count: triangles.len(),
             first_prim,
+            bounds,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }
