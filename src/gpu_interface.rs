@@ -87,7 +87,9 @@ mod tests {
 
     #[test]
     fn layouts_match_what_the_shaders_were_written_for() {
-        assert_eq!(std::mem::size_of::<PathParams>(), 192);
+        assert_eq!(std::mem::size_of::<PathParams>(), 224);
+        assert_eq!(std::mem::offset_of!(PathParams, cover_lo), 192);
+        assert_eq!(std::mem::offset_of!(PathParams, cover_cell), 208);
         assert_eq!(std::mem::offset_of!(PathParams, texture_filter), 176);
         assert_eq!(std::mem::offset_of!(PathParams, width), 96);
         assert_eq!(std::mem::offset_of!(PathParams, light_first), 160);
@@ -99,7 +101,7 @@ mod tests {
         assert_eq!(PathTraceBinding::PixelList.at(2), 23);
         assert_eq!(PathTraceBinding::LightWeights.at(2), 24);
         assert_eq!(PathTraceBinding::Addresses.at(2), 25);
-        assert_eq!(std::mem::size_of::<LightTri>(), 32);
+        assert_eq!(std::mem::size_of::<LightTri>(), 48);
         // path_trace.comp's map_buffer_addr picks a map's buffer among three consecutive
         // bindings.
         assert_eq!(
