@@ -687,6 +687,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         // The ray's closest hit; with a control-variate term pending also the first light
         // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped.
         uint kind = stop ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
+        // A ray that can meet no light: the object alone (the same hit, no light).
+        if (!stop && misses_lights(o, d)) kind = TQ_OBJECT;
         TraceResult tq = trace_query_hinted(kind, o, d, 0.0, 3.0e38, 0.0,
                                             depth == 0u ? pix_hint : trace_no_hint());
         Hit h = tq.h;
@@ -858,6 +860,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                 vec3 wj;
                 test = surface_sample(surf, wo, uj, wj, weight_j, pdf_j);
                 if (test) shadow_d = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
+                // A direction that can meet no light adds nothing: no trace.
+                test = test && !misses_lights(origin, shadow_d);
                 shadow = TQ_LIGHT_SEEN;
                 shadow_max = 3.0e38;
             }

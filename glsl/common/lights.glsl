@@ -31,6 +31,47 @@ uint choose_emitter(inout float u) {
     return e;
 }
 
+// Whether ray o + t d (t >= 0) meets no light triangle, decided without a trace
+// (conservative: false where unsure). A spot has none; any other light's lie in the
+// sphere of radius reach.y about pos (widened here by a part in 10^4 and 10^-3 mm for
+// f32); a ring's also outside its hole and inside its slab (reach.z, reach.w:
+// src/scene/light_cover.rs `ring_room`), so a ray that meets its slab only inside the
+// hole misses it (the squared distance from the axis along the ray is convex: its
+// largest at the slab's faces). Rays within a twentieth of parallel to a ring's plane
+// are not decided. Dark lights (no emitter counted) still block rays: not decided.
+// Never with `[render] light_shortcuts = false` (PathParams::shortcuts 0).
+bool misses_lights(vec3 o, vec3 d) {
+    if (prm.shortcuts == 0u) return false;   // [render] light_shortcuts = false
+    if (prm.light_count == 0u) return true;
+    if (prm.emitter_count == 0u) return false;
+    float dd = dot(d, d);
+    for (uint e = 0u; e < prm.emitter_count; e++) {
+        LightBlock b = EMITTERS[e];
+        if (b.reach.y < 0.0) continue;   // a spot: nothing to hit
+        vec3 p = o - b.pos.xyz;
+        float r = b.reach.y * 1.0001 + 1e-3;
+        float pd = dot(p, d);
+        float c = dot(p, p) - r * r;
+        if (c > 0.0 && (pd >= 0.0 || pd * pd < dd * c)) continue;   // the sphere missed
+        if (b.reach.w <= 0.0) return false;   // not a ring: met for all we know
+        vec3 a = b.dir.xyz;
+        float z0 = dot(p, a);
+        float dz = dot(d, a);
+        if (abs(dz) < 0.05 * sqrt(dd)) return false;
+        float t1 = (-b.reach.w - z0) / dz;
+        float t2 = (b.reach.w - z0) / dz;
+        float thi = max(t1, t2);
+        if (thi < 0.0) continue;   // the slab behind the ray
+        vec3 q1 = p + max(min(t1, t2), 0.0) * d;
+        vec3 q2 = p + thi * d;
+        vec3 r1 = q1 - dot(q1, a) * a;
+        vec3 r2 = q2 - dot(q2, a) * a;
+        float h2 = b.reach.z * b.reach.z;
+        if (!(dot(r1, r1) < h2 && dot(r2, r2) < h2)) return false;   // not through the hole
+    }
+    return true;
+}
+
 // Emitter of scene triangle `tri` (a light triangle).
 uint emitter_of(uint tri) { return LIGHT_TRI_WORDS[tri - prm.light_first].x; }
 

@@ -48,6 +48,9 @@ const uint TQ_LIGHT_VISIBLE = 3u;  // a light sample's shadow test: blocked wher
 const uint TQ_LIGHT_SEEN = 4u;     // light: the first light, occluders ignored (up to tmax);
                                    // blocked: none, or the object hides it
 const uint TQ_BLOCKED = 5u;        // blocked: anything, object or light, within tmax
+const uint TQ_OBJECT = 6u;         // h: the closest hit on the object alone, where the
+                                   // caller knows the ray meets no light (as TQ_CLOSEST
+                                   // then; lights.glsl misses_lights); light: none
 
 struct TraceResult {
     Hit h;
@@ -111,8 +114,8 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     TraceResult res;
     res.blocked = false;
     res.light = hit_none(3.0e38);
-    bool one = kind == TQ_CLOSEST || kind == TQ_BLOCKED;
-    uint mask = one ? 0xffu : 0x02u;
+    bool one = kind == TQ_CLOSEST || kind == TQ_BLOCKED || kind == TQ_OBJECT;
+    uint mask = kind == TQ_OBJECT ? 0x01u : one ? 0xffu : 0x02u;
     bool any = kind == TQ_BLOCKED;
     float bound = tmax;
     Hit h;
@@ -374,14 +377,14 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     TraceResult res;
     res.blocked = false;
     res.light = hit_none(3.0e38);
-    uint level = kind == TQ_CLOSEST || kind == TQ_BLOCKED ? 0u : 1u;
+    uint level = kind == TQ_CLOSEST || kind == TQ_BLOCKED || kind == TQ_OBJECT ? 0u : 1u;
     bool any = kind == TQ_BLOCKED;
     Hit h = hit_none(tmax);
     // A camera ray of the bundle's pixel (the hint's): its closest hit on the object
     // among the bundle's triangles, taken without the object's traversal where it lies
     // no deeper than the bundle reaches.
     bool skip_first = false;   // the first level's traversal answered without it
-    if (kind == TQ_CLOSEST && hint.prim != NO_HIT) {
+    if ((kind == TQ_CLOSEST || kind == TQ_OBJECT) && hint.prim != NO_HIT) {
         if (trace_bundle_n > 0u) {
             for (uint k = 0u; k < trace_bundle_n; k++) {
                 BvhTri t = trace_tri(0u, trace_bundle_tri[k]);
@@ -406,7 +409,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     }
     for (uint step = 0u; step < 2u; step++) {
         if (!(step == 0u && skip_first)) trace_bvh(level, o, inv_d, tr, tmin, h, any);
-        if (step == 1u) break;
+        if (step == 1u || kind == TQ_OBJECT) break;
         if (kind == TQ_CLOSEST) {
             level = 1u;
         } else if (kind == TQ_BLOCKED) {

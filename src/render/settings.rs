@@ -54,6 +54,9 @@ pub struct RenderSettings {
     pub light_samples: u32,
     /// BSDF samples for the direct light there (`[render] bsdf_samples`).
     pub bsdf_samples: u32,
+    /// Whether rays skip the lights' traversal where it cannot change their answer
+    /// (`[render] light_shortcuts`).
+    pub light_shortcuts: bool,
 }
 
 impl RenderSettings {
@@ -72,6 +75,7 @@ impl RenderSettings {
             analytic_rays: r.analytic_rays,
             light_samples: r.light_samples,
             bsdf_samples: r.bsdf_samples,
+            light_shortcuts: r.light_shortcuts,
         }
     }
 }

@@ -3,6 +3,7 @@
 //! annotation targets. `record_batch` adds one batch of samples to a render graph.
 
 use ash::vk;
+use glam::Vec3;
 
 use super::RenderError;
 use super::annotate::{Annotation, AnnotationTargets, record_annotate};
@@ -17,7 +18,7 @@ use crate::gpu_interface::{
 use crate::graph::Graph;
 use crate::scene::Camera;
 use crate::scene::assemble::{EmitterSampling, LightGeometry, ViewSetup};
-use crate::scene::light_cover::{LightCover, light_cover, seen_box};
+use crate::scene::light_cover::{LightCover, light_cover, ring_room, seen_box};
 use crate::scene::lights::MM2_PER_M2;
 use crate::trace::{TraceScene, TriangleSoup, scramble_multiplier};
 use crate::vk::{Buffer, MemoryKind, Profiler, timed};
@@ -191,10 +192,14 @@ impl<'s> View<'s> {
                 message: "texture_filter = \"lean\" needs the maps' moment pyramids: upload them with GpuScene::set_face_maps_filtered".into(),
             }));
         }
-        let cover = timed(profiler, "light cover", || {
-            let grid = scene.geometry.bounds.and_then(|b| seen_box(cam, b));
-            light_cover(&light.tris, grid)
-        });
+        let cover = if settings.light_shortcuts {
+            timed(profiler, "light cover", || {
+                let grid = scene.geometry.bounds.and_then(|b| seen_box(cam, b));
+                light_cover(&light.tris, grid)
+            })
+        } else {
+            LightCover::none(light.tris.triangles.len())
+        };
         let mut params = path_params(scene, cam, light, settings);
         params.cover_lo = cover.lo.extend(0.0).into();
         params.cover_cell = cover.cell.extend(0.0).into();
@@ -525,6 +530,7 @@ fn path_params(
         cv_extra_rays: s.analytic_rays.max(1) - 1,
         light_samples: s.light_samples.max(1),
         bsdf_samples: s.bsdf_samples.max(1),
+        shortcuts: s.light_shortcuts as u32,
         ..Default::default()
     }
 }
@@ -612,9 +618,18 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
             };
             // A ring's segments around the ring (0: not a ring).
             let ring = e.torus.map_or(0.0, |t| t.segments_major as f32);
-            let reach = e
-                .reach
-                .map_or([0.0, -1.0, 0.0, 0.0], |r| [r.inner, r.outer, 0.0, 0.0]);
+            let room = e.torus.map_or([0.0, 0.0], |t| {
+                let first = e.first_tri as usize;
+                let tris: Vec<[Vec3; 3]> = light.tris.triangles
+                    [first..first + e.tri_count as usize]
+                    .iter()
+                    .map(|t| t.map(|i| light.tris.positions[i as usize]))
+                    .collect();
+                ring_room(&tris, t.centre, t.axis)
+            });
+            let reach = e.reach.map_or([0.0, -1.0, 0.0, 0.0], |r| {
+                [r.inner, r.outer, room[0], room[1]]
+            });
             LightBlock {
                 pos,
                 dir,

@@ -897,6 +897,13 @@ pub struct RenderConfig {
     /// reflection of a partly hidden light (docs/rendering.md, "More light and BSDF
     /// samples at the first hit").
     pub bsdf_samples: u32,
+    /// Rays that need no traversal of the lights skip it (default true): a light
+    /// sample's shadow ray toward a light triangle no other can hide tests that triangle
+    /// alone (src/scene/light_cover.rs), and a ray that can meet no light is traced
+    /// through the object alone or, for the direct light's extra BSDF directions, not at
+    /// all (glsl/common/lights.glsl `misses_lights`). The same images; false traverses
+    /// the lights for every ray (for comparison).
+    pub light_shortcuts: bool,
 }
 
 /// `[render] light_samples` and `bsdf_samples` when not given (scene files and jobs).
@@ -1018,6 +1025,7 @@ impl Default for RenderConfig {
             analytic_rays: DEFAULT_ANALYTIC_RAYS,
             light_samples: DEFAULT_LIGHT_SAMPLES,
             bsdf_samples: DEFAULT_LIGHT_SAMPLES,
+            light_shortcuts: true,
         }
     }
 }

@@ -43,6 +43,9 @@ const BOX_MARGIN_MM: f64 = 1e-3;
 /// it, so neighbours in the list are neighbours in space).
 const CLUSTER: usize = 32;
 
+/// A mask with every cell marked.
+pub const ALL_CELLS: u32 = u32::MAX >> (32 - LIGHT_COVER_CELLS);
+
 /// The grid and, per light triangle, its mask of cells (bit x + 2 y + 4 z).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightCover {
@@ -65,7 +68,7 @@ impl LightCover {
 
     /// The share of light triangles marked in every cell (a summary for the profile).
     pub fn share_all(&self) -> f64 {
-        let all = (1u32 << LIGHT_COVER_CELLS) - 1;
+        let all = ALL_CELLS;
         let n = self.masks.iter().filter(|&&m| m == all).count();
         n as f64 / self.masks.len().max(1) as f64
     }
@@ -141,6 +144,55 @@ pub fn seen_box(camera: &Camera, object: [Vec3; 2]) -> Option<[Vec3; 2]> {
     (a.x <= b.x).then(|| [(a - step).max(lo), (b + step).min(hi)])
 }
 
+/// The room triangles `tris` take about the axis through `centre` along unit `axis` (a
+/// ring light's): [the hole's radius (no point of them nearer the axis), the half
+/// height of the slab about the plane through `centre` normal to the axis that holds
+/// them], the first narrowed and the second widened by a part in 10^4 of the largest
+/// distance and 10^-3 mm, for the shader's f32 arithmetic; [0, 0] without triangles.
+/// A ray that crosses the slab inside the hole, or never meets the slab, meets none of
+/// them (glsl/common/lights.glsl `misses_lights`).
+pub fn ring_room(tris: &[[Vec3; 3]], centre: Vec3, axis: Vec3) -> [f32; 2] {
+    if tris.is_empty() {
+        return [0.0, 0.0];
+    }
+    let (c, a) = (centre.as_dvec3(), axis.as_dvec3().normalize());
+    let e1 = a.any_orthonormal_vector();
+    let e2 = a.cross(e1);
+    let (mut hole, mut half, mut far) = (f64::INFINITY, 0.0f64, 0.0f64);
+    for t in tris {
+        let p = t.map(|v| v.as_dvec3() - c);
+        let q = p.map(|v| glam::DVec2::new(v.dot(e1), v.dot(e2)));
+        for v in &p {
+            half = half.max(v.dot(a).abs());
+            far = far.max(v.length());
+        }
+        hole = hole.min(distance_to_origin(q));
+    }
+    let slack = 1e-4 * far + 1e-3;
+    [(hole - slack).max(0.0) as f32, (half + slack) as f32]
+}
+
+/// The distance from the origin to the 2D triangle `q` (0 inside it).
+fn distance_to_origin(q: [glam::DVec2; 3]) -> f64 {
+    let edge = |a: glam::DVec2, b: glam::DVec2| a.perp_dot(b);
+    let s = [edge(q[0], q[1]), edge(q[1], q[2]), edge(q[2], q[0])];
+    if s.iter().all(|&x| x >= 0.0) || s.iter().all(|&x| x <= 0.0) {
+        return 0.0;
+    }
+    (0..3)
+        .map(|i| {
+            let (a, b) = (q[i], q[(i + 1) % 3]);
+            let ab = b - a;
+            let t = if ab.length_squared() > 0.0 {
+                (-a.dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a + ab * t).length()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// A bounding sphere of a cluster of triangles.
 struct Sphere {
     centre: DVec3,
@@ -207,7 +259,7 @@ impl Ctx<'_> {
                 }
             }
         }
-        let all = (1u32 << LIGHT_COVER_CELLS) - 1;
+        let all = ALL_CELLS;
         if near.is_empty() || self.clear(j, &front, lo, hi, &near) {
             return all;
         }
@@ -576,7 +628,7 @@ mod tests {
                 Vec3::new(100.0, 100.0, 20.0),
             ]),
         );
-        assert_eq!(cover.masks, vec![(1 << LIGHT_COVER_CELLS) - 1; 4]);
+        assert_eq!(cover.masks, vec![ALL_CELLS; 4]);
     }
 
     #[test]
@@ -603,8 +655,63 @@ mod tests {
         let cover = light_cover(&lights, Some(object));
         assert_eq!(cover.masks[0], 0);
         assert_eq!(cover.masks[1], 0);
-        assert_eq!(cover.masks[2], (1 << LIGHT_COVER_CELLS) - 1);
+        assert_eq!(cover.masks[2], ALL_CELLS);
         assert!(check_marked_cells_are_clear(&lights, object, 0.0) > 0);
+    }
+
+    #[test]
+    fn a_rings_room_holds_its_triangles_and_its_hole_is_empty() {
+        let (centre, axis) = (
+            Vec3::new(5.0, -3.0, 80.0),
+            Vec3::new(0.2, 0.1, 1.0).normalize(),
+        );
+        let lights = ring(30.0, 5.0, 32, 8, centre, axis);
+        let tris: Vec<[Vec3; 3]> = lights
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| lights.positions[i as usize]))
+            .collect();
+        let [hole, half] = ring_room(&tris, centre, axis);
+        // The torus's own bounds, less the chords' sag (at most 30 (1 - cos(pi / 32)) =
+        // 0.14 mm inwards) and the slack.
+        assert!(hole > 24.8 && hole < 25.0, "{hole}");
+        assert!((5.0..5.02).contains(&half), "{half}");
+        // Points of the triangles lie outside the hole and inside the slab; the hole is
+        // tight (some point within 0.05 mm of it).
+        let mut nearest = f32::INFINITY;
+        for t in &tris {
+            for (u, v) in [
+                (0.0, 0.0),
+                (1.0, 0.0),
+                (0.0, 1.0),
+                (0.5, 0.5),
+                (0.5, 0.0),
+                (0.0, 0.5),
+                (0.3, 0.3),
+            ] {
+                let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v - centre;
+                let z = p.dot(axis);
+                let radial = (p - axis * z).length();
+                assert!(radial >= hole && z.abs() <= half, "{radial} {z}");
+                nearest = nearest.min(radial);
+            }
+        }
+        assert!(nearest - hole < 0.05, "{nearest} {hole}");
+        assert_eq!(ring_room(&[], centre, axis), [0.0, 0.0]);
+        assert_eq!(
+            distance_to_origin([
+                glam::DVec2::new(-1.0, -1.0),
+                glam::DVec2::new(2.0, -1.0),
+                glam::DVec2::new(-1.0, 2.0)
+            ]),
+            0.0
+        );
+        let d = distance_to_origin([
+            glam::DVec2::new(1.0, -1.0),
+            glam::DVec2::new(1.0, 1.0),
+            glam::DVec2::new(3.0, 0.0),
+        ]);
+        assert!((d - 1.0).abs() < 1e-12, "{d}");
     }
 
     #[test]
