@@ -1,13 +1,14 @@
 //! Where no light triangle can hide another (issue 15): for each light triangle of a
-//! view, the cells of a 2 x 2 x 2 grid over the object's box (the stage's triangles, the
-//! table included: every path vertex, hence every shadow ray's origin, lies on them)
-//! from every point of which every point of the triangle in front of it is seen past
-//! all the other light triangles. A light sample's shadow ray from such a cell toward
-//! such a triangle then needs the lights' traversal only to find that triangle: the
-//! shader tests the sampled triangle alone (glsl/common/trace.glsl, TQ_LIGHT_VISIBLE)
-//! and traverses the object up to its hit, the answer the traversal would give. A ring
-//! light is a torus, which can hide parts of itself; a panel, bar or dome cannot hide
-//! its own front-facing triangles, but another light can.
+//! view, the cells of a 2 x 2 x 2 grid over a box (the part of the stage's box that the
+//! camera sees, `seen_box`, where the image's shading points lie) from every point of
+//! which every point of the triangle in front of it is seen past all the other light
+//! triangles. A light sample's shadow ray from such a cell toward such a triangle then
+//! needs the lights' traversal only to find that triangle: the shader tests the sampled
+//! triangle alone (glsl/common/trace.glsl, TQ_LIGHT_VISIBLE) and traverses the object up
+//! to its hit, the answer the traversal would give; a ray from outside the grid
+//! traverses the lights as always. A ring light is a torus, which can hide parts of
+//! itself; a panel, bar or dome cannot hide its own front-facing triangles, but another
+//! light can.
 //!
 //! The test is exact geometry in f64 and conservative: a cell is marked only where a
 //! separating plane is found between every other light triangle and the convex hull of
@@ -17,6 +18,8 @@
 //! tie a closest-hit traversal settles by the triangle index at the same distance).
 //! Another light triangle whose corners lie behind the triangle's plane, or on it to
 //! within a few f32 roundings (`PLANE_SLACK`), cannot be in front of any point of it.
+//! Each cell is tested widened by `CELL_PAD` so that the shader's f32 arithmetic, which
+//! may place a point near a cell's face in its neighbour, stays inside what was tested.
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -34,10 +37,16 @@ pub const PLANE_SLACK: f64 = 4e-7;
 /// holds by at least this much in f64.
 const SEPARATION_MARGIN: f64 = 1e-9;
 
-/// The object's box is widened by this part of the scene's scale and this many mm: a
-/// shadow ray starts a few hundred ulps off its surface (glsl/common/offset_ray.glsl).
+/// The grid's box is widened by this part of the scene's scale and this many mm: a
+/// shadow ray starts a few hundred ulps off the surface (glsl/common/offset_ray.glsl),
+/// and the box may end at the object's faces.
 const BOX_MARGIN_REL: f64 = 1e-4;
 const BOX_MARGIN_MM: f64 = 1e-3;
+
+/// Each cell is tested widened by this part of the scene's scale and this many mm (the
+/// shader's cell index from f32 positions errs by far less).
+const CELL_PAD_REL: f64 = 1e-5;
+const CELL_PAD_MM: f64 = 1e-3;
 
 /// Light triangles handled together by the broad phase (a ring's come in order around
 /// it, so neighbours in the list are neighbours in space).
@@ -65,20 +74,14 @@ impl LightCover {
             masks: vec![0; count],
         }
     }
-
-    /// The share of light triangles marked in every cell (a summary for the profile).
-    pub fn share_all(&self) -> f64 {
-        let all = ALL_CELLS;
-        let n = self.masks.iter().filter(|&&m| m == all).count();
-        n as f64 / self.masks.len().max(1) as f64
-    }
 }
 
-/// The cover of light triangles `lights` over the object's box `object` (lower and upper
-/// corner); every light triangle's mask 0 without a box (an empty stage).
-pub fn light_cover(lights: &TriangleSoup, object: Option<[Vec3; 2]>) -> LightCover {
+/// The cover of light triangles `lights` over a grid on box `grid` (lower and upper
+/// corner); every light triangle's mask 0 without a box (an empty stage, a camera that
+/// sees none of it).
+pub fn light_cover(lights: &TriangleSoup, grid: Option<[Vec3; 2]>) -> LightCover {
     let count = lights.triangles.len();
-    let Some([lo, hi]) = object else {
+    let Some([lo, hi]) = grid else {
         return LightCover::none(count);
     };
     let tris: Vec<[DVec3; 3]> = lights
@@ -103,6 +106,7 @@ pub fn light_cover(lights: &TriangleSoup, object: Option<[Vec3; 2]>) -> LightCov
         clusters: &clusters,
         plane_slack: PLANE_SLACK * scale,
         margin: SEPARATION_MARGIN * scale,
+        pad: DVec3::splat(CELL_PAD_REL * scale + CELL_PAD_MM),
     };
     let masks = (0..count)
         .into_par_iter()
@@ -228,6 +232,8 @@ struct Ctx<'a> {
     clusters: &'a [Sphere],
     plane_slack: f64,
     margin: f64,
+    /// What each cell is widened by when tested.
+    pad: DVec3,
 }
 
 impl Ctx<'_> {
@@ -260,7 +266,7 @@ impl Ctx<'_> {
             }
         }
         let all = ALL_CELLS;
-        if near.is_empty() || self.clear(j, &front, lo, hi, &near) {
+        if near.is_empty() || self.clear(j, &front, lo - self.pad, hi + self.pad, &near) {
             return all;
         }
         let side = LIGHT_COVER_SIDE;
@@ -269,7 +275,7 @@ impl Ctx<'_> {
             for y in 0..side {
                 for x in 0..side {
                     let a = lo + cell * DVec3::new(x as f64, y as f64, z as f64);
-                    if self.clear(j, &front, a, a + cell, &near) {
+                    if self.clear(j, &front, a - self.pad, a + cell + self.pad, &near) {
                         mask |= 1 << (x + side * (y + side * z));
                     }
                 }
