@@ -154,18 +154,6 @@ uint mat_word(uint prim) {
 
 vec3 tri_normal(Tri t) { return cross(t.b.xyz - t.a.xyz, t.c.xyz - t.a.xyz); }
 
-// Whether no other light triangle can hide light triangle `li` from point x: x lies in
-// a cell of the light cover's grid that the triangle's mask marks (LightTri::cover,
-// src/scene/light_cover.rs; outside the grid: no).
-bool light_unhidden(uint li, vec3 x) {
-    vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
-    float side = float(LIGHT_COVER_SIDE);
-    if (!all(greaterThanEqual(c, vec3(0.0))) || !all(lessThan(c, vec3(side)))) return false;
-    uvec3 ci = uvec3(c);
-    uint bit = ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
-    return ((LIGHT_TRI_WEIGHTS[li - prm.light_first].cover.x >> bit) & 1u) != 0u;
-}
-
 #include "common/lights.glsl"
 #include "common/analytic_light.glsl"
 
