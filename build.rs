@@ -54,6 +54,23 @@ macro_rules! gpu_blocks {
     };
 }
 
+macro_rules! gpu_specs {
+    ($(#[doc = $doc:literal])* $block:ident { $($f:ident = $id:literal),* $(,)? }) => {
+        fn glsl_specs(s: &mut String) {
+            s.push_str("#define SPEC_FROM_PARAMS 4294967295u\n");
+            $(
+                let field = stringify!($f);
+                let upper = field.to_ascii_uppercase();
+                s.push_str(&format!(
+                    "layout(constant_id = {}) const uint SPEC_{upper} = SPEC_FROM_PARAMS;\n\
+                     #define PRM_{upper} (SPEC_{upper} != SPEC_FROM_PARAMS ? SPEC_{upper} : prm.{field})\n",
+                    stringify!($id)
+                ));
+            )*
+        }
+    };
+}
+
 include!("src/gpu_interface.in");
 
 fn screaming_snake(camel: &str) -> String {
@@ -78,6 +95,7 @@ fn write_interface(out: &Path) -> PathBuf {
     glsl_constants(&mut s);
     glsl_bindings(&mut s);
     glsl_blocks(&mut s);
+    glsl_specs(&mut s);
     s.push_str("#endif\n");
     let path = out.join("interface.glsl");
     if std::fs::read_to_string(&path).ok().as_deref() != Some(s.as_str()) {

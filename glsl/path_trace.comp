@@ -53,7 +53,7 @@ layout(std430, set = 0, binding = PT_PARAMS) readonly buffer Params { PathParams
 
 layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
 // The per-pixel sums behind `[render] noise_target`'s variance estimate
-// (src/render/noise.rs), by prm.noise_sums: NOISE_SQUARES, the sum of each sample's
+// (src/render/noise.rs), by PRM_NOISE_SUMS: NOISE_SQUARES, the sum of each sample's
 // squared radiance (one float a pixel); NOISE_HALVES, the radiance of sample indices
 // [2^(L-1), 2^L) (level L >= 1; level 0: index 0) summed into float L & 1 of the pixel's
 // two, each cleared at its level's first sample, so they hold the last two levels;
@@ -458,7 +458,7 @@ vec3 surface_normal(Hit h, vec3 d, vec3 p, vec3 ng, uint word, uint depth, inout
     // read level 0, and so do curved (revolved and triplanar) patches (LEAN there is not
     // done: lean_level uses the planar projection).
     float lambda = 0.0;
-    if (prm.texture_filter == FILTER_LEAN && depth == 0u
+    if (PRM_TEXTURE_FILTER == FILTER_LEAN && depth == 0u
             && (MAP_HEADERS[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
         float c = max(dot(d, prm.cam.forward.xyz), 0.1);
         float width = prm.pixel_angle * c * sqrt(c) * h.t / max(abs(dot(ng, d)), LEAN_MIN_COS);
@@ -640,7 +640,7 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
     float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
     if (!(cos_l > 0.0)) return 0.0;
     return EMITTERS[k].emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
-        / float(max(prm.bsdf_samples, 1u));
+        / float(max(PRM_BSDF_SAMPLES, 1u));
 }
 
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
@@ -650,12 +650,12 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
 float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, bool label_only,
                       out uint label_word) {
     label_word = 0u;
-    Sampler rng = sampler_init(prm.sample_gen, pixel, s, prm.seed);
+    Sampler rng = sampler_init(PRM_SAMPLE_GEN, pixel, s, prm.seed);
     vec3 o, d;
     pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
     // This sample's camera ray, kept for its A' (the extra camera rays' term below).
-    uint extra = prm.direct_light == DIRECT_ANALYTIC ? prm.cv_extra_rays : 0u;
+    uint extra = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC ? PRM_CV_EXTRA_RAYS : 0u;
     vec3 o0 = o, d0 = d;
 
     float L = 0.0;
@@ -671,7 +671,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
     // loop's trace, for the light alone (every trace of the path is that one call: the
     // shader compiles one traversal for it).
     bool stop = false;
-    for (uint depth = 0u; depth <= prm.max_bounces || stop; depth++) {
+    for (uint depth = 0u; depth <= PRM_MAX_BOUNCES || stop; depth++) {
         // The ray's closest hit; with a control-variate term pending also the first light
         // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped.
         uint kind = stop ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
@@ -707,7 +707,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             }
             break;
         }
-        if (depth == prm.max_bounces) break;
+        if (depth == PRM_MAX_BOUNCES) break;
         Surface surf = surface_of(mat, cond);
         vec3 p = hit_point(t, h.bary);
         if (dot(ng, d) > 0.0) ng = -ng;
@@ -720,8 +720,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
 
         // Analytic direct light (control variate) at the primary hit of a conductor.
         Lobe lobe;
-        bool cv = prm.direct_light == DIRECT_ANALYTIC && depth == 0u && !surf.diffuse
-            && prm.emitter_count > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
+        bool cv = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && depth == 0u && !surf.diffuse
+            && PRM_EMITTER_COUNT > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
         // A (closed form, over the rings of cv_rings) and G's light-sample term.
         uint cv_rings = 0u;
         float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, 1u, cv_rings) : 0.0;
@@ -733,17 +733,17 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         // (below), each strategy's samples averaged under the one-sample MIS weights
         // (which sum to 1 whatever K and M: unbiased; the counts are not put into the
         // heuristic, which measured worse where the light sampler is the better one).
-        uint nl = depth == 0u ? max(prm.light_samples, 1u) : 1u;
+        uint nl = depth == 0u ? max(PRM_LIGHT_SAMPLES, 1u) : 1u;
         float fnl = float(nl);
-        uint nb = depth == 0u ? max(prm.bsdf_samples, 1u) : 1u;
+        uint nb = depth == 0u ? max(PRM_BSDF_SAMPLES, 1u) : 1u;
         float fnb = float(nb);
         // The first vertex's direct light in one loop with one trace call (lavapipe
         // inlines a whole traversal at each call site): steps 0 to nl - 1 the light
         // samples and their shadow rays, step nl the path's own BSDF sample (no trace),
         // then the nb - 1 more BSDF directions and the first light each meets. The same
         // samples drawn and the same terms added in the same order as one loop each.
-        uint lights = prm.emitter_count > 0u ? nl : 0u;
-        uint steps = prm.emitter_count > 0u ? nl + nb : 1u;
+        uint lights = PRM_EMITTER_COUNT > 0u ? nl : 0u;
+        uint steps = PRM_EMITTER_COUNT > 0u ? nl + nb : 1u;
         // The path's own BSDF sample (step nl): its direction (local), weight and pdf.
         vec3 wi_path = vec3(0.0);
         float weight = 0.0, pdf = 0.0;
@@ -918,7 +918,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             o = o0;
             d = d0;
             if (j > 0u) {
-                Sampler r = sampler_init(prm.sample_gen, pixel, s * extra + j - 1u, prm.seed ^ 0x5ca1ab1eu);
+                Sampler r = sampler_init(PRM_SAMPLE_GEN, pixel, s * extra + j - 1u, prm.seed ^ 0x5ca1ab1eu);
                 pixel_ray(px, py, r, o, d);
             }
             Lobe lobe;
@@ -965,8 +965,8 @@ void main() {
     // split into batches: an image stopped at n samples equals one of n samples in any
     // batches (the "halves" sums below work the same way).
     float sum = accum[i];
-    float sq = prm.noise_sums == NOISE_SQUARES ? noise_sums[i] : 0.0;
-    vec2 halves = prm.noise_sums == NOISE_HALVES
+    float sq = PRM_NOISE_SUMS == NOISE_SQUARES ? noise_sums[i] : 0.0;
+    vec2 halves = PRM_NOISE_SUMS == NOISE_HALVES
         ? vec2(noise_sums[2u * i], noise_sums[2u * i + 1u]) : vec2(0.0);
     // Labels from the first n x n samples (the caller makes sure this dispatch starts at
     // sample 0): the annotation pass's thin-lens rays, traced once. Those past this
@@ -974,7 +974,7 @@ void main() {
     // the pass would), so a first batch of fewer samples needs no pass either.
     uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
     pix_hint = trace_no_hint();
-    if (prm.direct_light == DIRECT_ANALYTIC && prm.cv_extra_rays > 0u) pixel_plane_init(px, py);
+    if (PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u) pixel_plane_init(px, py);
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();
     for (uint s = 0u; s < max(pc.sample_count, label_count); s++) {
@@ -986,7 +986,7 @@ void main() {
         if (label_only) continue;
         sum += r;
         sq += r * r;
-        if (prm.noise_sums == NOISE_HALVES) {
+        if (PRM_NOISE_SUMS == NOISE_HALVES) {
             uint j = pc.sample_start + s;
             uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
             bool level_starts = (j & (j - 1u)) == 0u;   // j = 0 or a power of two
@@ -998,9 +998,9 @@ void main() {
         }
     }
     accum[i] = sum;
-    if (prm.noise_sums == NOISE_SQUARES) {
+    if (PRM_NOISE_SUMS == NOISE_SQUARES) {
         noise_sums[i] = sq;
-    } else if (prm.noise_sums == NOISE_HALVES) {
+    } else if (PRM_NOISE_SUMS == NOISE_HALVES) {
         noise_sums[2u * i] = halves.x;
         noise_sums[2u * i + 1u] = halves.y;
     }

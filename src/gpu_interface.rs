@@ -79,6 +79,21 @@ macro_rules! gpu_blocks {
     };
 }
 
+macro_rules! gpu_specs {
+    ($(#[doc = $doc:literal])* $block:ident { $($f:ident = $id:literal),* $(,)? }) => {
+        /// How many of the path tracer's settings are specialization constants.
+        pub const PATH_SPEC_COUNT: usize = [$($id),*].len();
+        impl $block {
+            $(#[doc = $doc])*
+            ///
+            /// The (constant_id, value) of each, from these parameters.
+            pub fn specialization(&self) -> [(u32, u32); PATH_SPEC_COUNT] {
+                [$(($id, self.$f)),*]
+            }
+        }
+    };
+}
+
 include!("gpu_interface.in");
 
 #[cfg(test)]

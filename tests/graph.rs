@@ -64,6 +64,7 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
         HitsBinding::COUNT,
         16,
         [64, 1, 1],
+        &[],
     )
     .unwrap();
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER;

@@ -364,7 +364,7 @@ bool ring_cv_valid(uint k, vec3 x) {
     if (!(sin_k < 0.8)) return false;
     float far_k = dist + big_r + r;
     float cone_k = asin(sin_k);
-    for (uint j = 0u; j < prm.emitter_count; j++) {
+    for (uint j = 0u; j < PRM_EMITTER_COUNT; j++) {
         LightBlock o = EMITTERS[j];
         if (j == k || o.reach.y < 0.0) continue;   // itself, or a spot (nothing to hit)
         vec3 dj = o.pos.xyz - x;
@@ -389,7 +389,7 @@ bool ring_cv_valid(uint k, vec3 x) {
 float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint mask) {
     mask = 0u;
     float a = 0.0;
-    for (uint k = 0u; k < min(prm.emitter_count, 32u); k++) {
+    for (uint k = 0u; k < min(PRM_EMITTER_COUNT, 32u); k++) {
         LightBlock e = EMITTERS[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;
@@ -426,7 +426,7 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
     Lobe unused;   // the walk records only: no lobe is evaluated
     unused.t1 = unused.t2 = unused.r = ng;
     unused.a1 = unused.a2 = unused.c = 1.0;
-    for (uint k = 0u; k < min(prm.emitter_count, 32u) && rec_rings < REC_RINGS; k++) {
+    for (uint k = 0u; k < min(PRM_EMITTER_COUNT, 32u) && rec_rings < REC_RINGS; k++) {
         LightBlock e = EMITTERS[k];
         if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
         bool ok;

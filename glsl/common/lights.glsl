@@ -24,7 +24,7 @@ float emitter_pdf(uint e) {
 // chosen interval (one light: u unchanged).
 uint choose_emitter(inout float u) {
     uint e = 0u;
-    while (e + 1u < prm.emitter_count && !(u < EMITTERS[e].emit.w)) e++;
+    while (e + 1u < PRM_EMITTER_COUNT && !(u < EMITTERS[e].emit.w)) e++;
     float lo = e == 0u ? 0.0 : EMITTERS[e - 1u].emit.w;
     float p = EMITTERS[e].emit.w - lo;
     if (p > 0.0) u = clamp((u - lo) / p, 0.0, 0.99999994);
@@ -41,11 +41,11 @@ uint choose_emitter(inout float u) {
 // are not decided. Dark lights (no emitter counted) still block rays: not decided.
 // Never with `[render] light_shortcuts = false` (PathParams::shortcuts 0).
 bool misses_lights(vec3 o, vec3 d) {
-    if (prm.shortcuts == 0u) return false;   // [render] light_shortcuts = false
-    if (prm.light_count == 0u) return true;
-    if (prm.emitter_count == 0u) return false;
+    if (PRM_SHORTCUTS == 0u) return false;   // [render] light_shortcuts = false
+    if (PRM_LIGHT_COUNT == 0u) return true;
+    if (PRM_EMITTER_COUNT == 0u) return false;
     float dd = dot(d, d);
-    for (uint e = 0u; e < prm.emitter_count; e++) {
+    for (uint e = 0u; e < PRM_EMITTER_COUNT; e++) {
         LightBlock b = EMITTERS[e];
         if (b.reach.y < 0.0) continue;   // a spot: nothing to hit
         vec3 p = o - b.pos.xyz;

@@ -86,6 +86,7 @@ pub fn accel_from_env() -> anyhow::Result<Option<synosis::trace::AccelChoice>> {
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    synosis::render::settings::specialize_from_env().map_err(anyhow::Error::msg)?;
     match cli.command {
         Command::Info(a) => gpu::info(a),
         Command::Compile(a) => gpu::compile_cmd(a),

@@ -24,8 +24,13 @@ use crate::scene::config::SceneConfig;
 use crate::trace::{Backend, TraceScene, trace_pipeline};
 use crate::vk::{ComputePipeline, Context, ContextOptions, VkError};
 
-/// The path tracer (`glsl/path_trace.comp`).
-pub fn path_trace(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkError> {
+/// The path tracer (`glsl/path_trace.comp`), with `specialization` (from
+/// `PathParams::specialization`) its settings compiled in, or none: read at run time.
+pub fn path_trace(
+    ctx: &Arc<Context>,
+    backend: Backend,
+    specialization: &[(u32, u32)],
+) -> Result<ComputePipeline, VkError> {
     let push = std::mem::size_of::<PathPush>() as u32;
     trace_pipeline(
         ctx,
@@ -34,6 +39,7 @@ pub fn path_trace(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipelin
         PathTraceBinding::COUNT,
         push,
         [TILE, TILE, 1],
+        specialization,
     )
 }
 
@@ -47,13 +53,22 @@ pub fn annotate(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline,
         AnnotateBinding::COUNT,
         push,
         [TILE, TILE, 1],
+        &[],
     )
 }
 
 /// Closest hits of a list of rays (`glsl/hits.comp`).
 pub fn hits(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkError> {
     let push = std::mem::size_of::<HitsPush>() as u32;
-    trace_pipeline(ctx, "hits", backend, HitsBinding::COUNT, push, [64, 1, 1])
+    trace_pipeline(
+        ctx,
+        "hits",
+        backend,
+        HitsBinding::COUNT,
+        push,
+        [64, 1, 1],
+        &[],
+    )
 }
 
 /// Depth and normals of a camera's first hits (`glsl/raycast.comp`).
@@ -66,6 +81,7 @@ pub fn raycast(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, 
         RaycastBinding::COUNT,
         push,
         [TILE, TILE, 1],
+        &[],
     )
 }
 

@@ -57,6 +57,9 @@ pub struct RenderSettings {
     /// Whether rays skip the lights' traversal where it cannot change their answer
     /// (`[render] light_shortcuts`).
     pub light_shortcuts: bool,
+    /// Whether the path tracer's pipeline is compiled for these settings
+    /// (`[render] specialize`).
+    pub specialize: bool,
 }
 
 impl RenderSettings {
@@ -76,7 +79,28 @@ impl RenderSettings {
             light_samples: r.light_samples,
             bsdf_samples: r.bsdf_samples,
             light_shortcuts: r.light_shortcuts,
+            specialize: r
+                .specialize
+                .unwrap_or_else(|| specialize_from_env().ok().flatten().unwrap_or(true)),
         }
+    }
+}
+
+/// `SYNOSIS_SPECIALIZE`: "1" or "0" turns `[render] specialize` on or off for every
+/// render of the process whose settings do not say (tools/test sets 0: its many settings
+/// would each compile a pipeline of their own); unset or empty: None. Another value is an
+/// error (the CLI checks it at its start; where it is not checked it is ignored).
+pub fn specialize_from_env() -> Result<Option<bool>, String> {
+    match std::env::var("SYNOSIS_SPECIALIZE") {
+        Err(_) => Ok(None),
+        Ok(v) => match v.trim() {
+            "" => Ok(None),
+            "1" => Ok(Some(true)),
+            "0" => Ok(Some(false)),
+            other => Err(format!(
+                "SYNOSIS_SPECIALIZE={other:?}: allowed \"0\" (the path tracer reads its settings at run time) or \"1\" (compiled for them)"
+            )),
+        },
     }
 }
 

@@ -1,25 +1,33 @@
 //! The path tracer of one device and backend: its pipelines and the energy tables,
 //! built once per process and shared by every scene and view.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
 use super::RenderError;
 use super::energy::EnergyTables;
+use crate::gpu_interface::{PATH_SPEC_COUNT, PathParams};
 use crate::trace::{Backend, TraceScene};
 use crate::vk::{Buffer, ComputePipeline, Context};
 
-/// How many path tracers this process has built (each compiles two pipelines); tests
-/// and the dataset's stage report use it to show that pipelines are built once.
+/// How many path tracers this process has built; tests and the dataset's stage report
+/// use it to show that pipelines are built once.
 static BUILT: AtomicUsize = AtomicUsize::new(0);
+
+/// The settings a path-tracing pipeline was specialized for (`PathParams::
+/// specialization`), or none: it reads them at run time.
+type PathKey = Option<[(u32, u32); PATH_SPEC_COUNT]>;
 
 /// Pipelines (path tracing, annotation) and the energy tables for one device + backend.
 pub struct PathTracer {
     pub(crate) ctx: Arc<Context>,
     pub backend: Backend,
-    pub(crate) path: ComputePipeline,
+    /// The path tracer's pipelines made so far, one per distinct setting it was
+    /// specialized for (`[render] specialize`) and one reading them at run time, each
+    /// made at its first use and kept for the process.
+    paths: Mutex<Vec<(PathKey, Arc<ComputePipeline>)>>,
     pub(crate) annotate: ComputePipeline,
     pub(crate) energy: Buffer,
 }
@@ -30,7 +38,6 @@ impl PathTracer {
         backend: Backend,
         tables: &EnergyTables,
     ) -> Result<PathTracer, RenderError> {
-        let path = super::pipelines::path_trace(ctx, backend)?;
         let annotate = super::pipelines::annotate(ctx, backend)?;
         let energy = Buffer::from_slice(
             ctx,
@@ -42,7 +49,7 @@ impl PathTracer {
         Ok(PathTracer {
             ctx: ctx.clone(),
             backend,
-            path,
+            paths: Mutex::new(Vec::new()),
             annotate,
             energy,
         })
@@ -55,6 +62,30 @@ impl PathTracer {
     /// Number of the backend's bindings (a pass's own come after them).
     pub fn backend_bindings(&self) -> u32 {
         TraceScene::binding_kinds(self.backend).len() as u32
+    }
+
+    /// The path-tracing pipeline for a view's parameters: with `specialize`, compiled for
+    /// their settings (`PathParams::specialization`: the driver drops the code they
+    /// switch off), else the one that reads them at run time; made at its first use.
+    pub(crate) fn path_pipeline(
+        &self,
+        params: &PathParams,
+        specialize: bool,
+    ) -> Result<Arc<ComputePipeline>, RenderError> {
+        let key: PathKey = specialize.then(|| params.specialization());
+        let mut paths = self.paths.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, p)) = paths.iter().find(|(k, _)| *k == key) {
+            return Ok(p.clone());
+        }
+        let spec = key.as_ref().map_or(&[][..], |k| &k[..]);
+        let p = Arc::new(super::pipelines::path_trace(&self.ctx, self.backend, spec)?);
+        paths.push((key, p.clone()));
+        Ok(p)
+    }
+
+    /// How many path-tracing pipelines this tracer has made (one per distinct setting).
+    pub fn path_pipeline_count(&self) -> usize {
+        self.paths.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
 
     /// Path tracers built by this process so far.

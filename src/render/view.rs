@@ -2,6 +2,8 @@
 //! the scene's shared acceleration structure), the accumulation buffer and the
 //! annotation targets. `record_batch` adds one batch of samples to a render graph.
 
+use std::sync::Arc;
+
 use ash::vk;
 use glam::Vec3;
 
@@ -21,7 +23,7 @@ use crate::scene::assemble::{EmitterSampling, LightGeometry, ViewSetup};
 use crate::scene::light_cover::{LightCover, light_cover, ring_room, seen_box};
 use crate::scene::lights::MM2_PER_M2;
 use crate::trace::{TraceScene, TriangleSoup, scramble_multiplier};
-use crate::vk::{Buffer, MemoryKind, Profiler, timed};
+use crate::vk::{Buffer, ComputePipeline, MemoryKind, Profiler, timed};
 
 /// The image's tiles and how many dispatches cover them (a device allows only so many
 /// workgroups per dispatch: 65,535 on lavapipe).
@@ -107,6 +109,9 @@ pub struct View<'s> {
     light_weights: Buffer,
     emitters: Buffer,
     params: Buffer,
+    /// The path-tracing pipeline for these parameters (`PathTracer::path_pipeline`:
+    /// specialized for them where `[render] specialize`).
+    path: Arc<ComputePipeline>,
     accum: Buffer,
     /// The per-pixel sums of the noise estimate when the view estimates its noise
     /// (`variance`), else one float the shader never writes.
@@ -254,6 +259,7 @@ impl<'s> View<'s> {
             (B::LightWeights, &light_weights),
         ]);
         let addresses = Buffer::from_slice(ctx, "path tracer addresses", &table, storage)?;
+        let path = tracer.path_pipeline(&params, settings.specialize)?;
         Ok(View {
             scene,
             trace,
@@ -262,6 +268,7 @@ impl<'s> View<'s> {
             emitters,
             addresses,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
+            path,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
             noise_sums: {
                 // Without `variance` one float: a binding may not be empty, and the shader
@@ -403,7 +410,7 @@ impl<'s> View<'s> {
                 pixel_count,
                 tiles,
             };
-            refs.bind(g.dispatch("path trace", &tracer.path, [groups, 1, 1]))
+            refs.bind(g.dispatch("path trace", &self.path, [groups, 1, 1]))
                 .read(B::Geometry.at(off), &geo)
                 .read(B::Materials.at(off), &mats)
                 .read(B::Lights.at(off), &lts)

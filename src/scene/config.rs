@@ -904,6 +904,18 @@ pub struct RenderConfig {
     /// all (glsl/common/lights.glsl `misses_lights`). The same images; false traverses
     /// the lights for every ray (for comparison).
     pub light_shortcuts: bool,
+    /// The path tracer's pipeline compiled for this render's settings (default true):
+    /// the sampler, the direct light's estimator and its ray and sample counts, the
+    /// bounces, the noise sums, the texture filter, the lights' counts and the shortcuts
+    /// become specialization constants
+    /// (src/gpu_interface.in `gpu_specs!`), so the driver drops the code they switch off
+    /// and folds the loops' counts. The same images; each distinct setting is a
+    /// pipeline of its own (on lavapipe compiled at its first use, then kept by the
+    /// driver's shader cache). false: one pipeline that reads them at run time. Not
+    /// given: true, or false where the environment says `SYNOSIS_SPECIALIZE=0`
+    /// (`render::specialize_from_env`; tools/test, whose many settings would each
+    /// compile a pipeline of their own).
+    pub specialize: Option<bool>,
 }
 
 /// `[render] light_samples` and `bsdf_samples` when not given (scene files and jobs).
@@ -1026,6 +1038,7 @@ impl Default for RenderConfig {
             light_samples: DEFAULT_LIGHT_SAMPLES,
             bsdf_samples: DEFAULT_LIGHT_SAMPLES,
             light_shortcuts: true,
+            specialize: None,
         }
     }
 }

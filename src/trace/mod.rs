@@ -475,7 +475,8 @@ impl TraceScene {
 }
 
 /// Creates the pipeline of shader `name` for `backend`, with `extra` pass bindings
-/// (storage buffers) after the backend's.
+/// (storage buffers) after the backend's and the given specialization constants
+/// ((constant_id, value); none: the shader's defaults).
 pub fn trace_pipeline(
     ctx: &Arc<Context>,
     name: &str,
@@ -483,13 +484,22 @@ pub fn trace_pipeline(
     extra: usize,
     push_size: u32,
     local_size: [u32; 3],
+    specialization: &[(u32, u32)],
 ) -> Result<ComputePipeline, VkError> {
     let variant = format!("{name}.{}", backend.shader_suffix());
     let spirv = crate::shaders::spirv(&variant)
         .ok_or_else(|| VkError::Other(format!("no shader variant {variant}")))?;
     let mut kinds = TraceScene::binding_kinds(backend);
     kinds.extend(std::iter::repeat_n(BindingKind::StorageBuffer, extra));
-    ComputePipeline::new(ctx, &variant, &spirv, &kinds, push_size, local_size)
+    ComputePipeline::new(
+        ctx,
+        &variant,
+        &spirv,
+        &kinds,
+        push_size,
+        local_size,
+        specialization,
+    )
 }
 
 /// A multiplier coprime with `count` for the workgroup scramble (see scramble.glsl).

@@ -35,6 +35,8 @@ pub struct ComputePipeline {
 }
 
 impl ComputePipeline {
+    /// `specialization`: (constant_id, value) of the shader's 32-bit specialization
+    /// constants to set; those not given keep their defaults.
     pub fn new(
         ctx: &Arc<Context>,
         name: &str,
@@ -42,6 +44,7 @@ impl ComputePipeline {
         bindings: &[BindingKind],
         push_constant_size: u32,
         local_size: [u32; 3],
+        specialization: &[(u32, u32)],
     ) -> Result<ComputePipeline, VkError> {
         let dev = &ctx.device;
         let layout_bindings: Vec<_> = bindings
@@ -93,10 +96,28 @@ impl ComputePipeline {
                 return Err(e.into());
             }
         };
-        let stage = vk::PipelineShaderStageCreateInfo::default()
+        let entries: Vec<vk::SpecializationMapEntry> = (0..specialization.len())
+            .map(|i| {
+                vk::SpecializationMapEntry::default()
+                    .constant_id(specialization[i].0)
+                    .offset(4 * i as u32)
+                    .size(4)
+            })
+            .collect();
+        let data: Vec<u8> = specialization
+            .iter()
+            .flat_map(|&(_, v)| v.to_ne_bytes())
+            .collect();
+        let spec_info = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(&data);
+        let mut stage = vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(module)
             .name(c"main");
+        if !specialization.is_empty() {
+            stage = stage.specialization_info(&spec_info);
+        }
         let info = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(layout)];

@@ -287,6 +287,12 @@ impl SceneRenderer {
         }
     }
 
+    /// How many path-tracing pipelines the renderer's tracer has made (one per distinct
+    /// specialized setting, one reading the settings at run time).
+    pub fn path_pipelines(&self) -> usize {
+        self.tracer.path_pipeline_count()
+    }
+
     /// Renders `cfg` (annotated with a 4 x 4 coverage grid when `annotate`); fails the
     /// test on any validation error.
     pub fn render(&self, cfg: &SceneConfig, annotate: bool) -> synosis::render::Frame {
