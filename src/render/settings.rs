@@ -81,15 +81,15 @@ impl RenderSettings {
             light_shortcuts: r.light_shortcuts,
             specialize: r
                 .specialize
-                .unwrap_or_else(|| specialize_from_env().ok().flatten().unwrap_or(true)),
+                .unwrap_or_else(|| specialize_from_env().ok().flatten().unwrap_or(false)),
         }
     }
 }
 
 /// `SYNOSIS_SPECIALIZE`: "1" or "0" turns `[render] specialize` on or off for every
-/// render of the process whose settings do not say (tools/test sets 0: its many settings
-/// would each compile a pipeline of their own); unset or empty: None. Another value is an
-/// error (the CLI checks it at its start; where it is not checked it is ignored).
+/// render of the process whose settings do not say (a dataset job's renders, which take
+/// no such setting, included); unset or empty: None. Another value is an error (the CLI
+/// checks it at its start; where it is not checked it is ignored).
 pub fn specialize_from_env() -> Result<Option<bool>, String> {
     match std::env::var("SYNOSIS_SPECIALIZE") {
         Err(_) => Ok(None),

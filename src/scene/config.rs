@@ -904,17 +904,18 @@ pub struct RenderConfig {
     /// all (glsl/common/lights.glsl `misses_lights`). The same images; false traverses
     /// the lights for every ray (for comparison).
     pub light_shortcuts: bool,
-    /// The path tracer's pipeline compiled for this render's settings (default true):
+    /// The path tracer's pipeline compiled for this render's settings (default false):
     /// the sampler, the direct light's estimator and its ray and sample counts, the
     /// bounces, the noise sums, the texture filter, the lights' counts and the shortcuts
-    /// become specialization constants
-    /// (src/gpu_interface.in `gpu_specs!`), so the driver drops the code they switch off
-    /// and folds the loops' counts. The same images; each distinct setting is a
-    /// pipeline of its own (on lavapipe compiled at its first use, then kept by the
-    /// driver's shader cache). false: one pipeline that reads them at run time. Not
-    /// given: true, or false where the environment says `SYNOSIS_SPECIALIZE=0`
-    /// (`render::specialize_from_env`; tools/test, whose many settings would each
-    /// compile a pipeline of their own).
+    /// become specialization constants (src/gpu_interface.in `gpu_specs!`), so the
+    /// driver drops the code they switch off and folds the loops' counts. The same
+    /// images; each distinct setting is a pipeline of its own (compiled at its first use,
+    /// on lavapipe then kept by the driver's shader cache). On lavapipe it measured 0.92
+    /// to 1.00 of the path tracing's time with Mitsuba's sampling and no gain on the
+    /// paper job (docs/benchmarks/rendering.md, "The path tracer compiled for a render's
+    /// settings"); it is for GPUs, where the code a kernel holds sets its registers,
+    /// unmeasured there. Not given: false, or what `SYNOSIS_SPECIALIZE` says
+    /// (`render::settings::specialize_from_env`: a whole process, a dataset job included).
     pub specialize: Option<bool>,
 }
 
