@@ -950,8 +950,7 @@ fn specialized_path_tracer_changes_no_pixel() {
                 .zip(&b.radiance.data)
                 .filter(|(x, y)| x.to_bits() != y.to_bits())
                 .count();
-            let mean = a.radiance.data.iter().map(|&x| x as f64).sum::<f64>()
-                / a.radiance.data.len() as f64;
+            let mean = mean(&a.radiance.data);
             println!(
                 "{name}, {}: mean {mean:.5}, {differing} pixels differ",
                 backend.name()

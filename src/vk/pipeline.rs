@@ -96,10 +96,12 @@ impl ComputePipeline {
                 return Err(e.into());
             }
         };
-        let entries: Vec<vk::SpecializationMapEntry> = (0..specialization.len())
-            .map(|i| {
+        let entries: Vec<vk::SpecializationMapEntry> = specialization
+            .iter()
+            .enumerate()
+            .map(|(i, &(id, _))| {
                 vk::SpecializationMapEntry::default()
-                    .constant_id(specialization[i].0)
+                    .constant_id(id)
                     .offset(4 * i as u32)
                     .size(4)
             })
