@@ -6,8 +6,7 @@
 mod common;
 
 use glam::Vec3;
-use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object, path_trace};
+use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object};
 use synosis::scene::assemble::{EmitterSampling, LightGeometry};
 use synosis::scene::config::SceneConfig;
 use synosis::scene::light_cover::{ALL_CELLS, light_cover, seen_box};
@@ -26,14 +25,11 @@ fn plate_cfg(lights: &str, w: u32, h: u32, spp: u32) -> SceneConfig {
 
 /// Renders the plate (albedo 1, Lambertian) under `cfg`.
 fn render_plate(cfg: &SceneConfig, backend: Backend) -> (RenderScene, Radiance) {
-    let ctx = common::gpu();
     let mut s = RenderScene::assemble(&common::face_a_plate(), cfg).expect("scene");
     for m in s.stage.materials.iter_mut().take(2) {
         *m = MAT_TABLE;
     }
-    let tables = EnergyTables::compute();
-    let img = path_trace(&ctx, &s, cfg, backend, &tables, None, |_| {}).expect("render");
-    common::assert_clean(&ctx);
+    let img = common::path_trace_shared(&s, cfg, backend);
     (s, img)
 }
 
@@ -222,13 +218,9 @@ fn two_lights_give_the_sum_of_one_light_each() {
     );
     for backend in common::BACKENDS {
         let render = |c: &SceneConfig| {
-            let ctx = common::gpu();
             let object = load_object(c).expect("object");
             let s = RenderScene::assemble(&object, c).expect("scene");
-            let img = path_trace(&ctx, &s, c, backend, &EnergyTables::compute(), None, |_| {})
-                .expect("render");
-            common::assert_clean(&ctx);
-            img
+            common::path_trace_shared(&s, c, backend)
         };
         let a = render(&cfg(ring));
         let b = render(&cfg(&bar));

@@ -8,20 +8,16 @@
 mod common;
 
 use glam::Vec3;
-use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{RenderScene, load_object, path_trace};
+use synosis::render::path_trace::{RenderScene, load_object};
 use synosis::scene::config::SceneConfig;
 use synosis::scene::materials::Preset;
 use synosis::scene::mesh::{FACE_A, FACE_B};
 use synosis::scene::{Mesh, TriLabel};
 use synosis::trace::Backend;
 
-fn render(cfg: &SceneConfig, object: &Mesh, backend: Backend, tables: &EnergyTables) -> Vec<f32> {
-    let ctx = common::gpu();
+fn render(cfg: &SceneConfig, object: &Mesh, backend: Backend) -> Vec<f32> {
     let scene = RenderScene::assemble(object, cfg).expect("scene");
-    let img = path_trace(&ctx, &scene, cfg, backend, tables, None, |_| {}).expect("render");
-    common::assert_clean(&ctx);
-    img.data
+    common::path_trace_shared(&scene, cfg, backend).data
 }
 
 /// A 200 mm plate at z = 10: the half x < 0 labelled A, the half x > 0 labelled B (one
@@ -76,7 +72,6 @@ fn f0(n: f32, k: f32) -> f64 {
 #[test]
 fn each_region_renders_with_its_own_bsdf() {
     use synosis::render::bsdf::{Conductor, Fresnel, fresnel_conductor};
-    let tables = EnergyTables::compute();
     let object = plate();
     let entries = |metal: &str| {
         format!(
@@ -101,8 +96,8 @@ fn each_region_renders_with_its_own_bsdf() {
     }
     let steel = Conductor::new(0.3, Fresnel::Conductor { n, k }, None);
     for backend in common::BACKENDS {
-        let a = render(&steel_cfg, &object, backend, &tables);
-        let b = render(&al_cfg, &object, backend, &tables);
+        let a = render(&steel_cfg, &object, backend);
+        let b = render(&al_cfg, &object, backend);
         let (mut worst_c, mut worst_d, mut worst_r) = (0.0f64, 0.0f64, 0.0f64);
         // 2 x 2 pixel blocks on each half, away from the seam at x = 0.
         for (cx, cy) in [(2u32, 2u32), (4, 6), (2, 9), (12, 2), (10, 6), (12, 9)] {
@@ -174,7 +169,6 @@ fn each_region_renders_with_its_own_bsdf() {
 /// region renders bit for bit as no texture.
 #[test]
 fn entries_equal_to_material_and_bare_finishes_change_nothing() {
-    let tables = EnergyTables::compute();
     let cfg = |extra: &str, texture: &str| {
         let text = format!(
             "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n{extra}[texture]\nkind = \"{texture}\"\n[render]\nspp = 4\nbatch_spp = 4\nseed = 3\n"
@@ -188,17 +182,17 @@ fn entries_equal_to_material_and_bare_finishes_change_nothing() {
     let plain = cfg("", "flat");
     let object = load_object(&plain).expect("object");
     for backend in common::BACKENDS {
-        let base = render(&plain, &object, backend, &tables);
+        let base = render(&plain, &object, backend);
         assert!(base.iter().any(|&v| v > 0.0));
-        let with = render(&cfg(same, "flat"), &object, backend, &tables);
+        let with = render(&cfg(same, "flat"), &object, backend);
         assert!(
             base == with,
             "{}: entries equal to [material] changed the image",
             backend.name()
         );
-        let grooves = render(&cfg("", "test-grooves"), &object, backend, &tables);
+        let grooves = render(&cfg("", "test-grooves"), &object, backend);
         assert!(base != grooves, "the grooves must show");
-        let grooves_bare = render(&cfg(bare, "test-grooves"), &object, backend, &tables);
+        let grooves_bare = render(&cfg(bare, "test-grooves"), &object, backend);
         assert!(
             base == grooves_bare,
             "{}: finish = \"none\" still shows the map",

@@ -6,7 +6,6 @@
 
 mod common;
 
-use synosis::render::energy::EnergyTables;
 use synosis::render::noise::{CameraNoise, NoiseEstimator, NoiseStop};
 use synosis::render::path_trace::{Frame, FrameOptions, RenderScene, load_object, render_frame};
 use synosis::render::sensor::{Responsivity, saturation_electrons};
@@ -59,15 +58,15 @@ fn stop_with(
 /// built once: pipelines are what costs on lavapipe.
 struct Gpu {
     ctx: std::sync::Arc<synosis::vk::Context>,
-    tracer: PathTracer,
+    tracer: std::sync::Arc<PathTracer>,
     gpu_scene: GpuScene,
     scene: RenderScene,
 }
 
 impl Gpu {
     fn new(cfg: &SceneConfig) -> Gpu {
-        let ctx = common::gpu();
-        let tracer = PathTracer::new(&ctx, Backend::Software, &EnergyTables::compute()).unwrap();
+        let tracer = common::tracer(Backend::Software);
+        let ctx = tracer.context().clone();
         let object = load_object(cfg).unwrap();
         let scene = RenderScene::assemble(&object, cfg).unwrap();
         let mut gpu_scene = GpuScene::new(&tracer, &scene.stage, None).unwrap();

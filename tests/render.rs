@@ -8,7 +8,7 @@ use std::sync::Arc;
 use synosis::render::bsdf::{Conductor, Fresnel, ggx_d, ggx_g1, sample_vndf};
 use synosis::render::energy::EnergyTables;
 
-use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object, path_trace};
+use synosis::render::path_trace::{MAT_TABLE, Radiance, RenderScene, load_object};
 use synosis::render::slope::{FaceMap, SlopeMap};
 use synosis::scene::config::SceneConfig;
 use synosis::scene::mesh::FACE_A;
@@ -186,14 +186,10 @@ fn test_cfg(camera: &str, extra: &str) -> SceneConfig {
 }
 
 fn render(cfg: &SceneConfig, backend: Backend, tweak: impl FnOnce(&mut RenderScene)) -> Radiance {
-    let ctx = common::gpu();
     let object = load_object(cfg).expect("object");
     let mut scene = RenderScene::assemble(&object, cfg).expect("scene");
     tweak(&mut scene);
-    let tables = EnergyTables::compute();
-    let img = path_trace(&ctx, &scene, cfg, backend, &tables, None, |_| {}).expect("render");
-    common::assert_clean(&ctx);
-    img
+    common::path_trace_shared(&scene, cfg, backend)
 }
 
 fn mean(v: &[f32]) -> f64 {
@@ -318,14 +314,11 @@ rim_width = 0.5
     let dented = imprint(&body, &set).unwrap();
     assert!(dented.triangles.len() > body.triangles.len());
     for backend in common::BACKENDS {
-        let ctx = common::gpu();
-        let tables = EnergyTables::compute();
         let mut imgs = Vec::new();
         for mesh in [&body, &dented] {
             let scene = RenderScene::assemble(mesh, &cfg).unwrap();
-            imgs.push(path_trace(&ctx, &scene, &cfg, backend, &tables, None, |_| {}).unwrap());
+            imgs.push(common::path_trace_shared(&scene, &cfg, backend));
         }
-        common::assert_clean(&ctx);
         assert_sane("20 um dent", &imgs[1]);
         let off = imgs[0]
             .data
@@ -376,14 +369,11 @@ fn diffuse_plate_matches_irradiance_integral() {
     ] {
         let mut cfg = base_cfg.clone();
         cfg.light.sampling = sampling;
-        let ctx = common::gpu();
         let mut s = RenderScene::assemble(&plate, &cfg).expect("scene");
         for m in s.stage.materials.iter_mut().take(2) {
             *m = MAT_TABLE;
         }
-        let tables = EnergyTables::compute();
-        let img = path_trace(&ctx, &s, &cfg, backend, &tables, None, |_| {}).expect("render");
-        common::assert_clean(&ctx);
+        let img = common::path_trace_shared(&s, &cfg, backend);
         // 3 x 3 pixel blocks at four places (centre to near the corners): the block
         // mean has a third of a single pixel's noise.
         let mut worst = 0.0f64;
@@ -702,9 +692,7 @@ fn conductor_plate_matches_rust_bsdf_integral() {
         cfg.render.batch_spp = 512;
         cfg.set_resolution(16, 12).expect("size");
         let s = RenderScene::assemble(&plate, &cfg).expect("scene");
-        let ctx = common::gpu();
-        let img = path_trace(&ctx, &s, &cfg, backend, &tables, None, |_| {}).expect("render");
-        common::assert_clean(&ctx);
+        let img = common::path_trace_shared(&s, &cfg, backend);
         let m = &cfg.material;
         let bsdf = Conductor::new(
             m.alpha,

@@ -19,7 +19,9 @@ pub mod tracer;
 pub mod view;
 
 pub use gpu_scene::GpuScene;
-pub use path_trace::{Frame, FrameOptions, Radiance, RenderError, render_frame, render_scene};
+pub use path_trace::{
+    Frame, FrameOptions, Radiance, RenderError, render_frame, render_scene, render_scene_on,
+};
 pub use settings::{Material, RenderSettings};
 pub use tracer::PathTracer;
 pub use view::View;

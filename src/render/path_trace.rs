@@ -301,17 +301,31 @@ pub fn render_scene(
     progress: impl FnMut(u32),
 ) -> Result<Frame, RenderError> {
     let tracer = PathTracer::new(ctx, backend, tables)?;
+    render_scene_on(&tracer, scene, settings, opts, progress)
+}
+
+/// [`render_scene`] with a path tracer the caller keeps, so that its pipelines are made
+/// once for many scenes (lavapipe spends seconds turning the path tracer's SPIR-V into
+/// its own code at each pipeline's creation, whatever the pipeline cache holds); the GPU
+/// scene is built for this one image.
+pub fn render_scene_on(
+    tracer: &PathTracer,
+    scene: &RenderScene,
+    settings: impl Into<RenderSettings>,
+    opts: FrameOptions<'_>,
+    progress: impl FnMut(u32),
+) -> Result<Frame, RenderError> {
     let settings: RenderSettings = settings.into();
-    let mut gpu = GpuScene::new(&tracer, &scene.stage, opts.profiler)?;
+    let mut gpu = GpuScene::new(tracer, &scene.stage, opts.profiler)?;
     crate::vk::timed(opts.profiler, "place and upload maps", || {
         gpu.set_face_maps_filtered(
-            &tracer,
+            tracer,
             &scene.face_maps,
             &scene.placement,
             settings.texture_filter,
         )
     })?;
-    render_frame(&tracer, &gpu, &scene.view, &settings, opts, progress)
+    render_frame(tracer, &gpu, &scene.view, &settings, opts, progress)
 }
 
 /// The radiance of [`render_scene`] without annotation.

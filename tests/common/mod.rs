@@ -4,11 +4,14 @@
 
 pub mod files;
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::Vec3;
+use synosis::render::PathTracer;
 use synosis::render::energy::EnergyTables;
-use synosis::render::path_trace::{FrameOptions, Radiance, RenderScene, load_object, render_scene};
+use synosis::render::path_trace::{
+    Frame, FrameOptions, Radiance, RenderScene, load_object, render_scene_on,
+};
 use synosis::scene::config::SceneConfig;
 use synosis::scene::mesh::{FACE_A, Mesh, TriLabel};
 use synosis::trace::Backend;
@@ -28,6 +31,52 @@ pub fn gpu() -> Arc<Context> {
         "tests need ray query (Mesa >= 25 lavapipe); run tools/setup"
     );
     ctx
+}
+
+/// One device for the whole test binary (validation and ray query on, as [`gpu`]), for
+/// tests that render many small images: they share it and its path tracers
+/// ([`tracer`]). Its GPU work is one submission at a time (a context's command pool is
+/// held through each submission); a validation error made by any test fails the next
+/// [`assert_clean`] of every test on it.
+pub fn shared_gpu() -> Arc<Context> {
+    static SHARED: OnceLock<Arc<Context>> = OnceLock::new();
+    SHARED.get_or_init(gpu).clone()
+}
+
+/// The path tracer of `backend` on [`shared_gpu`] (default energy tables), made at its
+/// first use and kept by the test binary: lavapipe takes 2.5 to 4 s (2-core machine)
+/// to create a path-tracing pipeline, cache or not, which a test making one per image
+/// paid per image.
+pub fn tracer(backend: Backend) -> Arc<PathTracer> {
+    static TRACERS: Mutex<Vec<(Backend, Arc<PathTracer>)>> = Mutex::new(Vec::new());
+    let mut tracers = TRACERS.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((_, t)) = tracers.iter().find(|(b, _)| *b == backend) {
+        return t.clone();
+    }
+    let t = Arc::new(
+        PathTracer::new(&shared_gpu(), backend, &EnergyTables::compute()).expect("path tracer"),
+    );
+    tracers.push((backend, t.clone()));
+    t
+}
+
+/// Renders `scene` with `backend`'s shared [`tracer`]; fails the test on any validation
+/// error.
+pub fn render_shared(
+    scene: &RenderScene,
+    cfg: &SceneConfig,
+    backend: Backend,
+    opts: FrameOptions<'_>,
+) -> Frame {
+    let tracer = tracer(backend);
+    let f = render_scene_on(&tracer, scene, cfg, opts, |_| {}).expect("render");
+    assert_clean(tracer.context());
+    f
+}
+
+/// The radiance of [`render_shared`] without annotation.
+pub fn path_trace_shared(scene: &RenderScene, cfg: &SceneConfig, backend: Backend) -> Radiance {
+    render_shared(scene, cfg, backend, FrameOptions::default()).radiance
 }
 
 /// Every trace backend (both software layouts too): tests over it hold each to the same
@@ -174,18 +223,15 @@ pub fn render_faces_with(
     backend: Backend,
     tweak: impl FnOnce(&mut RenderScene),
 ) -> (Radiance, Vec<u8>) {
-    let ctx = gpu();
     let object = load_object(cfg).expect("object");
     let mut scene = RenderScene::assemble(&object, cfg).expect("scene");
     tweak(&mut scene);
-    let tables = EnergyTables::compute();
     let opts = FrameOptions {
         annotate_grid: Some(1),
         profiler: None,
         noise: None,
     };
-    let f = render_scene(&ctx, &scene, cfg, backend, &tables, opts, |_| {}).expect("render");
-    assert_clean(&ctx);
+    let f = render_shared(&scene, cfg, backend, opts);
     (f.radiance, f.annotation.expect("annotation").face)
 }
 
