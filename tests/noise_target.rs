@@ -54,10 +54,9 @@ fn stop_with(
     }
 }
 
-/// The path tracer (software traversal, as on data-centre GPUs) and the scene on it,
-/// built once: pipelines are what costs on lavapipe.
+/// The test binary's shared path tracer (software traversal, as on data-centre GPUs,
+/// `common::tracer`: pipelines are what costs on lavapipe) and the scene on it.
 struct Gpu {
-    ctx: std::sync::Arc<synosis::vk::Context>,
     tracer: std::sync::Arc<PathTracer>,
     gpu_scene: GpuScene,
     scene: RenderScene,
@@ -66,7 +65,6 @@ struct Gpu {
 impl Gpu {
     fn new(cfg: &SceneConfig) -> Gpu {
         let tracer = common::tracer(Backend::Software);
-        let ctx = tracer.context().clone();
         let object = load_object(cfg).unwrap();
         let scene = RenderScene::assemble(&object, cfg).unwrap();
         let mut gpu_scene = GpuScene::new(&tracer, &scene.stage, None).unwrap();
@@ -79,7 +77,6 @@ impl Gpu {
             )
             .unwrap();
         Gpu {
-            ctx,
             tracer,
             gpu_scene,
             scene,
@@ -115,7 +112,7 @@ impl Gpu {
             |done| batches.push(done),
         )
         .expect("render");
-        common::assert_clean(&self.ctx);
+        common::assert_clean(self.tracer.context());
         (f, batches)
     }
 }

@@ -912,9 +912,9 @@ pub struct RenderConfig {
     /// images; each distinct setting is a pipeline of its own (compiled at its first use,
     /// on lavapipe then kept by the driver's shader cache). On lavapipe it measured 0.96
     /// of the path tracing's time with Mitsuba's sampling (sets from 0.91 to 1.00) and no
-    /// gain on the paper job (docs/benchmarks/rendering.md, "The path tracer compiled for a render's
-    /// settings"); it is for GPUs, where the code a kernel holds sets its registers,
-    /// unmeasured there. Not given: false, or what `SYNOSIS_SPECIALIZE` says
+    /// gain on the paper job (docs/benchmarks/rendering.md, "The path tracer compiled for
+    /// a render's settings"); it is for GPUs, where the code a kernel holds sets its
+    /// registers, unmeasured there. Not given: false, or what `SYNOSIS_SPECIALIZE` says
     /// (`render::settings::specialize_from_env`: a whole process, a dataset job included).
     pub specialize: Option<bool>,
 }
