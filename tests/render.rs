@@ -927,7 +927,7 @@ fn specialized_path_tracer_changes_no_pixel() {
         let off = cfg(render, rest, false);
         let mesh = load_object(&on).expect("object");
         for &backend in backends {
-            let r = common::SceneRenderer::new(backend, mesh.clone(), &on);
+            let r = common::SceneRenderer::own(backend, mesh.clone(), &on);
             let a = r.render(&on, true);
             let b = r.render(&off, true);
             assert_eq!(r.path_pipelines(), 2, "{name}, {}", backend.name());

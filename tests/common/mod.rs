@@ -307,26 +307,42 @@ pub fn labelled_plane(side: f32, z: f32, regions: &[Region], occluder: [Vec3; 4]
     m
 }
 
-/// One device, path tracer and GPU scene for every render of one mesh in a test (the
-/// pipelines take most of a small render's time on lavapipe); each render assembles the
-/// scene from its own config (view, lights, settings) over the same stage.
+/// One GPU scene for every render of one mesh in a test, on the test binary's shared
+/// device and path tracer ([`tracer`]: the pipelines take most of a small render's time
+/// on lavapipe), or on a device and tracer of its own ([`SceneRenderer::own`]); each
+/// render assembles the scene from its own config (view, lights, settings) over the
+/// same stage.
 pub struct SceneRenderer {
     pub ctx: Arc<Context>,
-    tracer: synosis::render::PathTracer,
+    tracer: Arc<synosis::render::PathTracer>,
     gpu: synosis::render::GpuScene,
     mesh: Mesh,
 }
 
 impl SceneRenderer {
-    /// `cfg`: any config of the test (the stage does not depend on the view).
+    /// On the shared tracer of `backend`; `cfg`: any config of the test (the stage does
+    /// not depend on the view).
     pub fn new(backend: Backend, mesh: Mesh, cfg: &SceneConfig) -> SceneRenderer {
-        let ctx = gpu();
-        let tracer = synosis::render::PathTracer::new(&ctx, backend, &EnergyTables::compute())
+        Self::on(tracer(backend), mesh, cfg)
+    }
+
+    /// On a device and path tracer of its own (a test that counts the tracer's
+    /// pipelines).
+    pub fn own(backend: Backend, mesh: Mesh, cfg: &SceneConfig) -> SceneRenderer {
+        let tracer = synosis::render::PathTracer::new(&gpu(), backend, &EnergyTables::compute())
             .expect("tracer");
+        Self::on(Arc::new(tracer), mesh, cfg)
+    }
+
+    fn on(
+        tracer: Arc<synosis::render::PathTracer>,
+        mesh: Mesh,
+        cfg: &SceneConfig,
+    ) -> SceneRenderer {
         let scene = RenderScene::assemble(&mesh, cfg).expect("scene");
         let gpu = synosis::render::GpuScene::new(&tracer, &scene.stage, None).expect("gpu scene");
         SceneRenderer {
-            ctx,
+            ctx: tracer.context().clone(),
             tracer,
             gpu,
             mesh,
