@@ -5,10 +5,11 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use synosis::render::PathTracer;
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
 use synosis::render::noise::{CameraNoise, NoiseStop};
-use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene};
+use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene_on};
 use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
 use synosis::scene::assemble::load_object_inspected;
@@ -86,6 +87,19 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             "--png16: with a [sensor] section, sensor.bit_depth sets the PNG depth (8 -> 8-bit PNG, 10/12/16 -> 16-bit PNG)"
         );
     }
+    // The device and the path tracer first: its pipeline is made on a thread of its own
+    // (seconds on lavapipe) while the object and its maps are loaded below.
+    let tables = profiler.cpu("energy tables", EnergyTables::compute);
+    let ctx = profiler.cpu("Vulkan init", || {
+        Context::new(&ContextOptions {
+            validation: false,
+            ray_query: true,
+        })
+    })?;
+    let backend = resolve(cfg.render.accel, &ctx.info)?;
+    let tracer = profiler.cpu("path tracer (begun)", || {
+        PathTracer::new(&ctx, backend, &tables)
+    })?;
     let (object, inspected) = profiler
         .cpu("load object", || load_object_inspected(&cfg))
         .context("loading the object")?;
@@ -110,14 +124,6 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         RenderScene::assemble(&object, &cfg)
     })?;
     print_region_materials(&scene.stage);
-    let tables = profiler.cpu("energy tables", EnergyTables::compute);
-    let ctx = profiler.cpu("Vulkan init", || {
-        Context::new(&ContextOptions {
-            validation: false,
-            ray_query: true,
-        })
-    })?;
-    let backend = resolve(cfg.render.accel, &ctx.info)?;
     let bar = ProgressBar::new(cfg.render.spp as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} spp {elapsed_precise} eta {eta}")
@@ -150,7 +156,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         profiler: Some(&profiler),
         noise: noise.as_ref(),
     };
-    let frame = render_scene(&ctx, &scene, &cfg, backend, &tables, opts, |done| {
+    let frame = render_scene_on(&tracer, &scene, &cfg, opts, |done| {
         bar.set_position(done as u64)
     })?;
     let img = frame.radiance;

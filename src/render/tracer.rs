@@ -1,8 +1,15 @@
 //! The path tracer of one device and backend: its pipelines and the energy tables,
 //! built once per process and shared by every scene and view.
+//!
+//! Its pipeline that reads the settings at run time (what every render uses unless
+//! `[render] specialize`) is made on a thread of its own from [`PathTracer::new`] on:
+//! lavapipe takes 2.5 to 5 s to create it on a 2-core machine (its SPIR-V turned into
+//! its own IR, whatever the shader cache holds), which a process then spends on the
+//! scene (loading the object, its maps and slopes, the BVH) instead of after it.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
 
 use ash::vk;
 
@@ -10,7 +17,7 @@ use super::RenderError;
 use super::energy::EnergyTables;
 use crate::gpu_interface::{PATH_SPEC_COUNT, PathParams};
 use crate::trace::{Backend, TraceScene};
-use crate::vk::{Buffer, ComputePipeline, Context};
+use crate::vk::{Buffer, ComputePipeline, Context, VkError};
 
 /// How many path tracers this process has built; tests and the dataset's stage report
 /// use it to show that pipelines are built once.
@@ -26,8 +33,12 @@ pub struct PathTracer {
     pub backend: Backend,
     /// The path tracer's pipelines made so far, one per distinct setting it was
     /// specialized for (`[render] specialize`) and one reading them at run time, each
-    /// made at its first use and kept for the process.
+    /// taken at its first use (the one reading them begun by `new`) and kept for the
+    /// process.
     paths: Mutex<Vec<(PathKey, Arc<ComputePipeline>)>>,
+    /// The pipeline reading its settings at run time while its thread makes it (taken
+    /// into `paths` at its first use).
+    unspecialized: Mutex<Option<JoinHandle<Result<ComputePipeline, VkError>>>>,
     pub(crate) annotate: ComputePipeline,
     pub(crate) energy: Buffer,
 }
@@ -38,6 +49,13 @@ impl PathTracer {
         backend: Backend,
         tables: &EnergyTables,
     ) -> Result<PathTracer, RenderError> {
+        let unspecialized = {
+            let ctx = ctx.clone();
+            std::thread::Builder::new()
+                .name("path tracer pipeline".into())
+                .spawn(move || super::pipelines::path_trace(&ctx, backend, &[]))
+                .ok()
+        };
         let annotate = super::pipelines::annotate(ctx, backend)?;
         let energy = Buffer::from_slice(
             ctx,
@@ -50,6 +68,7 @@ impl PathTracer {
             ctx: ctx.clone(),
             backend,
             paths: Mutex::new(Vec::new()),
+            unspecialized: Mutex::new(unspecialized),
             annotate,
             energy,
         })
@@ -66,7 +85,8 @@ impl PathTracer {
 
     /// The path-tracing pipeline for a view's parameters: with `specialize`, compiled for
     /// their settings (`PathParams::specialization`: the driver drops the code they
-    /// switch off), else the one that reads them at run time; made at its first use.
+    /// switch off), made at its first use, else the one that reads them at run time
+    /// (begun by [`PathTracer::new`] on a thread of its own, waited for here).
     pub(crate) fn path_pipeline(
         &self,
         params: &PathParams,
@@ -77,8 +97,22 @@ impl PathTracer {
         if let Some((_, p)) = paths.iter().find(|(k, _)| *k == key) {
             return Ok(p.clone());
         }
+        let made = match key {
+            None => self
+                .unspecialized
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take(),
+            Some(_) => None,
+        };
         let spec = key.as_ref().map_or(&[][..], |k| &k[..]);
-        let p = Arc::new(super::pipelines::path_trace(&self.ctx, self.backend, spec)?);
+        let p = Arc::new(match made {
+            Some(thread) => thread.join().map_err(|_| {
+                VkError::Other("the thread making the path tracer's pipeline panicked".into())
+            })??,
+            // No thread could be started, or a specialized pipeline: made here.
+            None => super::pipelines::path_trace(&self.ctx, self.backend, spec)?,
+        });
         paths.push((key, p.clone()));
         Ok(p)
     }
