@@ -608,9 +608,11 @@ fn ordered_terms<T: Send>(
 /// values in the mean, else 0), each window mean as [`box_mean`] makes it (a running
 /// sum along each row, then one down each column), the same sums in the same order, so
 /// the result equals that composition bit for bit (tested); made in one pass along the
-/// rows for all four sums and one down the columns, the columns in chunks on all cores
-/// (a noise check's largest part at the paper's size: 100 -> about 40 ms on 2 cores,
-/// `examples/bench_noise_check.rs`).
+/// rows for all four sums and one down the columns, the columns in chunks on all cores,
+/// into planes kept between calls ([`PlanePool`]). A noise check's largest part at the
+/// paper's size: 128 -> 43 to 75 ms on 2 cores on synthetic sums
+/// (`examples/bench_noise_check.rs`), `samples wanted` 0.91x in real renders
+/// (docs/benchmarks/dataset.md, "A noise check's CPU time").
 pub fn kind_mean(
     v: &[f64],
     in_mean: &[bool],
@@ -629,7 +631,7 @@ pub fn kind_mean(
     // The sums, a plane each (v w and w of the first kind, then of the second), along
     // the rows: each row's running sums (rows on all cores), each value's window mean
     // along its row. A plane of 0 for a kind no value is of.
-    let mut planes: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.0f64; px]);
+    let mut planes = PlanePool::take(px);
     let [s0, w0, s1, w1] = &mut planes;
     s0.par_chunks_mut(width)
         .zip(w0.par_chunks_mut(width))
@@ -699,6 +701,7 @@ pub fn kind_mean(
             out
         })
         .collect();
+    PlanePool::give(planes);
     let mut mean = vec![0.0f64; px];
     mean.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
         for (c, chunk) in chunks.iter().enumerate() {
@@ -708,6 +711,39 @@ pub fn kind_mean(
         }
     });
     mean
+}
+
+/// [`kind_mean`]'s four planes, kept between calls: a noise check every few batches
+/// would otherwise map 4 x 8 bytes a pixel afresh (40 MB at the paper's size), and in a
+/// renderer's process the page faults of that memory cost about as much as the sums
+/// (measured: the same call 75 to 85 ms on fresh memory, 41 to 52 ms on memory used
+/// before, 2 cores). One set per call at once (a run's renderers check side by side);
+/// the process keeps as many as ran at once.
+struct PlanePool;
+
+static PLANES: std::sync::Mutex<Vec<[Vec<f64>; 4]>> = std::sync::Mutex::new(Vec::new());
+
+impl PlanePool {
+    /// A set of four planes of `px` values each; their values are left as they were
+    /// (every one is written before it is read).
+    fn take(px: usize) -> [Vec<f64>; 4] {
+        let mut planes = PLANES
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .pop()
+            .unwrap_or_default();
+        for p in &mut planes {
+            p.resize(px, 0.0);
+        }
+        planes
+    }
+
+    fn give(planes: [Vec<f64>; 4]) {
+        PLANES
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(planes);
+    }
 }
 
 /// Each value's mean over the window of r on either side (clipped at the ends) from the
