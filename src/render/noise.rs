@@ -609,7 +609,7 @@ fn ordered_terms<T: Send>(
 /// sum along each row, then one down each column), the same sums in the same order, so
 /// the result equals that composition bit for bit (tested); made in one pass along the
 /// rows for all four sums and one down the columns, the columns in chunks on all cores,
-/// into planes kept between calls ([`PlanePool`]). A noise check's largest part at the
+/// into planes kept between calls (`PlanePool`). A noise check's largest part at the
 /// paper's size: 128 -> 43 to 75 ms on 2 cores on synthetic sums
 /// (`examples/bench_noise_check.rs`), `samples wanted` 0.91x in real renders
 /// (docs/benchmarks/dataset.md, "A noise check's CPU time").
