@@ -605,9 +605,9 @@ fn ordered_terms<T: Send>(
 /// the window holds none. `v` is an image `width` values a row.
 ///
 /// Each kind's mean is the window mean of v w over that of w (w: 1 for the kind's
-/// values in the mean, else 0), each window mean as [`box_mean`] makes it (a running
-/// sum along each row, then one down each column), the same sums in the same order, so
-/// the result equals that composition bit for bit (tested); made in one pass along the
+/// values in the mean, else 0), each window mean a box mean (a running sum along each
+/// row, then one down each column; the tests' `box_mean`), the same sums in the same
+/// order, so the result equals that composition bit for bit (tested); made in one pass along the
 /// rows for all four sums and one down the columns, the columns in chunks on all cores,
 /// into planes kept between calls (`PlanePool`). A noise check's largest part at the
 /// paper's size: 128 -> 43 to 75 ms on 2 cores on synthetic sums
@@ -687,7 +687,7 @@ pub fn kind_mean(
             let at = |k: usize, y: usize, x: usize| prefix[(k * (height + 1) + y) * cw + x];
             let mut out = vec![0.0f64; height * cw];
             for y in 0..height {
-                let (lo, hi) = (y.saturating_sub(r), (y + r + 1).min(height));
+                let (lo, hi) = window(y, height, r);
                 let n = (hi - lo) as f64;
                 for x in 0..cw {
                     let k = if kind(y * width + x0 + x) { 0 } else { 2 };
@@ -746,9 +746,14 @@ impl PlanePool {
     }
 }
 
+/// The window of `r` on either side of `j` in `0..len`, clipped at the ends: `lo..hi`.
+fn window(j: usize, len: usize, r: usize) -> (usize, usize) {
+    (j.saturating_sub(r), (j + r + 1).min(len))
+}
+
 /// Each value's mean over the window of r on either side (clipped at the ends) from the
 /// running sums `prefix` (prefix[j]: the sum of the first j values): (prefix[hi] -
-/// prefix[lo]) / (hi - lo), as [`box_mean`]'s pass along the rows; the interior, where
+/// prefix[lo]) / (hi - lo), as a box mean's pass along the rows; the interior, where
 /// the window is whole, in one loop the compiler can vectorise (a division by the same
 /// count: the same quotients).
 fn window_means(prefix: &[f64], out: &mut [f64], r: usize) {
@@ -758,7 +763,7 @@ fn window_means(prefix: &[f64], out: &mut [f64], r: usize) {
         if j >= r && j + r < len {
             continue;
         }
-        let (lo, hi) = (j.saturating_sub(r), (j + r + 1).min(len));
+        let (lo, hi) = window(j, len, r);
         *o = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
     }
     if len > 2 * r {
@@ -768,49 +773,6 @@ fn window_means(prefix: &[f64], out: &mut [f64], r: usize) {
             *o = (a - b) / whole;
         }
     }
-}
-
-/// The mean of `v` (an image `width` values a row) over the (2 r + 1)^2 window around
-/// each value, clipped at the image's edges (two passes of running sums).
-pub fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
-    let height = v.len() / width;
-    let window = |j: usize, len: usize| (j.saturating_sub(r), (j + r + 1).min(len));
-    // Along the rows: each row's running sum on its own (rows on all cores).
-    let mut rows = vec![0.0; v.len()];
-    rows.par_chunks_mut(width)
-        .zip(v.par_chunks(width))
-        .for_each(|(out, src)| {
-            let mut prefix = vec![0.0f64; width + 1];
-            for j in 0..width {
-                prefix[j + 1] = prefix[j] + src[j];
-            }
-            for (j, o) in out.iter_mut().enumerate() {
-                let (lo, hi) = window(j, width);
-                *o = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
-            }
-        });
-    // Along the columns: every column's running sum, a row at a time (the same sums in
-    // the same order per column), then each output row from two of them (written over
-    // the rows' pass, which the sums hold by then).
-    let mut prefix = vec![0.0f64; (height + 1) * width];
-    for y in 0..height {
-        let (done, next) = prefix.split_at_mut((y + 1) * width);
-        let (above, row) = (&done[y * width..], &mut next[..width]);
-        for x in 0..width {
-            row[x] = above[x] + rows[y * width + x];
-        }
-    }
-    rows.par_chunks_mut(width)
-        .take(height)
-        .enumerate()
-        .for_each(|(y, o)| {
-            let (lo, hi) = window(y, height);
-            let (a, b) = (&prefix[lo * width..], &prefix[hi * width..]);
-            for ((o, b), a) in o.iter_mut().zip(b).zip(a) {
-                *o = (b - a) / (hi - lo) as f64;
-            }
-        });
-    rows
 }
 
 impl NoiseStop {
@@ -874,6 +836,49 @@ impl NoiseStop {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The mean of `v` (an image `width` values a row) over the (2 r + 1)^2 window around
+    /// each value, clipped at the image's edges (two passes of running sums): the reference
+    /// [`kind_mean`]'s sums are checked against, and its code before they were fused.
+    fn box_mean(v: &[f64], width: usize, r: usize) -> Vec<f64> {
+        let height = v.len() / width;
+        // Along the rows: each row's running sum on its own (rows on all cores).
+        let mut rows = vec![0.0; v.len()];
+        rows.par_chunks_mut(width)
+            .zip(v.par_chunks(width))
+            .for_each(|(out, src)| {
+                let mut prefix = vec![0.0f64; width + 1];
+                for j in 0..width {
+                    prefix[j + 1] = prefix[j] + src[j];
+                }
+                for (j, o) in out.iter_mut().enumerate() {
+                    let (lo, hi) = window(j, width, r);
+                    *o = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+                }
+            });
+        // Along the columns: every column's running sum, a row at a time (the same sums in
+        // the same order per column), then each output row from two of them (written over
+        // the rows' pass, which the sums hold by then).
+        let mut prefix = vec![0.0f64; (height + 1) * width];
+        for y in 0..height {
+            let (done, next) = prefix.split_at_mut((y + 1) * width);
+            let (above, row) = (&done[y * width..], &mut next[..width]);
+            for x in 0..width {
+                row[x] = above[x] + rows[y * width + x];
+            }
+        }
+        rows.par_chunks_mut(width)
+            .take(height)
+            .enumerate()
+            .for_each(|(y, o)| {
+                let (lo, hi) = window(y, height, r);
+                let (a, b) = (&prefix[lo * width..], &prefix[hi * width..]);
+                for ((o, b), a) in o.iter_mut().zip(b).zip(a) {
+                    *o = (b - a) / (hi - lo) as f64;
+                }
+            });
+        rows
+    }
 
     fn sensor() -> SensorConfig {
         SensorConfig {
