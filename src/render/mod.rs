@@ -12,6 +12,7 @@ pub mod path_trace;
 pub mod pipelines;
 pub mod pixels;
 pub mod raycast;
+pub mod scratch;
 pub mod sensor;
 pub mod settings;
 pub mod slope;

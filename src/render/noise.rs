@@ -30,6 +30,7 @@
 //! samples from). The ratio of the two rms values over the object's pixels is what
 //! `noise_target` bounds.
 
+use super::scratch::Scratch;
 use super::sensor::{Responsivity, SensorError, exposure_time_s, saturation_electrons};
 pub use crate::scene::config::NoiseEstimator;
 use crate::scene::config::SensorConfig;
@@ -230,8 +231,24 @@ fn pixel_variance(estimator: NoiseEstimator, sum: &[f32], noise: &[f32], n: u32,
 pub fn mean_image(sum: &[f32], n: PixelSamples<'_>) -> Vec<f32> {
     sum.par_iter()
         .enumerate()
-        .map(|(i, v)| v * (1.0 / n.of(i).max(1) as f32))
+        .map(|(i, &v)| pixel_mean(v, n.of(i)))
         .collect()
+}
+
+/// A pixel's mean from its sum over `n` samples (none: 0), as [`mean_image`] has it.
+#[inline]
+fn pixel_mean(sum: f32, n: u32) -> f32 {
+    sum * (1.0 / n.max(1) as f32)
+}
+
+/// [`mean_image`] into an array kept between checks.
+fn mean_scratch(sum: &[f32], n: PixelSamples<'_>) -> Scratch<f32> {
+    let mut mean = Scratch::stale(sum.len(), 0.0);
+    mean.par_iter_mut()
+        .zip(sum)
+        .enumerate()
+        .for_each(|(i, (m, &v))| *m = pixel_mean(v, n.of(i)));
+    mean
 }
 
 /// Floats a pixel the path tracer keeps for `estimator` (its `NoiseSums` binding).
@@ -274,35 +291,45 @@ impl CameraNoise {
                 object_mask.len()
             )));
         }
-        let mean = mean_image(sum, n);
+        let mean = mean_scratch(sum, n);
         let t = exposure_time_s(&self.resp, &mean, Some(exposure_mask), &self.sensor)?
             * self.exposure_factor;
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
-        // Each pixel's terms on all cores, a chunk of pixels at a time, summed in pixel
-        // order (the same sums as one loop over the pixels).
-        let terms = ordered_terms(px, |i| {
-            if !(all || object_mask[i]) {
-                return None;
-            }
-            let e_per_l = self.resp.electrons_per_s[i] * t;
-            let l = mean[i].max(0.0) as f64;
-            let mu = l * e_per_l;
-            if mu >= full {
-                return None;
-            }
-            let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
-            Some((
-                (k * e_per_l).powi(2) * var_l,
-                camera_variance_dn(&self.sensor, mu),
-            ))
-        });
+        // Each pixel's terms on all cores (into arrays kept between checks), summed in
+        // pixel order (the same sums as one loop over the pixels).
+        let mut counted = Scratch::stale(px, false);
+        let mut render_t = Scratch::stale(px, 0.0f64);
+        let mut camera_t = Scratch::stale(px, 0.0f64);
+        counted
+            .par_iter_mut()
+            .zip(render_t.par_iter_mut())
+            .zip(camera_t.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, ((c, r), cam))| {
+                *c = false;
+                if !(all || object_mask[i]) {
+                    return;
+                }
+                let e_per_l = self.resp.electrons_per_s[i] * t;
+                let l = mean[i].max(0.0) as f64;
+                let mu = l * e_per_l;
+                if mu >= full {
+                    return;
+                }
+                let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
+                *c = true;
+                *r = (k * e_per_l).powi(2) * var_l;
+                *cam = camera_variance_dn(&self.sensor, mu);
+            });
         let (mut render, mut camera, mut pixels) = (0.0f64, 0.0f64, 0usize);
-        for (_, (r, c)) in terms.iter().flatten() {
-            render += r;
-            camera += c;
-            pixels += 1;
+        for i in 0..px {
+            if counted[i] {
+                render += render_t[i];
+                camera += camera_t[i];
+                pixels += 1;
+            }
         }
         let (render_rms_dn, camera_rms_dn, ratio) = if pixels == 0 {
             (0.0, 0.0, 0.0)
@@ -386,10 +413,9 @@ impl CameraNoise {
         target: f64,
         grown: Option<(&(dyn Fn(f64) -> f64 + Sync), f64)>,
         radius: u32,
-    ) -> Vec<f64> {
+    ) -> Scratch<f64> {
         let n = n.into();
         let px = sum.len();
-        let mean = mean_image(sum, n);
         let all = !object_mask.iter().any(|&m| m);
         let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
@@ -397,7 +423,7 @@ impl CameraNoise {
         // at or above saturation.
         let variance = |i: usize| -> Option<(f64, f64)> {
             let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
-            let mu = mean[i].max(0.0) as f64 * e_per_l;
+            let mu = pixel_mean(sum[i], n.of(i)).max(0.0) as f64 * e_per_l;
             if mu >= full {
                 return None;
             }
@@ -409,11 +435,12 @@ impl CameraNoise {
         // One pass on all cores: the variance per sample (0 when unknown or saturated),
         // whether it is unknown, whether it is in its kind's means (known and below
         // saturation), and the camera's variance of a counted pixel (NaN: not counted);
-        // then the camera's sum in pixel order (the same sum as one loop).
-        let mut per_sample = vec![0.0f64; px];
-        let mut unknown = vec![false; px];
-        let mut in_mean = vec![false; px];
-        let mut camera_of = vec![f64::NAN; px];
+        // then the camera's sum in pixel order (the same sum as one loop). Every array
+        // is kept between checks (`Scratch`).
+        let mut per_sample = Scratch::stale(px, 0.0f64);
+        let mut unknown = Scratch::stale(px, false);
+        let mut in_mean = Scratch::stale(px, false);
+        let mut camera_of = Scratch::stale(px, f64::NAN);
         per_sample
             .par_iter_mut()
             .zip(unknown.par_iter_mut())
@@ -421,6 +448,7 @@ impl CameraNoise {
             .zip(camera_of.par_iter_mut())
             .enumerate()
             .for_each(|(i, (((p, u), m), c))| {
+                (*p, *u, *m, *c) = (0.0, false, false, f64::NAN);
                 if let Some((v, mu)) = variance(i) {
                     match v.is_finite() {
                         true => (*p, *m) = (v, true),
@@ -433,12 +461,12 @@ impl CameraNoise {
             });
         let mut camera = 0.0f64;
         // The counted pixels with a known variance, in order: the budget's terms.
-        let mut shared = Vec::new();
+        let mut shared = Scratch::<u32>::empty();
         for (i, &c) in camera_of.iter().enumerate() {
             if !c.is_nan() {
                 camera += c;
                 if !unknown[i] {
-                    shared.push(i);
+                    shared.push(i as u32);
                 }
             }
         }
@@ -452,11 +480,16 @@ impl CameraNoise {
             width.max(1),
             radius as usize,
         );
-        let mut roots: Vec<f64> = smooth.par_iter().map(|v| v.max(0.0).sqrt()).collect();
+        let mut roots = Scratch::stale(px, 0.0f64);
+        roots
+            .par_iter_mut()
+            .zip(&smooth[..])
+            .for_each(|(r, v)| *r = v.max(0.0).sqrt());
         // The estimate's render variance now (the pixels' own) and the means' (in pixel
         // order: the same sums on every run).
         let (mut own, mut means) = (0.0f64, 0.0f64);
-        for &i in &shared {
+        for &i in shared.iter() {
+            let i = i as usize;
             let m = n.of(i).max(1) as f64;
             own += per_sample[i] / m;
             means += smooth[i] / m;
@@ -472,21 +505,28 @@ impl CameraNoise {
         // fewer than the most samples stopped at an earlier check and takes no more:
         // fixed from the start.
         let most = n.most();
-        let stopped: Vec<bool> = (0..px).into_par_iter().map(|i| n.of(i) < most).collect();
+        let mut stopped = Scratch::stale(px, false);
+        stopped
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, s)| *s = n.of(i) < most);
         // A fixed pixel's variance (its share of the budget spent), once for every round.
-        let spent_of: Vec<f64> = (0..px)
-            .into_par_iter()
-            .map(|i| smooth[i] / n.of(i).max(1) as f64)
-            .collect();
+        let mut spent_of = Scratch::stale(px, 0.0f64);
+        spent_of
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, s)| *s = smooth[i] / n.of(i).max(1) as f64);
         // The scale on the roots that meets target t (the budget t^2 times the camera's
         // variance, made consistent).
         let water = |t: f64| -> f64 {
             // (In the order of before: the same budget to the bit without growth.)
             let budget = t * t * camera * consistent;
-            let mut fixed = stopped.clone();
+            let mut fixed = Scratch::stale(px, false);
+            fixed.copy_from_slice(&stopped);
             loop {
                 let (mut spent, mut free) = (0.0f64, 0.0f64);
-                for &i in &shared {
+                for &i in shared.iter() {
+                    let i = i as usize;
                     if fixed[i] {
                         spent += spent_of[i];
                     } else {
@@ -547,7 +587,7 @@ impl CameraNoise {
             }
         };
         // Each pixel's samples, in the roots' place.
-        roots.par_iter_mut().zip(&unknown).for_each(|(r, &u)| {
+        roots.par_iter_mut().zip(&unknown[..]).for_each(|(r, &u)| {
             *r = if u {
                 f64::INFINITY
             } else if *r > 0.0 {
@@ -580,25 +620,9 @@ pub fn on_check_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     }
 }
 
-/// Pixels a chunk of [`ordered_terms`] holds.
+/// Pixels a chunk of the growing target's mean samples holds (summed in order: the same
+/// sum whatever the thread count).
 const TERM_CHUNK: usize = 16384;
-
-/// `f` of pixels `0..px` on all cores, a chunk of pixels at a time: each chunk's
-/// (pixel, term) of the pixels where `f` gives one, the chunks in pixel order (summing
-/// them in that order gives the same sums as one loop over the pixels).
-fn ordered_terms<T: Send>(
-    px: usize,
-    f: impl Fn(usize) -> Option<T> + Sync,
-) -> Vec<Vec<(usize, T)>> {
-    (0..px.div_ceil(TERM_CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            (c * TERM_CHUNK..((c + 1) * TERM_CHUNK).min(px))
-                .filter_map(|i| f(i).map(|t| (i, t)))
-                .collect()
-        })
-        .collect()
-}
 
 /// The mean of `v` over the (2 r + 1)^2 window around each value taken only over the
 /// window's values of the same kind (`kind(i)`, two kinds) that are `in_mean`; 0 where
@@ -609,7 +633,7 @@ fn ordered_terms<T: Send>(
 /// row, then one down each column; the tests' `box_mean`), the same sums in the same
 /// order, so the result equals that composition bit for bit (tested); made in one pass along the
 /// rows for all four sums and one down the columns, the columns in chunks on all cores,
-/// into planes kept between calls (`PlanePool`). A noise check's largest part at the
+/// into planes kept between calls ([`Scratch`]). A noise check's largest part at the
 /// paper's size: 128 -> 43 to 75 ms on 2 cores on synthetic sums
 /// (`examples/bench_noise_check.rs`), `samples wanted` 0.91x in real renders
 /// (docs/benchmarks/dataset.md, "A noise check's CPU time").
@@ -619,7 +643,7 @@ pub fn kind_mean(
     kind: impl Fn(usize) -> bool + Sync,
     width: usize,
     r: usize,
-) -> Vec<f64> {
+) -> Scratch<f64> {
     let px = v.len();
     let height = px / width;
     assert_eq!(
@@ -631,7 +655,7 @@ pub fn kind_mean(
     // The sums, a plane each (v w and w of the first kind, then of the second), along
     // the rows: each row's running sums (rows on all cores), each value's window mean
     // along its row. A plane of 0 for a kind no value is of.
-    let mut planes = PlanePool::take(px);
+    let mut planes: [Scratch<f64>; 4] = std::array::from_fn(|_| Scratch::stale(px, 0.0));
     let [s0, w0, s1, w1] = &mut planes;
     s0.par_chunks_mut(width)
         .zip(w0.par_chunks_mut(width))
@@ -639,7 +663,7 @@ pub fn kind_mean(
         .zip(w1.par_chunks_mut(width))
         .enumerate()
         .for_each_init(
-            || vec![vec![0.0f64; width + 1]; 4],
+            || std::array::from_fn::<_, 4, _>(|_| Scratch::filled(width + 1, 0.0f64)),
             |prefix, (y, (((s0, w0), s1), w1))| {
                 let row = y * width..(y + 1) * width;
                 for (j, i) in row.enumerate() {
@@ -662,11 +686,13 @@ pub fn kind_mean(
         );
     // Down the columns, COLUMNS at a time on all cores: each column's running sums, then
     // each value's window mean and its own kind's quotient, a chunk's values column-chunk
-    // major; then gathered into rows.
+    // major (chunk c's at c COLUMNS height); then gathered into rows.
     const COLUMNS: usize = 32;
-    let chunks: Vec<Vec<f64>> = (0..width.div_ceil(COLUMNS))
-        .into_par_iter()
-        .map_init(Vec::new, |prefix, c| {
+    let mut chunks = Scratch::stale(px, 0.0f64);
+    chunks
+        .par_chunks_mut(COLUMNS * height.max(1))
+        .enumerate()
+        .for_each_init(Scratch::<f64>::empty, |prefix, (c, out)| {
             let (x0, x1) = (c * COLUMNS, ((c + 1) * COLUMNS).min(width));
             let cw = x1 - x0;
             // Plane k's running sums at row y (of rows 0..y) at prefix[(k (height + 1)
@@ -685,7 +711,6 @@ pub fn kind_mean(
                 }
             }
             let at = |k: usize, y: usize, x: usize| prefix[(k * (height + 1) + y) * cw + x];
-            let mut out = vec![0.0f64; height * cw];
             for y in 0..height {
                 let (lo, hi) = window(y, height, r);
                 let n = (hi - lo) as f64;
@@ -698,52 +723,17 @@ pub fn kind_mean(
                     out[y * cw + x] = if w > least { s / w } else { 0.0 };
                 }
             }
-            out
-        })
-        .collect();
-    PlanePool::give(planes);
-    let mut mean = vec![0.0f64; px];
+        });
+    drop(planes);
+    let mut mean = Scratch::stale(px, 0.0f64);
     mean.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (c, chunk) in chunks.iter().enumerate() {
+        for (c, chunk) in chunks.chunks(COLUMNS * height).enumerate() {
             let x0 = c * COLUMNS;
             let cw = chunk.len() / height;
             row[x0..x0 + cw].copy_from_slice(&chunk[y * cw..(y + 1) * cw]);
         }
     });
     mean
-}
-
-/// [`kind_mean`]'s four planes, kept between calls: a noise check every few batches
-/// would otherwise map 4 x 8 bytes a pixel afresh (40 MB at the paper's size), and in a
-/// renderer's process the page faults of that memory cost about as much as the sums
-/// (measured: the same call 75 to 85 ms on fresh memory, 41 to 52 ms on memory used
-/// before, 2 cores). One set per call at once (a run's renderers check side by side);
-/// the process keeps as many as ran at once.
-struct PlanePool;
-
-static PLANES: std::sync::Mutex<Vec<[Vec<f64>; 4]>> = std::sync::Mutex::new(Vec::new());
-
-impl PlanePool {
-    /// A set of four planes of `px` values each; their values are left as they were
-    /// (every one is written before it is read).
-    fn take(px: usize) -> [Vec<f64>; 4] {
-        let mut planes = PLANES
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .pop()
-            .unwrap_or_default();
-        for p in &mut planes {
-            p.resize(px, 0.0);
-        }
-        planes
-    }
-
-    fn give(planes: [Vec<f64>; 4]) {
-        PLANES
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .push(planes);
-    }
 }
 
 /// The window of `r` on either side of `j` in `0..len`, clipped at the ends: `lo..hi`.

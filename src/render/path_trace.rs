@@ -10,6 +10,7 @@ use super::gpu_scene::GpuScene;
 use super::noise::{
     NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, next_power_of_two_above, on_check_pool,
 };
+use super::scratch::Scratch;
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use super::view::{View, tile_order};
@@ -153,7 +154,7 @@ pub fn render_frame(
             && (done >= at || done == spp)
         {
             let counts = pixel_counts(&stopped, done);
-            let samples = PixelSamples::new(counts.as_deref(), done);
+            let samples = PixelSamples::new(counts.as_deref().map(Vec::as_slice), done);
             let (est, sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
                 on_check_pool(|| noise_estimate(&view, stop, samples, &mut masks))
             })?;
@@ -181,13 +182,15 @@ pub fn render_frame(
                             radius,
                         )
                     });
-                    let order = sampling.take().unwrap_or_else(|| tile_order(width, height));
-                    let (keep, stop_now): (Vec<u32>, Vec<u32>) = order
-                        .into_iter()
-                        .partition(|&i| want[i as usize] > done as f64);
-                    for i in stop_now {
-                        stopped[i as usize] = done;
-                    }
+                    // The pixels still sampling, in their order, in the list's own memory.
+                    let mut keep = sampling.take().unwrap_or_else(|| tile_order(width, height));
+                    keep.retain(|&i| {
+                        let go_on = want[i as usize] > done as f64;
+                        if !go_on {
+                            stopped[i as usize] = done;
+                        }
+                        go_on
+                    });
                     let fewest = keep
                         .iter()
                         .map(|&i| want[i as usize])
@@ -204,7 +207,7 @@ pub fn render_frame(
         }
     }
     let counts = pixel_counts(&stopped, done);
-    let samples = PixelSamples::new(counts.as_deref(), done);
+    let samples = PixelSamples::new(counts.as_deref().map(Vec::as_slice), done);
     let (data, annotation) = view.read(samples)?;
     let radiance = Radiance {
         width,
@@ -216,7 +219,7 @@ pub fn render_frame(
         radiance,
         annotation,
         spp: done,
-        pixel_spp: counts,
+        pixel_spp: counts.map(Scratch::into_vec),
         noise: checks.last().copied(),
         noise_checks: checks,
         labels_from_samples: view.labels_from_samples(),
@@ -247,20 +250,19 @@ pub fn batch_before_check(batch: u32, done: u32, first: Option<u32>, halves: boo
 /// Each pixel's samples when some stopped before `done` (`stopped`: the samples a pixel
 /// stopped at, 0 for one still sampling, empty when the render is not adaptive): None
 /// when every pixel has `done`.
-fn pixel_counts(stopped: &[u32], done: u32) -> Option<Vec<u32>> {
+fn pixel_counts(stopped: &[u32], done: u32) -> Option<Scratch<u32>> {
     if stopped.iter().all(|&s| s == 0) {
         return None;
     }
-    Some(
-        stopped
-            .iter()
-            .map(|&s| if s == 0 { done } else { s })
-            .collect(),
-    )
+    let mut counts = Scratch::stale(stopped.len(), 0);
+    for (c, &s) in counts.iter_mut().zip(stopped) {
+        *c = if s == 0 { done } else { s };
+    }
+    Some(counts)
 }
 
 /// Per-pixel sums as [`View::read_sums`] reads them: radiance, and the noise estimate's.
-type Sums = (Vec<f32>, Vec<f32>);
+type Sums = (Scratch<f32>, Scratch<f32>);
 
 /// The noise criterion after `done` samples, and the sums it was made from; `masks`
 /// (auto exposure's pixels: the inspected faces 1..=3; the rms's: the object,

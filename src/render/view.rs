@@ -11,6 +11,7 @@ use super::RenderError;
 use super::annotate::{Annotation, AnnotationTargets, record_annotate};
 use super::gpu_scene::GpuScene;
 use super::noise::{NoiseEstimator, PixelSamples, mean_image, noise_floats_per_pixel};
+use super::scratch::Scratch;
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
@@ -442,10 +443,13 @@ impl<'s> View<'s> {
 
     /// The per-pixel sums so far: radiance, and the noise estimate's when the view was
     /// made `with_variance` (else None).
-    pub fn read_sums(&self) -> Result<(Vec<f32>, Option<Vec<f32>>), RenderError> {
-        let sum: Vec<f32> = self.accum.read()?;
+    pub fn read_sums(&self) -> Result<(Scratch<f32>, Option<Scratch<f32>>), RenderError> {
+        let mut sum = Scratch::empty();
+        self.accum.read_into(&mut sum)?;
         let sq = if self.variance {
-            Some(self.noise_sums.read()?)
+            let mut sq = Scratch::empty();
+            self.noise_sums.read_into(&mut sq)?;
+            Some(sq)
         } else {
             None
         };

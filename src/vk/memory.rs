@@ -167,6 +167,22 @@ impl Buffer {
         ))
     }
 
+    /// [`Buffer::read`] into `out` (its length set to the buffer's values), so that a
+    /// caller can reuse one vector's memory for many reads.
+    pub fn read_into<T: bytemuck::Pod>(&self, out: &mut Vec<T>) -> Result<(), VkError> {
+        let slice = self
+            .allocation
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .ok_or_else(|| VkError::NotMappable(self.name.clone()))?;
+        let n = slice.len() / std::mem::size_of::<T>();
+        let n = n.min(self.size as usize / std::mem::size_of::<T>());
+        out.resize(n, bytemuck::Zeroable::zeroed()); // every value overwritten below
+        bytemuck::cast_slice_mut::<T, u8>(out)
+            .copy_from_slice(&slice[..n * std::mem::size_of::<T>()]);
+        Ok(())
+    }
+
     pub fn device_address(&self) -> vk::DeviceAddress {
         let info = vk::BufferDeviceAddressInfo::default().buffer(self.raw);
         unsafe { self.ctx.device.get_buffer_device_address(&info) }
