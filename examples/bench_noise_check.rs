@@ -10,13 +10,14 @@
 //! the pixels stopped at 4.
 //!
 //! cargo run --release --example bench_noise_check
-//! Env: BENCH_REPEAT (checks timed, default 20). The checks run on `on_check_pool`, as a
+//! Env: BENCH_REPEAT (checks timed, default 20). The checks run on `on_render_pool`, as a
 //! render's do: a thread per core, at most 8.
 
 use std::time::Instant;
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use synosis::render::noise::{CameraNoise, NoiseEstimator, PixelSamples, on_check_pool};
+use synosis::render::cpu::on_render_pool;
+use synosis::render::noise::{CameraNoise, NoiseEstimator, PixelSamples};
 use synosis::render::sensor::Responsivity;
 use synosis::render::view::tile_order;
 use synosis::scene::config::SensorConfig;
@@ -97,8 +98,8 @@ fn main() {
         .filter(|&i| counts[i as usize] == 8)
         .collect();
     println!(
-        "noise check at {W} x {H}, {} threads on the check pool, {repeat} repeats",
-        on_check_pool(rayon::current_num_threads)
+        "noise check at {W} x {H}, {} threads on the render threads' pool, {repeat} repeats",
+        on_render_pool(rayon::current_num_threads)
     );
     println!();
     println!(
@@ -119,11 +120,11 @@ fn main() {
         let (mut t_est, mut t_want, mut t_list, mut kept) = (0.0, 0.0, 0.0, 0);
         for _ in 0..repeat {
             let t = Instant::now();
-            let e = on_check_pool(|| camera.estimate(est, sum, noise, n, &exposure, &object))
+            let e = on_render_pool(|| camera.estimate(est, sum, noise, n, &exposure, &object))
                 .expect("the estimate");
             t_est += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            let want = on_check_pool(|| {
+            let want = on_render_pool(|| {
                 camera.pixel_samples_wanted(
                     est,
                     sum,

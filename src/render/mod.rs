@@ -5,6 +5,7 @@
 
 pub mod annotate;
 pub mod bsdf;
+pub mod cpu;
 pub mod energy;
 pub mod gpu_scene;
 pub mod noise;
@@ -12,7 +13,6 @@ pub mod path_trace;
 pub mod pipelines;
 pub mod pixels;
 pub mod raycast;
-pub mod scratch;
 pub mod sensor;
 pub mod settings;
 pub mod slope;

@@ -30,7 +30,7 @@
 //! samples from). The ratio of the two rms values over the object's pixels is what
 //! `noise_target` bounds.
 
-use super::scratch::Scratch;
+use super::cpu::Scratch;
 use super::sensor::{Responsivity, SensorError, exposure_time_s, saturation_electrons};
 pub use crate::scene::config::NoiseEstimator;
 use crate::scene::config::SensorConfig;
@@ -597,26 +597,6 @@ impl CameraNoise {
             }
         });
         roots
-    }
-}
-
-/// Runs `f` (a noise check's per-pixel work) on the checks' own thread pool: the global
-/// pool is often busy with the next object instance's textures (a dataset run makes them
-/// on its preparing thread), and a check queued behind them leaves the GPU idle. At
-/// most 8 threads, shared by every renderer of the process.
-pub fn on_check_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
-    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
-    let pool = POOL.get_or_init(|| {
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(cores.min(8))
-            .thread_name(|i| format!("noise check {}", i + 1))
-            .build()
-            .ok()
-    });
-    match pool {
-        Some(p) => p.install(f),
-        None => f(), // no thread could be made: the global pool
     }
 }
 

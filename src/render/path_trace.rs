@@ -5,12 +5,12 @@
 use std::sync::Arc;
 
 use super::annotate::Annotation;
+use super::cpu::{Scratch, on_render_pool};
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
 use super::noise::{
-    NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, next_power_of_two_above, on_check_pool,
+    NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, next_power_of_two_above,
 };
-use super::scratch::Scratch;
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use super::view::{View, tile_order};
@@ -156,7 +156,7 @@ pub fn render_frame(
             let counts = pixel_counts(&stopped, done);
             let samples = PixelSamples::new(counts.as_deref().map(Vec::as_slice), done);
             let (est, sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
-                on_check_pool(|| noise_estimate(&view, stop, samples, &mut masks))
+                on_render_pool(|| noise_estimate(&view, stop, samples, &mut masks))
             })?;
             checks.push(est);
             if est.ratio <= stop.target_at(est.mean_spp) {
@@ -168,7 +168,7 @@ pub fn render_frame(
                 let object = &masks.as_ref().expect("filled by the estimate").1;
                 let grown = |m: f64| stop.target_at(m);
                 let (keep, fewest) = crate::vk::timed(opts.profiler, "samples wanted", || {
-                    let want = on_check_pool(|| {
+                    let want = on_render_pool(|| {
                         stop.camera.pixel_samples_wanted(
                             stop.estimator,
                             &sum,

@@ -9,9 +9,9 @@ use glam::Vec3;
 
 use super::RenderError;
 use super::annotate::{Annotation, AnnotationTargets, record_annotate};
+use super::cpu::{Scratch, on_render_pool};
 use super::gpu_scene::GpuScene;
 use super::noise::{NoiseEstimator, PixelSamples, mean_image, noise_floats_per_pixel};
-use super::scratch::Scratch;
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
@@ -201,7 +201,7 @@ impl<'s> View<'s> {
         let cover = if settings.light_shortcuts {
             timed(profiler, "light cover", || {
                 let grid = scene.geometry.bounds.and_then(|b| seen_box(cam, b));
-                light_cover(&light.tris, grid)
+                on_render_pool(|| light_cover(&light.tris, grid))
             })
         } else {
             LightCover::none(light.tris.triangles.len())
@@ -471,7 +471,9 @@ impl<'s> View<'s> {
         spp: impl Into<PixelSamples<'a>>,
     ) -> Result<(Vec<f32>, Option<Annotation>), RenderError> {
         let sum: Vec<f32> = self.accum.read()?;
-        Ok((mean_image(&sum, spp.into()), self.read_annotation()?))
+        let spp = spp.into();
+        let mean = on_render_pool(|| mean_image(&sum, spp));
+        Ok((mean, self.read_annotation()?))
     }
 }
 

@@ -1,17 +1,45 @@
-//! Per-pixel vectors kept between a render's noise checks (issue 15). A check every few
-//! batches works on about a dozen per-pixel arrays (up to 10 MB each at the paper's
-//! size: the sums read back, the mean image, each pixel's variance, its neighbourhood
-//! mean, its share); made afresh, each is memory the kernel maps page by page, and in a
-//! renderer's process those page faults cost about as much as the arithmetic
-//! (docs/benchmarks/dataset.md, "A noise check's CPU time" and "A noise check's arrays
-//! kept"). A [`Scratch`] takes a vector from a process-wide pool of its element type and
-//! gives it back when dropped, so the next check reuses memory already mapped.
+//! The CPU side of a render thread's work between batches (issue 15): the thread pool
+//! its per-pixel work runs on, and the per-pixel vectors it keeps between noise checks.
 //!
-//! The pool keeps at most [`KEPT`] vectors of a type (what the checks running at once
-//! used, in a run of several renderers); a vector beyond that is freed.
+//! **The pool** ([`on_render_pool`]): a noise check, a view's light cover and a frame's
+//! mean image are per-pixel (or per-triangle) work the render thread waits on while the
+//! GPU has nothing of its to do. On the global pool they would queue behind the next
+//! object instance's textures (a dataset run makes them on its preparing thread); this
+//! pool is theirs alone, at most 8 threads shared by every renderer of the process.
+//!
+//! **The vectors** ([`Scratch`]): a check every few batches works on about a dozen
+//! per-pixel arrays (up to 10 MB each at the paper's size: the sums read back, the mean
+//! image, each pixel's variance, its neighbourhood mean, its share); made afresh, each is
+//! memory the kernel maps page by page, and in a renderer's process those page faults
+//! cost about as much as the arithmetic (docs/benchmarks/dataset.md, "A noise check's CPU
+//! time" and "A noise check's arrays kept"). A [`Scratch`] takes a vector from a
+//! process-wide pool of its element type and gives it back when dropped, so the next
+//! check reuses memory already mapped. The pool keeps at most [`KEPT`] vectors of a type
+//! (what the checks running at once used, in a run of several renderers); a vector
+//! beyond that is freed.
 
 use std::ops::{Deref, DerefMut};
 use std::sync::Mutex;
+
+/// Runs `f` (a render thread's per-pixel work between batches: a noise check, a view's
+/// light cover, a frame's mean image) on the render threads' own pool: the global pool is
+/// often busy with the next object instance's textures, and work queued behind them
+/// leaves the GPU idle. At most 8 threads, shared by every renderer of the process.
+pub fn on_render_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    let pool = POOL.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(cores.min(8))
+            .thread_name(|i| format!("render cpu {}", i + 1))
+            .build()
+            .ok()
+    });
+    match pool {
+        Some(p) => p.install(f),
+        None => f(), // no thread could be made: the global pool
+    }
+}
 
 /// Vectors a pool keeps at most, per element type.
 pub const KEPT: usize = 48;
