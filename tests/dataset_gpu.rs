@@ -178,6 +178,7 @@ fn face_textures_reach_the_image() {
             light_samples: 1,
             bsdf_samples: 1,
             batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
+            scene: None,
         };
         r.render(&req).unwrap()
     };
@@ -279,6 +280,7 @@ rim_width = 0.5
             light_samples: 1,
             bsdf_samples: 1,
             batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
+            scene: None,
         };
         let img = r.render(&req).unwrap();
         let label: Vec<u8> = img.class.clone();

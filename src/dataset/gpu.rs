@@ -11,13 +11,16 @@ use crate::render::annotate::DEFAULT_COVERAGE_GRID;
 use crate::render::energy::EnergyTables;
 use crate::render::noise::NoiseEstimate;
 use crate::render::slope::FaceMap;
-use crate::render::{FrameOptions, GpuScene, PathTracer, RenderSettings, render_frame};
+use crate::render::{
+    FrameOptions, GpuScene, PathTracer, PreparedScene, RenderSettings, render_frame,
+};
+use crate::scene::Mesh;
 use crate::scene::assemble::{DefectSurface, Stage, ViewSetup};
 use crate::scene::config::SceneConfig;
-use crate::scene::materials::RegionSelector;
+use crate::scene::materials::{GltfMaterials, RegionMaterial, RegionSelector};
 use crate::scene::mesh::FACE_OTHER;
 use crate::trace::{AccelChoice, Backend, resolve};
-use crate::vk::{Context, ContextOptions, Profiler};
+use crate::vk::{Context, ContextOptions, Profiler, timed};
 
 /// Face id given to the object's non-inspected triangles for the annotation pass only,
 /// so "object" and "table or nothing" (both face 0 in faces.png) can be told apart.
@@ -113,8 +116,59 @@ impl GpuRenderer {
 /// per request).
 type SceneKey = (u64, Vec<Vec<RegionSelector>>);
 
+/// What a run's preparing thread needs to make a [`GpuRenderer`]'s scenes
+/// ([`ImageRenderer::scene_prep`]): its backend and scene defaults. The stage (planar
+/// regions, region materials) and the object's acceleration structure are then made
+/// once per object instance on that thread, while the renderers trace the instance
+/// before, and every renderer only uploads them.
+#[derive(Clone)]
+pub struct ScenePrep {
+    backend: Backend,
+    base: SceneConfig,
+}
+
+impl ScenePrep {
+    /// The backend the scenes are made for.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// The scene of `mesh` (an object instance's) with its region materials
+    /// (`materials`, `gltf`: as in [`ImageRequest`]) and `defects`' surface.
+    pub fn prepare(
+        &self,
+        mesh: &Mesh,
+        materials: &[RegionMaterial],
+        gltf: Option<&GltfMaterials>,
+        defects: DefectSurface,
+        profiler: Option<&Profiler>,
+    ) -> Result<PreparedScene, String> {
+        let mut object = mesh.clone();
+        for l in &mut object.labels {
+            if l.face == FACE_OTHER {
+                l.face = FACE_OBJECT_OTHER;
+            }
+        }
+        let mut stage = timed(profiler, "stage (planar regions)", || {
+            Stage::new(object, self.base.object.position_mm, &self.base.table)
+        });
+        if !materials.is_empty() {
+            // Which triangle takes which entry depends on the mesh only (one object per
+            // mesh key); the entries' values (an instance's alpha) are set per request.
+            stage
+                .set_region_materials(materials, gltf)
+                .map_err(|e| e.to_string())?;
+        }
+        if defects == DefectSurface::Burnished {
+            stage.burnish_defects();
+        }
+        PreparedScene::new(stage, self.backend, profiler).map_err(|e| e.to_string())
+    }
+}
+
 /// The GPU scene for `req`'s mesh: the cached one when the mesh key and the material
-/// selectors are the same.
+/// selectors are the same, else uploaded from the request's prepared scene (made on the
+/// run's preparing thread) or, without one, made here.
 fn scene_for<'c>(
     cached: &'c mut Option<(SceneKey, GpuScene)>,
     tracer: &PathTracer,
@@ -128,26 +182,26 @@ fn scene_for<'c>(
     );
     if cached.as_ref().map(|c| &c.0) != Some(&key) {
         *cached = None; // free the old scene before building the next
-        let mut object = req.mesh.clone();
-        for l in &mut object.labels {
-            if l.face == FACE_OTHER {
-                l.face = FACE_OBJECT_OTHER;
+        let made;
+        let prepared = match req.scene {
+            Some(p) if p.backend() == tracer.backend => p,
+            _ => {
+                let prep = ScenePrep {
+                    backend: tracer.backend,
+                    base: base.clone(),
+                };
+                made = prep.prepare(
+                    req.mesh,
+                    req.materials,
+                    req.gltf_materials,
+                    req.placement.defects,
+                    Some(profiler),
+                )?;
+                &made
             }
-        }
-        let mut stage = profiler.cpu("stage (planar regions)", || {
-            Stage::new(object, base.object.position_mm, &base.table)
-        });
-        if !req.materials.is_empty() {
-            // Which triangle takes which entry depends on the mesh only (one object per
-            // mesh key); the entries' values (an instance's alpha) are set per request.
-            stage
-                .set_region_materials(req.materials, req.gltf_materials)
-                .map_err(|e| e.to_string())?;
-        }
-        if req.placement.defects == DefectSurface::Burnished {
-            stage.burnish_defects();
-        }
-        let scene = GpuScene::new(tracer, &stage, Some(profiler)).map_err(|e| e.to_string())?;
+        };
+        let scene =
+            GpuScene::from_prepared(tracer, prepared, Some(profiler)).map_err(|e| e.to_string())?;
         *cached = Some((key, scene));
     }
     Ok(&mut cached.as_mut().expect("just filled").1)
@@ -170,6 +224,13 @@ fn face_maps(req: &ImageRequest) -> Vec<FaceMap> {
 impl ImageRenderer for GpuRenderer {
     fn describe(&self) -> String {
         format!("gpu-path-tracer/{}", self.tracer.backend.name())
+    }
+
+    fn scene_prep(&self) -> Option<ScenePrep> {
+        Some(ScenePrep {
+            backend: self.tracer.backend,
+            base: self.base.clone(),
+        })
     }
 
     fn last_stages(&self) -> Vec<(String, f64)> {

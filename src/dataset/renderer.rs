@@ -119,6 +119,10 @@ pub struct ImageRequest<'a> {
     pub bsdf_samples: u32,
     /// Samples per GPU submission (`[render] batch_spp`; default 16).
     pub batch_spp: u32,
+    /// The object instance's scene (stage and acceleration structure) made by the run's
+    /// preparing thread with the renderer's [`ImageRenderer::scene_prep`]; None: the
+    /// renderer makes it (a GPU renderer uses it only for its own backend).
+    pub scene: Option<&'a crate::render::PreparedScene>,
 }
 
 /// What the renderer returns, every buffer row-major with row 0 at the top.
@@ -219,6 +223,12 @@ pub trait ImageRenderer {
     /// target, the criterion's estimates in order (the last at those samples); None: the
     /// request's `spp` (a renderer without the noise criterion ignores `noise`).
     fn last_samples(&self) -> Option<(u32, Vec<crate::render::noise::NoiseEstimate>)> {
+        None
+    }
+    /// How a run's preparing thread can make this renderer's scene of an object instance
+    /// ahead of its views ([`ImageRequest::scene`]); None (the default): the renderer
+    /// makes what it needs itself.
+    fn scene_prep(&self) -> Option<super::gpu::ScenePrep> {
         None
     }
 }

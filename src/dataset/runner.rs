@@ -15,6 +15,7 @@ use serde_json::json;
 use super::camera::{CameraRecord, Exposed, expose};
 use super::error::{DatasetError, Result};
 use super::files;
+use super::gpu::ScenePrep;
 use super::job::{Job, builtin_variant};
 use super::labels;
 use super::lock;
@@ -24,6 +25,7 @@ use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
 use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, TextureWant, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, imprint_traced, sample_defects};
+use crate::render::PreparedScene;
 use crate::render::pixels::{quantise_units_deep, quantise_units8};
 use crate::scene::assemble::Placement;
 use crate::scene::materials::GltfMaterials;
@@ -814,6 +816,21 @@ impl Overlapped<'_> {
         };
         std::thread::scope(|s| -> Result<()> {
             let mut inputs = Inputs::new(self.prep, self.profiler);
+            // The instances' scenes made here, ahead of their views, when every renderer
+            // can take them (one backend).
+            let preps: Vec<Option<ScenePrep>> = std::iter::once(renderer.scene_prep())
+                .chain(more.iter().map(|r| r.scene_prep()))
+                .collect();
+            inputs.scene_prep = match &preps[0] {
+                Some(p)
+                    if preps
+                        .iter()
+                        .all(|q| q.as_ref().map(ScenePrep::backend) == Some(p.backend())) =>
+                {
+                    Some(p.clone())
+                }
+                _ => None,
+            };
             let profiler = self.profiler;
             let preparing = std::thread::Builder::new()
                 .name("prepare".into())
@@ -1161,7 +1178,9 @@ struct ItemInputs {
     gltf: Option<Arc<GltfMaterials>>,
     materials: Vec<crate::scene::materials::RegionMaterial>,
     face_textures: Vec<FaceTexture>,
-    /// "defects" and "textures" seconds.
+    /// The instance's scene made by the preparing thread (`Inputs::scene_prep`).
+    scene: Option<Arc<PreparedScene>>,
+    /// "defects", "scene" and "textures" seconds.
     stages: BTreeMap<String, f64>,
 }
 
@@ -1169,7 +1188,7 @@ struct ItemInputs {
 struct RenderedItem<'p> {
     item: &'p ItemPlan,
     img: RenderedImage,
-    /// Every stage so far ("defects", "textures", "render", the renderer's parts).
+    /// Every stage so far ("defects", "scene", "textures", "render", the renderer's parts).
     stages: BTreeMap<String, f64>,
     /// `ImageRenderer::describe` of the renderer that made it.
     renderer: String,
@@ -1189,6 +1208,12 @@ struct Inputs<'p> {
     /// The current instance's mesh, with its triangles' glTF materials when the object
     /// has them.
     mesh: Option<(usize, Arc<Mesh>, Option<Arc<GltfMaterials>>)>,
+    /// How to make the renderers' scene of an instance here, ahead of its views (a run
+    /// with images in flight: `ImageRenderer::scene_prep`); None: each renderer makes its
+    /// own.
+    scene_prep: Option<ScenePrep>,
+    /// The last scene made, by the mesh key its requests carry.
+    scene: Option<(u64, Arc<PreparedScene>)>,
     profiler: Option<&'p Profiler>,
 }
 
@@ -1198,8 +1223,48 @@ impl<'p> Inputs<'p> {
             prep,
             cache: TextureCache::new(prep.job.texture.cache as usize),
             mesh: None,
+            scene_prep: None,
+            scene: None,
             profiler,
         }
+    }
+
+    /// The scene of `item`'s instance when this stage makes them (`scene_prep`): the last
+    /// one while the mesh key is the same (the views of an instance, every defect-free
+    /// instance of an object), else made anew.
+    fn scene(
+        &mut self,
+        item: &ItemPlan,
+        mesh: &Mesh,
+        gltf: Option<&GltfMaterials>,
+        materials: &[crate::scene::materials::RegionMaterial],
+    ) -> Result<Option<Arc<PreparedScene>>> {
+        let Some(prep) = &self.scene_prep else {
+            return Ok(None);
+        };
+        let key = mesh_key(&self.prep.plan.instances[item.instance], item.instance);
+        if let Some((k, s)) = &self.scene
+            && *k == key
+        {
+            return Ok(Some(s.clone()));
+        }
+        self.scene = None; // free the last before making the next
+        let made = prep
+            .prepare(
+                mesh,
+                materials,
+                gltf,
+                self.prep.job.mapping.defects,
+                self.profiler,
+            )
+            .map_err(|message| DatasetError::Render {
+                index: item.index,
+                id: item.id(),
+                message,
+            })?;
+        let made = Arc::new(made);
+        self.scene = Some((key, made.clone()));
+        Ok(Some(made))
     }
 
     /// The mesh of an instance: the object, with its defect set imprinted if defective,
@@ -1271,6 +1336,10 @@ impl<'p> Inputs<'p> {
                 id: item.id(),
                 message,
             })?;
+        let scene = self.scene(item, &mesh, gltf.as_deref(), &materials)?;
+        if scene.is_some() {
+            laps.stage("scene", &mut stages);
+        }
         let present: BTreeSet<u8> = mesh.labels.iter().map(|l| l.face).collect();
         let faces: Vec<_> = params
             .faces
@@ -1317,8 +1386,18 @@ impl<'p> Inputs<'p> {
             gltf,
             materials,
             face_textures,
+            scene,
             stages,
         })
+    }
+}
+
+/// The key of instance `index`'s mesh ([`ImageRequest::mesh_key`]): its own with a
+/// defect set, else its object's (every defect-free instance of an object has its mesh).
+fn mesh_key(inst: &InstancePlan, index: usize) -> u64 {
+    match inst.defect_set {
+        Some(_) => (1u64 << 32) | index as u64,
+        None => inst.object as u64,
     }
 }
 
@@ -1360,10 +1439,8 @@ fn render_stage<'p>(
         materials: &inputs.materials,
         gltf_materials: inputs.gltf.as_deref(),
         mesh: &inputs.mesh,
-        mesh_key: match inst.defect_set {
-            Some(_) => (1u64 << 32) | item.instance as u64,
-            None => inst.object as u64,
-        },
+        mesh_key: mesh_key(inst, item.instance),
+        scene: inputs.scene.as_deref(),
         view: vp.name(),
         alpha: params.alpha as f32,
         face_textures: inputs.face_textures,
@@ -1476,7 +1553,7 @@ fn write_stage(
     laps.stage("write", &mut stages);
     let render_seconds = match started {
         Some(t0) => t0.elapsed().as_secs_f64(),
-        None => ["defects", "textures", "render", "write"]
+        None => ["defects", "scene", "textures", "render", "write"]
             .iter()
             .filter_map(|k| stages.get(*k))
             .sum(),

@@ -20,7 +20,8 @@ use crate::scene::curved::CurvedPatch;
 use crate::scene::materials::{Finish, SurfaceKind, SurfaceMaterial};
 use crate::scene::mesh::{FACE_A, FACE_C};
 use crate::scene::{FaceFrame, TriLabel};
-use crate::trace::TraceGeometry;
+use crate::trace::software_bvh::DEFAULT_BVH_QUALITY;
+use crate::trace::{Backend, LevelData, TraceGeometry};
 use crate::vk::{Buffer, Profiler};
 
 static BUILT: AtomicUsize = AtomicUsize::new(0);
@@ -56,6 +57,42 @@ struct MapKey {
     filter: TextureFilter,
 }
 
+/// What a [`GpuScene`] is made of before any device: the stage and its object's
+/// acceleration structure built on the CPU ([`LevelData`]). A dataset run makes one per
+/// object instance on its preparing thread and every renderer uploads it
+/// ([`GpuScene::from_prepared`]), so that neither the region search nor the BVH build
+/// runs on a render thread, nor once per renderer.
+pub struct PreparedScene {
+    pub stage: Stage,
+    object: LevelData,
+}
+
+static PREPARED: AtomicUsize = AtomicUsize::new(0);
+
+impl PreparedScene {
+    /// `stage` and its object's level for `backend` (software: obvhs's default preset).
+    pub fn new(
+        stage: Stage,
+        backend: Backend,
+        profiler: Option<&Profiler>,
+    ) -> Result<PreparedScene, RenderError> {
+        let object = LevelData::build(&stage, backend, DEFAULT_BVH_QUALITY, profiler)?;
+        PREPARED.fetch_add(1, Ordering::Relaxed);
+        Ok(PreparedScene { stage, object })
+    }
+
+    /// The backend its acceleration structure is for.
+    pub fn backend(&self) -> Backend {
+        self.object.backend
+    }
+
+    /// Scenes prepared by this process so far (tests: one per object instance, however
+    /// many renderers).
+    pub fn prepared_count() -> usize {
+        PREPARED.load(Ordering::Relaxed)
+    }
+}
+
 /// The GPU side of a [`Stage`].
 pub struct GpuScene {
     pub(crate) geometry: Arc<TraceGeometry>,
@@ -82,17 +119,39 @@ impl GpuScene {
         stage: &Stage,
         profiler: Option<&Profiler>,
     ) -> Result<GpuScene, RenderError> {
-        let ctx = &tracer.ctx;
-        let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         // The stage, not only its mesh: triplanar patches' smooth normals ride in the
         // shading triangles' w (`Stage::corner_w`).
-        let geometry = Arc::new(TraceGeometry::build(
-            ctx,
-            stage,
-            tracer.backend,
-            0,
-            profiler,
-        )?);
+        let level = LevelData::build(stage, tracer.backend, DEFAULT_BVH_QUALITY, profiler)?;
+        Self::with_level(tracer, stage, &level, profiler)
+    }
+
+    /// As [`GpuScene::new`] from a [`PreparedScene`] (its stage and acceleration
+    /// structure made beforehand, perhaps on another thread and for several devices):
+    /// only the uploads here.
+    pub fn from_prepared(
+        tracer: &PathTracer,
+        prepared: &PreparedScene,
+        profiler: Option<&Profiler>,
+    ) -> Result<GpuScene, RenderError> {
+        if prepared.object.backend != tracer.backend {
+            return Err(RenderError::Vk(crate::vk::VkError::Other(format!(
+                "a scene prepared for the {} backend given to a {} path tracer",
+                prepared.object.backend.name(),
+                tracer.backend.name()
+            ))));
+        }
+        Self::with_level(tracer, &prepared.stage, &prepared.object, profiler)
+    }
+
+    fn with_level(
+        tracer: &PathTracer,
+        stage: &Stage,
+        level: &LevelData,
+        profiler: Option<&Profiler>,
+    ) -> Result<GpuScene, RenderError> {
+        let ctx = &tracer.ctx;
+        let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let geometry = Arc::new(TraceGeometry::upload(ctx, level, 0, profiler)?);
         // Material in the low byte, the slope-map slot above it (region + 1; 0 for the
         // table), the top bit for triangles labelled A, B or C: the shader finds the
         // region's map without another buffer.

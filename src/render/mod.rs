@@ -19,7 +19,7 @@ pub mod slope;
 pub mod tracer;
 pub mod view;
 
-pub use gpu_scene::GpuScene;
+pub use gpu_scene::{GpuScene, PreparedScene};
 pub use path_trace::{
     Frame, FrameOptions, Radiance, RenderError, render_frame, render_scene, render_scene_on,
 };

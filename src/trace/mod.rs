@@ -216,7 +216,110 @@ impl TraceGeometry {
         quality: software_bvh::BvhQuality,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
+        let level = LevelData::build(geo, backend, quality, profiler)?;
+        Self::upload(ctx, &level, first_prim, profiler)
+    }
+
+    /// Puts a level built on the CPU ([`LevelData::build`], which may run on another
+    /// thread and serve several devices) on `ctx`'s device: its buffers, or its BLAS
+    /// built there.
+    pub fn upload(
+        ctx: &Arc<Context>,
+        level: &LevelData,
+        first_prim: u32,
+        profiler: Option<&Profiler>,
+    ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let backend = level.backend;
+        let shade_tris = Buffer::from_slice(ctx, "shade triangles", &level.shade, storage)?;
+        let start = std::time::Instant::now();
+        let data = match &level.kind {
+            LevelKind::RayQuery { positions, .. } if positions.is_empty() => Data::RayQuery(None),
+            LevelKind::RayQuery {
+                positions,
+                triangles,
+            } => {
+                let blas = timed(profiler, "AS build (BLAS+TLAS)", || {
+                    Blas::build(ctx, positions, triangles)
+                })?;
+                Data::RayQuery(Some(blas))
+            }
+            LevelKind::Software { nodes, tris } => {
+                if !ctx.info.buffer_device_address {
+                    return Err(VkError::NoBufferDeviceAddress);
+                }
+                if !ctx.info.shader_int64 {
+                    return Err(VkError::NoShaderInt64);
+                }
+                // Read by the traversal through their device addresses (TraceScene's
+                // address table; every storage buffer has one, `Buffer::new`).
+                let numbered;
+                let tris = if first_prim != 0 {
+                    let mut t = tris.clone();
+                    for t in &mut t {
+                        t.v0[3] = f32::from_bits(t.v0[3].to_bits() + first_prim);
+                    }
+                    numbered = t;
+                    &numbered
+                } else {
+                    tris
+                };
+                timed(profiler, "upload BVH", || -> Result<Data, VkError> {
+                    Ok(Data::Software {
+                        nodes: Buffer::from_slice(ctx, "bvh nodes", nodes, storage)?,
+                        tris: Buffer::from_slice(ctx, "bvh triangles", tris, storage)?,
+                    })
+                })?
+            }
+        };
+        Ok(TraceGeometry {
+            backend,
+            data,
+            shade_tris,
+            triangle_count: level.triangle_count,
+            first_prim,
+            bounds: level.bounds,
+            build_ms: level.build_ms + start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+}
+
+enum LevelKind {
+    /// Positions and triangles for the BLAS, built on the device at upload.
+    RayQuery {
+        positions: Vec<[f32; 3]>,
+        triangles: Vec<[u32; 3]>,
+    },
+    /// The software BVH's nodes (bytes) and triangles in leaf order.
+    Software {
+        nodes: Vec<u8>,
+        tris: Vec<software_bvh::GpuTri>,
+    },
+}
+
+/// The CPU side of one [`TraceGeometry`]: its shading triangles, box and (software
+/// backends) BVH, built without a device, so that a dataset run can make an object's
+/// once on its preparing thread and put it on every renderer's device
+/// ([`TraceGeometry::upload`]).
+pub struct LevelData {
+    pub backend: Backend,
+    shade: Vec<ShadeTri>,
+    bounds: Option<[Vec3; 2]>,
+    triangle_count: usize,
+    kind: LevelKind,
+    /// CPU time of the BVH build, ms.
+    build_ms: f64,
+}
+
+impl LevelData {
+    /// The level of `geo`'s triangles for `backend`, its software BVH with obvhs's
+    /// `quality` preset (the ray-query backend builds its BLAS at upload).
+    pub fn build(
+        geo: &impl Triangles,
+        backend: Backend,
+        quality: software_bvh::BvhQuality,
+        profiler: Option<&Profiler>,
+    ) -> Result<LevelData, VkError> {
         let (positions, triangles) = (geo.positions(), geo.triangles());
         let corner_w = geo.corner_w();
         let shade: Vec<ShadeTri> = timed(profiler, "upload geometry", || {
@@ -241,7 +344,6 @@ impl TraceGeometry {
         } else {
             shade
         };
-        let shade_tris = Buffer::from_slice(ctx, "shade triangles", &shade, storage)?;
         let bounds = (!triangles.is_empty()).then(|| {
             triangles
                 .iter()
@@ -251,54 +353,38 @@ impl TraceGeometry {
                 })
         });
         let start = std::time::Instant::now();
-        let data = match backend {
-            Backend::RayQuery if triangles.is_empty() => Data::RayQuery(None),
-            Backend::RayQuery => {
-                let pos: Vec<[f32; 3]> = positions.iter().map(|p| p.to_array()).collect();
-                let blas = timed(profiler, "AS build (BLAS+TLAS)", || {
-                    Blas::build(ctx, &pos, triangles)
-                })?;
-                Data::RayQuery(Some(blas))
-            }
+        let kind = match backend {
+            Backend::RayQuery => LevelKind::RayQuery {
+                positions: if triangles.is_empty() {
+                    Vec::new()
+                } else {
+                    positions.iter().map(|p| p.to_array()).collect()
+                },
+                triangles: triangles.to_vec(),
+            },
             Backend::Software | Backend::SoftwareWide => {
-                if !ctx.info.buffer_device_address {
-                    return Err(VkError::NoBufferDeviceAddress);
-                }
-                if !ctx.info.shader_int64 {
-                    return Err(VkError::NoShaderInt64);
-                }
-                // Read by the traversal through their device addresses (TraceScene's
-                // address table; every storage buffer has one, `Buffer::new`).
                 let tris = software_bvh::obvhs_triangles(positions, triangles);
                 let wide = backend == Backend::SoftwareWide;
                 let build = || software_bvh::gpu_level(&tris, quality, wide);
-                let (nodes, mut gtris) = if tris.is_empty() {
+                let (nodes, tris) = if tris.is_empty() {
                     build()
                 } else {
                     timed(profiler, "BVH build (obvhs)", build)
                 }
                 .map_err(VkError::Bvh)?;
-                if first_prim != 0 {
-                    for t in &mut gtris {
-                        t.v0[3] = f32::from_bits(t.v0[3].to_bits() + first_prim);
-                    }
-                }
-                timed(profiler, "upload BVH", || -> Result<Data, VkError> {
-                    Ok(Data::Software {
-                        nodes: Buffer::from_slice(ctx, "bvh nodes", &nodes, storage)?,
-                        tris: Buffer::from_slice(ctx, "bvh triangles", &gtris, storage)?,
-                    })
-                })?
+                LevelKind::Software { nodes, tris }
             }
         };
-        Ok(TraceGeometry {
+        Ok(LevelData {
             backend,
-            data,
-            shade_tris,
-            triangle_count: triangles.len(),
-            first_prim,
+            shade,
             bounds,
-            build_ms: start.elapsed().as_secs_f64() * 1e3,
+            triangle_count: triangles.len(),
+            kind,
+            build_ms: match backend {
+                Backend::RayQuery => 0.0,
+                _ => start.elapsed().as_secs_f64() * 1e3,
+            },
         })
     }
 }
