@@ -44,7 +44,11 @@ fn main() {
         ),
         (
             "tilted fat ring close to a wide object",
-            ring(&tilted, Vec3::new(10.0, -5.0, 60.0), Vec3::new(0.3, 0.1, 1.0)),
+            ring(
+                &tilted,
+                Vec3::new(10.0, -5.0, 60.0),
+                Vec3::new(0.3, 0.1, 1.0),
+            ),
             [Vec3::new(-80.0, -60.0, -20.0), Vec3::new(70.0, 90.0, 30.0)],
         ),
     ];
