@@ -155,21 +155,20 @@ impl Buffer {
 
     /// Reads a mapped buffer (call after the GPU work writing it has completed).
     pub fn read<T: bytemuck::Pod>(&self) -> Result<Vec<T>, VkError> {
-        let slice = self
-            .allocation
-            .as_ref()
-            .and_then(|a| a.mapped_slice())
-            .ok_or_else(|| VkError::NotMappable(self.name.clone()))?;
-        let n = slice.len() / std::mem::size_of::<T>();
-        let n = n.min(self.size as usize / std::mem::size_of::<T>());
-        Ok(bytemuck::pod_collect_to_vec(
-            &slice[..n * std::mem::size_of::<T>()],
-        ))
+        Ok(bytemuck::pod_collect_to_vec(self.mapped_values::<T>()?))
     }
 
     /// [`Buffer::read`] into `out` (its length set to the buffer's values), so that a
     /// caller can reuse one vector's memory for many reads.
     pub fn read_into<T: bytemuck::Pod>(&self, out: &mut Vec<T>) -> Result<(), VkError> {
+        let bytes = self.mapped_values::<T>()?;
+        out.resize(bytes.len() / std::mem::size_of::<T>(), T::zeroed()); // all overwritten
+        bytemuck::cast_slice_mut::<T, u8>(out).copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// The mapped bytes of the whole values of `T` the buffer holds.
+    fn mapped_values<T: bytemuck::Pod>(&self) -> Result<&[u8], VkError> {
         let slice = self
             .allocation
             .as_ref()
@@ -177,10 +176,7 @@ impl Buffer {
             .ok_or_else(|| VkError::NotMappable(self.name.clone()))?;
         let n = slice.len() / std::mem::size_of::<T>();
         let n = n.min(self.size as usize / std::mem::size_of::<T>());
-        out.resize(n, bytemuck::Zeroable::zeroed()); // every value overwritten below
-        bytemuck::cast_slice_mut::<T, u8>(out)
-            .copy_from_slice(&slice[..n * std::mem::size_of::<T>()]);
-        Ok(())
+        Ok(&slice[..n * std::mem::size_of::<T>()])
     }
 
     pub fn device_address(&self) -> vk::DeviceAddress {
