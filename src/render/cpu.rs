@@ -67,13 +67,18 @@ recyclable!(f64, f32, u32, bool);
 pub struct Scratch<T: Recyclable>(Vec<T>);
 
 impl<T: Recyclable> Scratch<T> {
-    /// An empty vector, with the capacity of one used before where the pool has one.
-    pub fn empty() -> Self {
-        let mut v = T::pool()
+    /// A vector from the pool, as it was given back (a new one where the pool is empty).
+    fn take() -> Vec<T> {
+        T::pool()
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .pop()
-            .unwrap_or_default();
+            .unwrap_or_default()
+    }
+
+    /// An empty vector, with the capacity of one used before where the pool has one.
+    pub fn empty() -> Self {
+        let mut v = Self::take();
         v.clear();
         Scratch(v)
     }
@@ -88,11 +93,7 @@ impl<T: Recyclable> Scratch<T> {
     /// `len` values, those the reused vector held left as they were (`fill` past its
     /// length): for an array whose every value is written before it is read.
     pub fn stale(len: usize, fill: T) -> Self {
-        let mut v = T::pool()
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .pop()
-            .unwrap_or_default();
+        let mut v = Self::take();
         v.resize(len, fill);
         Scratch(v)
     }

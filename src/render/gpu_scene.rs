@@ -151,7 +151,7 @@ impl GpuScene {
     ) -> Result<GpuScene, RenderError> {
         let ctx = &tracer.ctx;
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        let geometry = Arc::new(TraceGeometry::upload(ctx, level, 0, profiler)?);
+        let geometry = Arc::new(TraceGeometry::upload(ctx, level, profiler)?);
         // Material in the low byte, the slope-map slot above it (region + 1; 0 for the
         // table), the top bit for triangles labelled A, B or C: the shader finds the
         // region's map without another buffer.

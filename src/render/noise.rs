@@ -229,10 +229,7 @@ fn pixel_variance(estimator: NoiseEstimator, sum: &[f32], noise: &[f32], n: u32,
 
 /// The mean image: each pixel's sum over its samples (none: 0).
 pub fn mean_image(sum: &[f32], n: PixelSamples<'_>) -> Vec<f32> {
-    sum.par_iter()
-        .enumerate()
-        .map(|(i, &v)| pixel_mean(v, n.of(i)))
-        .collect()
+    mean_scratch(sum, n).into_vec()
 }
 
 /// A pixel's mean from its sum over `n` samples (none: 0), as [`mean_image`] has it.

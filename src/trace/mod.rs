@@ -216,8 +216,9 @@ impl TraceGeometry {
         quality: software_bvh::BvhQuality,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
-        let level = LevelData::build(geo, backend, quality, profiler)?;
-        Self::upload(ctx, &level, first_prim, profiler)
+        let mut level = LevelData::build(geo, backend, quality, profiler)?;
+        level.number_from(first_prim);
+        Self::upload(ctx, &level, profiler)
     }
 
     /// Puts a level built on the CPU ([`LevelData::build`], which may run on another
@@ -226,7 +227,6 @@ impl TraceGeometry {
     pub fn upload(
         ctx: &Arc<Context>,
         level: &LevelData,
-        first_prim: u32,
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
@@ -253,17 +253,6 @@ impl TraceGeometry {
                 }
                 // Read by the traversal through their device addresses (TraceScene's
                 // address table; every storage buffer has one, `Buffer::new`).
-                let numbered;
-                let tris = if first_prim != 0 {
-                    let mut t = tris.clone();
-                    for t in &mut t {
-                        t.v0[3] = f32::from_bits(t.v0[3].to_bits() + first_prim);
-                    }
-                    numbered = t;
-                    &numbered
-                } else {
-                    tris
-                };
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
                         nodes: Buffer::from_slice(ctx, "bvh nodes", nodes, storage)?,
@@ -277,7 +266,7 @@ impl TraceGeometry {
             data,
             shade_tris,
             triangle_count: level.triangle_count,
-            first_prim,
+            first_prim: level.first_prim,
             bounds: level.bounds,
             build_ms: level.build_ms + start.elapsed().as_secs_f64() * 1e3,
         })
@@ -306,6 +295,8 @@ pub struct LevelData {
     shade: Vec<ShadeTri>,
     bounds: Option<[Vec3; 2]>,
     triangle_count: usize,
+    /// The scene index of its first triangle ([`LevelData::number_from`]; 0 as built).
+    first_prim: u32,
     kind: LevelKind,
     /// CPU time of the BVH build, ms.
     build_ms: f64,
@@ -380,12 +371,24 @@ impl LevelData {
             shade,
             bounds,
             triangle_count: triangles.len(),
+            first_prim: 0,
             kind,
             build_ms: match backend {
                 Backend::RayQuery => 0.0,
                 _ => start.elapsed().as_secs_f64() * 1e3,
             },
         })
+    }
+
+    /// Numbers its triangles from `first_prim` in the scene's index space (a second
+    /// level's after the object's): the leaf triangles carry their scene index.
+    pub fn number_from(&mut self, first_prim: u32) {
+        if let LevelKind::Software { tris, .. } = &mut self.kind {
+            for t in tris {
+                t.v0[3] = f32::from_bits(t.v0[3].to_bits() - self.first_prim + first_prim);
+            }
+        }
+        self.first_prim = first_prim;
     }
 }
 
