@@ -427,3 +427,44 @@ fn adaptive_pixels_each_stop_at_their_own_samples() {
     assert!(m_adaptive <= 1.3 * m_whole, "{m_adaptive} {m_whole}");
     assert!(shift.abs() < 0.01, "{shift}");
 }
+
+/// Two scenes on one device showing the same maps read one upload of each map's texels
+/// (`render::device_maps`), and render the same image.
+#[test]
+fn two_scenes_on_one_device_read_the_same_slope_texels() {
+    let cfg = scene_config(3, SamplerKind::Sobol);
+    let a = Gpu::new(&cfg);
+    let mut other = GpuScene::new(&a.tracer, &a.scene.stage, None).unwrap();
+    other
+        .set_face_maps_filtered(
+            &a.tracer,
+            &a.scene.face_maps,
+            &a.scene.placement,
+            cfg.render.texture_filter,
+        )
+        .unwrap();
+    let (ta, tb) = (
+        a.gpu_scene.slope_texel_buffers(),
+        other.slope_texel_buffers(),
+    );
+    let shared = ta.iter().zip(&tb).filter(|(x, y)| x == y).count();
+    let mut distinct: Vec<_> = a
+        .scene
+        .face_maps
+        .iter()
+        .map(|m| std::sync::Arc::as_ptr(&m.slopes))
+        .collect();
+    distinct.sort();
+    distinct.dedup();
+    assert!(!distinct.is_empty(), "the scene has face maps");
+    assert_eq!(shared, distinct.len(), "{ta:?} / {tb:?}");
+    let b = Gpu {
+        tracer: a.tracer.clone(),
+        gpu_scene: other,
+        scene: RenderScene::assemble(&load_object(&cfg).unwrap(), &cfg).unwrap(),
+    };
+    assert_eq!(
+        a.render(&cfg, 2, None).radiance.data,
+        b.render(&cfg, 2, None).radiance.data
+    );
+}

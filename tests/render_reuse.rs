@@ -6,10 +6,15 @@
 
 mod common;
 
+use std::sync::Arc;
+
 use synosis::dataset::gpu::GpuRenderer;
 use synosis::dataset::{self, Shard};
+use synosis::render::device_maps::{self, SharedMapError};
+use synosis::render::slope::{self, SlopeMap};
 use synosis::render::{GpuScene, PathTracer, PreparedScene};
 use synosis::trace::AccelChoice;
+use synosis::vk::{Context, ContextOptions};
 
 #[test]
 fn a_job_builds_pipelines_once_and_each_mesh_once() {
@@ -70,4 +75,60 @@ fn a_job_builds_pipelines_once_and_each_mesh_once() {
         2,
         "one more for the second renderer"
     );
+}
+
+/// A slope map's texels go to a device once while scenes there use it: contexts beside one
+/// another (one `VkDevice`) get the same buffer, another device its own; the words are
+/// `slope::texel_words`'; the buffer is freed once no one holds it and made anew when
+/// asked again; a map is known by identity, not by content; a slope that is not finite
+/// is an error.
+#[test]
+fn a_slope_map_is_uploaded_once_per_device() {
+    let opts = ContextOptions {
+        validation: true,
+        ray_query: false,
+    };
+    let ctx = Context::new(&opts).unwrap();
+    let beside = ctx.beside().unwrap();
+    let other = Context::new(&opts).unwrap();
+    let map = Arc::new(SlopeMap {
+        width: 37,
+        height: 5,
+        spacing_um: 6.0,
+        data: (0..185)
+            .map(|i| [i as f32 * 0.01 - 0.9, (i % 7) as f32 * -0.03])
+            .collect(),
+    });
+    let words = slope::texel_words(&map).unwrap();
+    let a = device_maps::texels(&ctx, &map).unwrap();
+    let b = device_maps::texels(&beside, &map).unwrap();
+    assert!(
+        Arc::ptr_eq(&a, &b),
+        "contexts on one device share the buffer"
+    );
+    let c = device_maps::texels(&other, &map).unwrap();
+    assert!(!Arc::ptr_eq(&a, &c), "another device has its own");
+    assert_eq!(a.read::<u32>().unwrap(), words);
+    assert_eq!(c.read::<u32>().unwrap(), words);
+    let twin = Arc::new((*map).clone());
+    let t = device_maps::texels(&ctx, &twin).unwrap();
+    assert!(!Arc::ptr_eq(&a, &t), "another map with the same texels");
+    let weak = Arc::downgrade(&a);
+    drop((a, b));
+    assert!(
+        weak.upgrade().is_none(),
+        "nothing keeps a buffer no scene holds"
+    );
+    let again = device_maps::texels(&ctx, &map).unwrap();
+    assert_eq!(again.read::<u32>().unwrap(), words);
+    let mut bad = (*map).clone();
+    bad.data[100][1] = f32::NAN;
+    let bad = Arc::new(bad);
+    assert!(matches!(
+        device_maps::texels(&ctx, &bad),
+        Err(SharedMapError::NotFinite)
+    ));
+    drop((again, c, t));
+    ctx.check_validation().unwrap();
+    other.check_validation().unwrap();
 }

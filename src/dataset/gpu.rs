@@ -277,13 +277,15 @@ impl ImageRenderer for GpuRenderer {
         let profiler = Profiler::new();
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
-        scene
-            .set_face_maps_filtered(
-                tracer,
-                &face_maps(req),
-                &req.placement,
-                cfg.render.texture_filter,
-            )
+        profiler
+            .cpu("face maps (place, pack, upload)", || {
+                scene.set_face_maps_filtered(
+                    tracer,
+                    &face_maps(req),
+                    &req.placement,
+                    cfg.render.texture_filter,
+                )
+            })
             .map_err(|e| e.to_string())?;
         let surfaces: Vec<_> = req.materials.iter().map(|m| m.material.clone()).collect();
         scene

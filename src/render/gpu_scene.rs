@@ -8,12 +8,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use ash::vk;
 
 use super::RenderError;
+use super::device_maps::{self, SharedMapError};
 use super::settings::TextureFilter;
 use super::slope::{self, FaceMap, Placement};
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
-    LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAT_LABELLED, MAT_MAP_SHIFT, MAT_REGION_FIRST,
-    MAT_SLOT_MASK, SURFACE_CONDUCTOR, SURFACE_DIFFUSE, SurfaceBlock,
+    LABEL_CLASS_SHIFT, LABEL_INSTANCE_SHIFT, MAP_BUFFER_MASK, MAT_LABELLED, MAT_MAP_SHIFT,
+    MAT_REGION_FIRST, MAT_SLOT_MASK, SURFACE_CONDUCTOR, SURFACE_DIFFUSE, SurfaceBlock,
 };
 use crate::scene::assemble::{PlacedCurved, RegionFrame, Stage, place_curved_maps, place_maps};
 use crate::scene::curved::CurvedPatch;
@@ -38,12 +39,14 @@ pub fn label_word(l: &TriLabel) -> u32 {
 struct MapBuffers {
     key: MapKey,
     headers: Buffer,
-    texels: [Buffer; slope::MAP_BUFFERS],
+    /// Each distinct map's texel words, shared with the other scenes on the device that
+    /// show it (`device_maps`); one unused word where a buffer has no map.
+    texels: [Arc<Buffer>; slope::MAP_BUFFERS],
     /// The curved patches' projections, one per slot.
     curved: Buffer,
     /// Each map's moment pyramid (`slope::moments_pyramid`) when uploaded for
-    /// `TextureFilter::Lean`; one unused word each otherwise.
-    moments: [Buffer; slope::MAP_BUFFERS],
+    /// `TextureFilter::Lean` (shared likewise); one unused word each otherwise.
+    moments: [Arc<Buffer>; slope::MAP_BUFFERS],
     /// Whether any slot has a map.
     any: bool,
 }
@@ -278,8 +281,17 @@ impl GpuScene {
         &self.face_frames
     }
 
-    pub(crate) fn map_buffers(&self) -> (&Buffer, &[Buffer; slope::MAP_BUFFERS]) {
-        (&self.maps.headers, &self.maps.texels)
+    pub(crate) fn map_buffers(&self) -> (&Buffer, [&Buffer; slope::MAP_BUFFERS]) {
+        (
+            &self.maps.headers,
+            self.maps.texels.each_ref().map(|b| &**b),
+        )
+    }
+
+    /// The buffer each of the maps' texel slots reads (tests: scenes on one device that
+    /// show the same maps read the same buffers).
+    pub fn slope_texel_buffers(&self) -> [vk::Buffer; slope::MAP_BUFFERS] {
+        self.maps.texels.each_ref().map(|b| b.raw)
     }
 
     /// The curved patches' projection blocks (`CurvedMapBlock` per slot).
@@ -288,8 +300,8 @@ impl GpuScene {
     }
 
     /// The maps' moment pyramids (unused words without "lean").
-    pub(crate) fn moment_buffers(&self) -> &[Buffer; slope::MAP_BUFFERS] {
-        &self.maps.moments
+    pub(crate) fn moment_buffers(&self) -> [&Buffer; slope::MAP_BUFFERS] {
+        self.maps.moments.each_ref().map(|b| &**b)
     }
 
     /// GPU scenes built by this process so far.
@@ -380,32 +392,38 @@ fn upload_maps(
     let max_bytes = ctx.info.max_storage_buffer_range as u64;
     let mut all = placed.to_vec();
     all.extend(curved.iter().map(|c| c.map.clone()));
-    let (mut headers, texels) = slope::pack(&all, slots, max_bytes)?;
+    let (mut headers, distinct) = slope::pack_headers(&all, slots, max_bytes)?;
     let blocks = slope::curved_blocks(curved, &mut headers)?;
-    let moments = if key.filter == TextureFilter::Lean {
-        slope::pack_moments(&headers, &texels, max_bytes)?
-    } else {
-        Default::default()
+    // A binding may not be empty; a slot without a map never reads it.
+    let unused = Arc::new(Buffer::from_slice(ctx, "no slope map", &[0u32], storage)?);
+    let shared_error = |map: &Arc<slope::SlopeMap>, e: SharedMapError| -> RenderError {
+        match e {
+            SharedMapError::Vk(e) => e.into(),
+            SharedMapError::Slope(e) => e.into(),
+            SharedMapError::NotFinite => slope::not_finite(&all, map).into(),
+        }
     };
-    let buf = |texels: &[u32], name: &str| {
-        // A binding may not be empty; a slot without a map never reads it.
-        let data: &[u32] = if texels.is_empty() { &[0] } else { texels };
-        Buffer::from_slice(ctx, name, data, storage)
-    };
+    let mut texels = [unused.clone(), unused.clone(), unused.clone()];
+    let mut moments = [unused.clone(), unused.clone(), unused];
+    for (b, map) in distinct.iter().enumerate() {
+        texels[b] = device_maps::texels(ctx, map).map_err(|e| shared_error(map, e))?;
+        if key.filter == TextureFilter::Lean {
+            // The first slot reading buffer b names the map in errors.
+            let slot = headers
+                .iter()
+                .position(|h| (h.dims[3] & MAP_BUFFER_MASK) as usize == b + 1)
+                .unwrap_or(0);
+            let region = slot.saturating_sub(1) as u32;
+            moments[b] = device_maps::moments(ctx, map, region, max_bytes)
+                .map_err(|e| shared_error(map, e))?;
+        }
+    }
     Ok(MapBuffers {
         any: !placed.is_empty() || !curved.is_empty(),
         key,
         headers: Buffer::from_slice(ctx, "slope map headers", &headers, storage)?,
-        texels: [
-            buf(&texels[0], "slopes 0")?,
-            buf(&texels[1], "slopes 1")?,
-            buf(&texels[2], "slopes 2")?,
-        ],
+        texels,
         curved: Buffer::from_slice(ctx, "curved maps", &blocks, storage)?,
-        moments: [
-            buf(&moments[0], "slope moments 0")?,
-            buf(&moments[1], "slope moments 1")?,
-            buf(&moments[2], "slope moments 2")?,
-        ],
+        moments,
     })
 }

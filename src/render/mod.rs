@@ -6,6 +6,7 @@
 pub mod annotate;
 pub mod bsdf;
 pub mod cpu;
+pub mod device_maps;
 pub mod energy;
 pub mod gpu_scene;
 pub mod noise;

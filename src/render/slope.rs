@@ -55,9 +55,26 @@ pub fn pack(
     slots: usize,
     max_bytes: u64,
 ) -> Result<(Vec<MapHeader>, [Vec<u32>; MAP_BUFFERS]), SlopeError> {
-    let mut headers = vec![MapHeader::default(); slots];
+    let (headers, distinct) = pack_headers(maps, slots, max_bytes)?;
     let mut texels: [Vec<u32>; MAP_BUFFERS] = Default::default();
-    let mut distinct: Vec<*const SlopeMap> = Vec::new();
+    for (t, s) in texels.iter_mut().zip(&distinct) {
+        *t = texel_words(s).map_err(|_| not_finite(maps, s))?;
+    }
+    Ok((headers, texels))
+}
+
+/// The headers of [`pack`] and its distinct maps in buffer order (the map of buffer b
+/// is `distinct[b]`, read by headers whose `dims.w & MAP_BUFFER_MASK` is b + 1), without
+/// their texels: a renderer takes each map's texel words from wherever it keeps them
+/// (`render::device_maps`). Checks everything [`pack`] does but whether the slopes are
+/// finite, which [`texel_words`] (and so [`texel_words_into`]) checks.
+pub fn pack_headers(
+    maps: &[PlacedMap],
+    slots: usize,
+    max_bytes: u64,
+) -> Result<(Vec<MapHeader>, Vec<Arc<SlopeMap>>), SlopeError> {
+    let mut headers = vec![MapHeader::default(); slots];
+    let mut distinct: Vec<Arc<SlopeMap>> = Vec::new();
     for m in maps {
         let bad = |message: String| SlopeError::Invalid {
             region: m.region,
@@ -68,7 +85,7 @@ pub fn pack(
             return Err(bad(format!("the object has {} regions", slots - 1)));
         }
         let s = &m.slopes;
-        let buf = match distinct.iter().position(|&p| p == Arc::as_ptr(s)) {
+        let buf = match distinct.iter().position(|d| Arc::ptr_eq(d, s)) {
             Some(b) => b,
             None => {
                 if s.width == 0 || s.height == 0 || s.data.len() != s.width * s.height {
@@ -91,24 +108,13 @@ pub fn pack(
                 if !(s.spacing_um.is_finite() && s.spacing_um > 0.0) {
                     return Err(bad(format!("spacing_um = {} must be > 0", s.spacing_um)));
                 }
-                if s.data
-                    .iter()
-                    .any(|v| !(v[0].is_finite() && v[1].is_finite()))
-                {
-                    return Err(bad("slopes must be finite".into()));
-                }
                 if distinct.len() == MAP_BUFFERS {
                     let mut all: Vec<_> = maps.iter().map(|m| Arc::as_ptr(&m.slopes)).collect();
                     all.sort();
                     all.dedup();
                     return Err(SlopeError::TooMany(all.len()));
                 }
-                texels[distinct.len()] = s
-                    .data
-                    .iter()
-                    .map(|v| f16_bits(v[0]) as u32 | (f16_bits(v[1]) as u32) << 16)
-                    .collect();
-                distinct.push(Arc::as_ptr(s));
+                distinct.push(s.clone());
                 distinct.len() - 1
             }
         };
@@ -132,7 +138,44 @@ pub fn pack(
             dims: [s.width as u32, s.height as u32, 0, flags],
         };
     }
-    Ok((headers, texels))
+    Ok((headers, distinct))
+}
+
+/// [`pack`]'s error for a map whose slopes are not all finite, on the first region
+/// `maps` put it on.
+pub fn not_finite(maps: &[PlacedMap], s: &Arc<SlopeMap>) -> SlopeError {
+    SlopeError::Invalid {
+        region: maps
+            .iter()
+            .find(|m| Arc::ptr_eq(&m.slopes, s))
+            .map_or(0, |m| m.region),
+        message: "slopes must be finite".into(),
+    }
+}
+
+/// A slope that is not finite, found by [`texel_words_into`].
+#[derive(Debug)]
+pub struct NotFinite;
+
+/// A map's texel words as the shader reads them (two f16 slopes in one u32, dh/dx in the
+/// low half).
+pub fn texel_words(s: &SlopeMap) -> Result<Vec<u32>, NotFinite> {
+    let mut out = vec![0u32; s.data.len()];
+    texel_words_into(&s.data, &mut out)?;
+    Ok(out)
+}
+
+/// [`texel_words`] of `slopes` written into `out` (as long as `slopes`), e.g. a mapped
+/// buffer's memory; fails at a slope that is not finite (`out` then partly written).
+pub fn texel_words_into(slopes: &[[f32; 2]], out: &mut [u32]) -> Result<(), NotFinite> {
+    debug_assert_eq!(slopes.len(), out.len());
+    for (o, v) in out.iter_mut().zip(slopes) {
+        if !(v[0].is_finite() && v[1].is_finite()) {
+            return Err(NotFinite);
+        }
+        *o = f16_bits(v[0]) as u32 | (f16_bits(v[1]) as u32) << 16;
+    }
+    Ok(())
 }
 
 /// f32 to IEEE half bits, rounding to nearest even; beyond the half range it saturates at
@@ -520,21 +563,33 @@ pub fn pack_moments(
         else {
             continue;
         };
-        let (w, ht) = (h.dims[0], h.dims[1]);
-        let bytes = level_offset(w, ht, moment_levels(w, ht)) as u64 * 4;
-        if bytes > max_bytes {
-            return Err(SlopeError::Invalid {
-                region: slot.saturating_sub(1) as u32,
-                message: format!(
-                    "{w} x {ht} texels: the moment pyramid of texture_filter = \"lean\" needs {} MiB, more than one storage buffer allows ({} MiB)",
-                    bytes >> 20,
-                    max_bytes >> 20
-                ),
-            });
-        }
-        *o = moments_pyramid(&texels[b], w, ht);
+        let region = slot.saturating_sub(1) as u32;
+        *o = map_moments(&texels[b], h.dims[0], h.dims[1], region, max_bytes)?;
     }
     Ok(out)
+}
+
+/// The moment pyramid of one map's texel words (`width` x `height`), checked against one
+/// storage buffer's `max_bytes`; errors name `region`, the first region showing the map.
+pub fn map_moments(
+    texels: &[u32],
+    width: u32,
+    height: u32,
+    region: u32,
+    max_bytes: u64,
+) -> Result<Vec<u32>, SlopeError> {
+    let bytes = level_offset(width, height, moment_levels(width, height)) as u64 * 4;
+    if bytes > max_bytes {
+        return Err(SlopeError::Invalid {
+            region,
+            message: format!(
+                "{width} x {height} texels: the moment pyramid of texture_filter = \"lean\" needs {} MiB, more than one storage buffer allows ({} MiB)",
+                bytes >> 20,
+                max_bytes >> 20
+            ),
+        });
+    }
+    Ok(moments_pyramid(texels, width, height))
 }
 
 /// The footprint's mip level as the shader computes it for a primary hit: the pixel

@@ -246,16 +246,16 @@ impl<'s> View<'s> {
             (B::Lights, &lights),
             (B::Energy, &tracer.energy),
             (B::MapHeaders, headers),
-            (B::Slopes0, &texels[0]),
-            (B::Slopes1, &texels[1]),
-            (B::Slopes2, &texels[2]),
+            (B::Slopes0, texels[0]),
+            (B::Slopes1, texels[1]),
+            (B::Slopes2, texels[2]),
             (B::LightGeometry, trace.second_shade_tris()),
             (B::LightList, &emitters),
             (B::Surfaces, &scene.surfaces),
             (B::CurvedMaps, scene.curved_buffer()),
-            (B::Moments0, &moments[0]),
-            (B::Moments1, &moments[1]),
-            (B::Moments2, &moments[2]),
+            (B::Moments0, moments[0]),
+            (B::Moments1, moments[1]),
+            (B::Moments2, moments[2]),
             (B::LabelWords, &scene.labels),
             (B::LightWeights, &light_weights),
         ]);
@@ -349,9 +349,9 @@ impl<'s> View<'s> {
         let mut acc = g.import(&self.accum);
         let mut noise = g.import(&self.noise_sums);
         let mh = g.import(headers);
-        let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(&texels[k]));
+        let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(texels[k]));
         let moments = self.scene.moment_buffers();
-        let [m0, m1, m2] = [0, 1, 2].map(|k| g.import(&moments[k]));
+        let [m0, m1, m2] = [0, 1, 2].map(|k| g.import(moments[k]));
         let labels = g.import(&self.scene.labels);
         // n: the path tracer labels from its first n x n samples (0: it does not), into
         // `targets`.

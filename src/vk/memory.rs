@@ -143,14 +143,21 @@ impl Buffer {
 
     /// Copies `bytes` into a mapped buffer at `offset`.
     pub fn write(&mut self, offset: usize, bytes: &[u8]) -> Result<(), VkError> {
-        let name = self.name.clone();
+        self.mapped_mut()?[offset..offset + bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// A mapped buffer's bytes (its `size`), to be written in place (e.g. values made
+    /// straight into it instead of into a vector that is then copied).
+    pub fn mapped_mut(&mut self) -> Result<&mut [u8], VkError> {
+        let size = self.size as usize;
         let slice = self
             .allocation
             .as_mut()
             .and_then(|a| a.mapped_slice_mut())
-            .ok_or(VkError::NotMappable(name))?;
-        slice[offset..offset + bytes.len()].copy_from_slice(bytes);
-        Ok(())
+            .ok_or_else(|| VkError::NotMappable(self.name.clone()))?;
+        let n = size.min(slice.len());
+        Ok(&mut slice[..n])
     }
 
     /// Reads a mapped buffer (call after the GPU work writing it has completed).
