@@ -6,7 +6,7 @@
 
 use std::sync::Arc;
 
-use super::renderer::{ImageRenderer, ImageRequest, RenderedImage};
+use super::renderer::{ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 use crate::render::annotate::DEFAULT_COVERAGE_GRID;
 use crate::render::energy::EnergyTables;
 use crate::render::noise::NoiseEstimate;
@@ -117,20 +117,43 @@ impl GpuRenderer {
 type SceneKey = (u64, Vec<Vec<RegionSelector>>);
 
 /// What a run's preparing thread needs to make a [`GpuRenderer`]'s scenes
-/// ([`ImageRenderer::scene_prep`]): its backend and scene defaults. The stage (planar
-/// regions, region materials) and the object's acceleration structure are then made
-/// once per object instance on that thread, while the renderers trace the instance
-/// before, and every renderer only uploads them.
+/// ([`ImageRenderer::scene_prep`]): its backend, scene defaults and device. The stage
+/// (planar regions, region materials) and the object's acceleration structure are then
+/// made once per object instance on that thread, while the renderers trace the instance
+/// before, and every renderer only uploads them; an image's slope maps are put on the
+/// device there too ([`ScenePrep::upload_maps`]).
 #[derive(Clone)]
 pub struct ScenePrep {
     backend: Backend,
     base: SceneConfig,
+    device: Arc<Context>,
+}
+
+/// An image's slope maps put on the renderers' device ahead of its render
+/// ([`ScenePrep::upload_maps`]); held until the image is rendered, so that its renderer
+/// finds them there (`render::device_maps`).
+pub struct MapsAhead {
+    _buffers: Vec<Arc<crate::vk::Buffer>>,
 }
 
 impl ScenePrep {
     /// The backend the scenes are made for.
     pub fn backend(&self) -> Backend {
         self.backend
+    }
+
+    /// Converts and uploads `maps` (an image's face textures) to the renderers' device,
+    /// unless a scene there holds them already, on the calling thread and rayon's global
+    /// pool: the renderer of the image then takes them as they are instead of converting
+    /// and uploading each map itself on its render thread. Renderers on other devices
+    /// upload their own.
+    pub fn upload_maps(&self, maps: &[&Arc<TextureMap>]) -> Result<MapsAhead, String> {
+        let buffers = maps
+            .iter()
+            .map(|m| crate::render::device_maps::texels(&self.device, m))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| format!("slope map: {e}"))?;
+        Ok(MapsAhead { _buffers: buffers })
     }
 
     /// The scene of `mesh` (an object instance's) with its region materials
@@ -189,6 +212,7 @@ fn scene_for<'c>(
                 let prep = ScenePrep {
                     backend: tracer.backend,
                     base: base.clone(),
+                    device: tracer.ctx.clone(),
                 };
                 made = prep.prepare(
                     req.mesh,
@@ -230,6 +254,7 @@ impl ImageRenderer for GpuRenderer {
         Some(ScenePrep {
             backend: self.tracer.backend,
             base: self.base.clone(),
+            device: self.ctx.clone(),
         })
     }
 

@@ -15,13 +15,13 @@ use serde_json::json;
 use super::camera::{CameraRecord, Exposed, expose};
 use super::error::{DatasetError, Result};
 use super::files;
-use super::gpu::ScenePrep;
+use super::gpu::{MapsAhead, ScenePrep};
 use super::job::{Job, builtin_variant};
 use super::labels;
 use super::lock;
 use super::plan::{self, FaceChoice, InstancePlan, ItemPlan, Label, Plan, Split};
 use super::post::{self, DefectVisibility, Frame};
-use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage};
+use super::renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, TextureWant, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, imprint_traced, sample_defects};
@@ -1180,7 +1180,10 @@ struct ItemInputs {
     face_textures: Vec<FaceTexture>,
     /// The instance's scene made by the preparing thread (`Inputs::scene_prep`).
     scene: Option<Arc<PreparedScene>>,
-    /// "defects", "scene" and "textures" seconds.
+    /// The face textures put on the renderers' device by the preparing thread (held
+    /// until the image is rendered).
+    maps_ahead: Option<MapsAhead>,
+    /// "defects", "scene", "textures" and "maps" seconds.
     stages: BTreeMap<String, f64>,
 }
 
@@ -1368,7 +1371,7 @@ impl<'p> Inputs<'p> {
                 .map(|(r, &(_, t))| r.map_err(|m| texture_error(finish, t, m)))
                 .collect()
         })?;
-        let face_textures = faces
+        let face_textures: Vec<FaceTexture> = faces
             .iter()
             .zip(maps)
             .map(|(fc, map)| FaceTexture {
@@ -1381,12 +1384,33 @@ impl<'p> Inputs<'p> {
             })
             .collect();
         laps.stage("textures", &mut stages);
+        let maps_ahead = match &self.scene_prep {
+            Some(prep) => {
+                let mut distinct: Vec<&Arc<TextureMap>> = Vec::new();
+                for t in &face_textures {
+                    if !distinct.iter().any(|d| Arc::ptr_eq(d, &t.map)) {
+                        distinct.push(&t.map);
+                    }
+                }
+                let ahead =
+                    prep.upload_maps(&distinct)
+                        .map_err(|message| DatasetError::Render {
+                            index: item.index,
+                            id: item.id(),
+                            message,
+                        })?;
+                laps.stage("maps", &mut stages);
+                Some(ahead)
+            }
+            None => None,
+        };
         Ok(ItemInputs {
             mesh,
             gltf,
             materials,
             face_textures,
             scene,
+            maps_ahead,
             stages,
         })
     }
@@ -1480,7 +1504,11 @@ fn render_stage<'p>(
         id: item.id(),
         message,
     };
-    let img = renderer.render(&req).map_err(fail)?;
+    let img = renderer.render(&req).map_err(fail);
+    // The maps put on the device ahead were found there by the render (or are no longer
+    // needed): let them go with the last scene that holds them.
+    drop(inputs.maps_ahead);
+    let img = img?;
     if let (Some(p), Some(r)) = (profiler, renderer.last_profile()) {
         p.absorb(r);
     }

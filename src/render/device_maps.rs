@@ -21,7 +21,6 @@ use ash::vk;
 use ash::vk::Handle;
 use rayon::prelude::*;
 
-use super::cpu::on_render_pool;
 use super::slope::{self, NotFinite, SlopeMap};
 use crate::vk::{Buffer, Context, MemoryKind, VkError};
 
@@ -72,7 +71,9 @@ pub fn uploads() -> usize {
 const CHUNK: usize = 1 << 16;
 
 /// `map`'s texel words on `ctx`'s device: the buffer another scene on that device uses
-/// now, or a new one (converted straight into mapped memory on the render threads' pool).
+/// now, or a new one (converted straight into mapped memory, in parallel on the caller's
+/// rayon pool: a render thread calls it on the render threads' pool, a run's preparing
+/// thread on the global one).
 pub fn texels(ctx: &Arc<Context>, map: &Arc<SlopeMap>) -> Result<Arc<Buffer>, SharedMapError> {
     shared(ctx, map, Content::Texels, |ctx| {
         let mut b = Buffer::new(
@@ -84,13 +85,11 @@ pub fn texels(ctx: &Arc<Context>, map: &Arc<SlopeMap>) -> Result<Arc<Buffer>, Sh
         )?;
         let words: &mut [u32] = bytemuck::try_cast_slice_mut(b.mapped_mut()?)
             .map_err(|e| VkError::Other(format!("slope map texels: mapped memory: {e}")))?;
-        on_render_pool(|| {
-            words
-                .par_chunks_mut(CHUNK)
-                .zip(map.data.par_chunks(CHUNK))
-                .try_for_each(|(out, slopes)| slope::texel_words_into(slopes, out))
-        })
-        .map_err(|NotFinite| SharedMapError::NotFinite)?;
+        words
+            .par_chunks_mut(CHUNK)
+            .zip(map.data.par_chunks(CHUNK))
+            .try_for_each(|(out, slopes)| slope::texel_words_into(slopes, out))
+            .map_err(|NotFinite| SharedMapError::NotFinite)?;
         Ok(b)
     })
 }

@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use ash::vk;
 
 use super::RenderError;
+use super::cpu::on_render_pool;
 use super::device_maps::{self, SharedMapError};
 use super::settings::TextureFilter;
 use super::slope::{self, FaceMap, Placement};
@@ -406,7 +407,8 @@ fn upload_maps(
     let mut texels = [unused.clone(), unused.clone(), unused.clone()];
     let mut moments = [unused.clone(), unused.clone(), unused];
     for (b, map) in distinct.iter().enumerate() {
-        texels[b] = device_maps::texels(ctx, map).map_err(|e| shared_error(map, e))?;
+        texels[b] =
+            on_render_pool(|| device_maps::texels(ctx, map)).map_err(|e| shared_error(map, e))?;
         if key.filter == TextureFilter::Lean {
             // The first slot reading buffer b names the map in errors.
             let slot = headers
