@@ -1581,7 +1581,7 @@ fn write_stage(
     laps.stage("write", &mut stages);
     let render_seconds = match started {
         Some(t0) => t0.elapsed().as_secs_f64(),
-        None => ["defects", "scene", "textures", "render", "write"]
+        None => ["defects", "scene", "textures", "maps", "render", "write"]
             .iter()
             .filter_map(|k| stages.get(*k))
             .sum(),
