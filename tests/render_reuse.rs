@@ -79,9 +79,9 @@ fn a_job_builds_pipelines_once_and_each_mesh_once() {
 
 /// A slope map's texels go to a device once while scenes there use it: contexts beside one
 /// another (one `VkDevice`) get the same buffer, another device its own; the words are
-/// `slope::texel_words`'; the buffer is freed once no one holds it and made anew when
-/// asked again; a map is known by identity, not by content; a slope that is not finite
-/// is an error.
+/// `slope::texel_words`', also through the staging copy of devices whose memory cannot
+/// be mapped; the buffer is freed once no one holds it and made anew when asked again; a
+/// map is known by identity, not by content; a slope that is not finite is an error.
 #[test]
 fn a_slope_map_is_uploaded_once_per_device() {
     let opts = ContextOptions {
@@ -121,6 +121,11 @@ fn a_slope_map_is_uploaded_once_per_device() {
     );
     let again = device_maps::texels(&ctx, &map).unwrap();
     assert_eq!(again.read::<u32>().unwrap(), words);
+    // Where device memory cannot be mapped (discrete GPUs) the words go through a
+    // staging buffer and a copy on the GPU.
+    let staged = Arc::new((*map).clone());
+    let s = device_maps::texels_via(&other, &staged, true).unwrap();
+    assert_eq!(s.read::<u32>().unwrap(), words, "through a staging copy");
     let mut bad = (*map).clone();
     bad.data[100][1] = f32::NAN;
     let bad = Arc::new(bad);
@@ -128,7 +133,7 @@ fn a_slope_map_is_uploaded_once_per_device() {
         device_maps::texels(&ctx, &bad),
         Err(SharedMapError::NotFinite)
     ));
-    drop((again, c, t));
+    drop((again, c, t, s));
     ctx.check_validation().unwrap();
     other.check_validation().unwrap();
 }

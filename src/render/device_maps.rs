@@ -8,7 +8,9 @@
 //!
 //! Nothing is kept for later: an entry holds its buffer weakly, so a map's buffer lives
 //! exactly as long as some scene uses it (GPU memory as when every scene had its own,
-//! at most), and an entry whose map is gone is dropped at the next lookup.
+//! at most), and an entry whose map is gone is dropped at the next lookup. The buffers
+//! are device-local (`Buffer::resident`): the path tracer reads them at every textured
+//! hit, and host-visible upload memory may be system memory on a discrete GPU.
 //!
 //! Before this, each renderer converted and uploaded every map of every instance it
 //! rendered (docs/benchmarks/dataset.md, "Each slope map uploaded once a device").
@@ -22,7 +24,7 @@ use ash::vk::Handle;
 use rayon::prelude::*;
 
 use super::slope::{self, NotFinite, SlopeMap};
-use crate::vk::{Buffer, Context, MemoryKind, VkError};
+use crate::vk::{Buffer, Context, VkError};
 
 /// What a shared buffer holds of its map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -71,26 +73,35 @@ pub fn uploads() -> usize {
 const CHUNK: usize = 1 << 16;
 
 /// `map`'s texel words on `ctx`'s device: the buffer another scene on that device uses
-/// now, or a new one (converted straight into mapped memory, in parallel on the caller's
-/// rayon pool: a render thread calls it on the render threads' pool, a run's preparing
-/// thread on the global one).
+/// now, or a new one in device-local memory (`Buffer::resident`: converted straight into
+/// it where the host can map it, else into a staging buffer copied by the GPU), in
+/// parallel on the caller's rayon pool (a render thread calls it on the render threads'
+/// pool, a run's preparing thread on the global one).
 pub fn texels(ctx: &Arc<Context>, map: &Arc<SlopeMap>) -> Result<Arc<Buffer>, SharedMapError> {
+    texels_via(ctx, map, false)
+}
+
+/// [`texels`]; `staged`: through a staging copy even where device memory is mappable
+/// (`Buffer::resident_via`; tests).
+pub fn texels_via(
+    ctx: &Arc<Context>,
+    map: &Arc<SlopeMap>,
+    staged: bool,
+) -> Result<Arc<Buffer>, SharedMapError> {
     shared(ctx, map, Content::Texels, |ctx| {
-        let mut b = Buffer::new(
-            ctx,
-            "slope map texels",
+        let (size, usage) = (
             map.data.len() as u64 * 4,
             vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryKind::Upload,
-        )?;
-        let words: &mut [u32] = bytemuck::try_cast_slice_mut(b.mapped_mut()?)
-            .map_err(|e| VkError::Other(format!("slope map texels: mapped memory: {e}")))?;
-        words
-            .par_chunks_mut(CHUNK)
-            .zip(map.data.par_chunks(CHUNK))
-            .try_for_each(|(out, slopes)| slope::texel_words_into(slopes, out))
-            .map_err(|NotFinite| SharedMapError::NotFinite)?;
-        Ok(b)
+        );
+        Buffer::resident_via(ctx, "slope map texels", size, usage, staged, |bytes| {
+            let words: &mut [u32] = bytemuck::try_cast_slice_mut(&mut bytes[..size as usize])
+                .map_err(|e| VkError::Other(format!("slope map texels: mapped memory: {e}")))?;
+            words
+                .par_chunks_mut(CHUNK)
+                .zip(map.data.par_chunks(CHUNK))
+                .try_for_each(|(out, slopes)| slope::texel_words_into(slopes, out))
+                .map_err(|NotFinite| SharedMapError::NotFinite)
+        })
     })
 }
 
@@ -107,12 +118,12 @@ pub fn moments(
         let words = slope::texel_words(map).map_err(|NotFinite| SharedMapError::NotFinite)?;
         let (w, h) = (map.width as u32, map.height as u32);
         let pyramid = slope::map_moments(&words, w, h, region, max_bytes)?;
-        Ok(Buffer::from_slice(
-            ctx,
-            "slope moments",
-            &pyramid,
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-        )?)
+        let bytes: &[u8] = bytemuck::cast_slice(&pyramid);
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        Buffer::resident(ctx, "slope moments", bytes.len() as u64, usage, |out| {
+            out[..bytes.len()].copy_from_slice(bytes);
+            Ok(())
+        })
     })
 }
 

@@ -127,8 +127,77 @@ impl Buffer {
         })
     }
 
-    /// A GPU-readable buffer holding `data`. Uses a staging copy when upload memory is not
-    /// what the GPU reads fastest is not worth it here: our uploads are read a few times.
+    /// A buffer of `size` bytes the GPU reads many times (a slope map's texels), in the
+    /// memory it reads fastest: device-local memory, filled by `fill` in place where the
+    /// host can map it (lavapipe: all its memory; GPUs whose whole memory is mappable),
+    /// else through a staging buffer and a copy on `ctx`'s queue, waited for. (Upload
+    /// memory, [`Buffer::from_slice`], may be system memory on a discrete GPU:
+    /// gpu-allocator falls back to it when the device-local mappable heap is small, and
+    /// the GPU would then read it across the bus at every access.)
+    pub fn resident<E: From<VkError>>(
+        ctx: &Arc<Context>,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        fill: impl FnOnce(&mut [u8]) -> Result<(), E>,
+    ) -> Result<Buffer, E> {
+        Self::resident_via(ctx, name, size, usage, false, fill)
+    }
+
+    /// [`Buffer::resident`]; `staged`: through the staging copy even where the
+    /// device-local memory is mappable (tests: that path on lavapipe).
+    pub fn resident_via<E: From<VkError>>(
+        ctx: &Arc<Context>,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        staged: bool,
+        fill: impl FnOnce(&mut [u8]) -> Result<(), E>,
+    ) -> Result<Buffer, E> {
+        let usage = usage | vk::BufferUsageFlags::TRANSFER_DST;
+        let mut b = Buffer::new(ctx, name, size, usage, MemoryKind::Device)?;
+        if !staged && let Ok(bytes) = b.mapped_mut() {
+            fill(bytes)?;
+            return Ok(b);
+        }
+        let src = vk::BufferUsageFlags::TRANSFER_SRC;
+        let mut staging = Buffer::new(
+            ctx,
+            &format!("{name} (staging)"),
+            b.size,
+            src,
+            MemoryKind::Upload,
+        )?;
+        fill(staging.mapped_mut()?)?;
+        ctx.submit_and_wait(|cb| {
+            let region = [vk::BufferCopy::default().size(b.size)];
+            let barrier = [vk::BufferMemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::SHADER_READ)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .buffer(b.raw)
+                .offset(0)
+                .size(vk::WHOLE_SIZE)];
+            unsafe {
+                ctx.device.cmd_copy_buffer(cb, staging.raw, b.raw, &region);
+                ctx.device.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &barrier,
+                    &[],
+                )
+            };
+            Ok(())
+        })?;
+        Ok(b)
+    }
+
+    /// A GPU-readable buffer holding `data`, in upload memory (host-visible): for data
+    /// the GPU reads a few times; see [`Buffer::resident`] for data it reads often.
     pub fn from_slice<T: bytemuck::Pod>(
         ctx: &Arc<Context>,
         name: &str,
