@@ -56,14 +56,15 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         i.max_storage_buffer_range / (1 << 20)
     );
     for (k, h) in i.memory_heaps.iter().enumerate() {
+        let kind = match (h.device_local, h.host_visible) {
+            (true, true) => " (device local, host visible)",
+            (true, false) => " (device local)",
+            (false, true) => " (host visible)",
+            (false, false) => "",
+        };
         println!(
-            "memory heap {k}:   {:.1} GiB{}",
+            "memory heap {k}:   {:.1} GiB{kind}",
             h.size_bytes as f64 / (1u64 << 30) as f64,
-            if h.device_local {
-                " (device local)"
-            } else {
-                ""
-            }
         );
     }
     Ok(())

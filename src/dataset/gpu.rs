@@ -142,6 +142,20 @@ impl ScenePrep {
         self.backend
     }
 
+    /// This preparation on a context of its own beside the renderer's
+    /// ([`Context::beside`]: the device's next queue), so that the preparing thread's
+    /// copies (`Buffer::resident`'s staging copy on a GPU whose memory the host cannot
+    /// map) do not queue behind a renderer's batches; itself where none can be made.
+    pub fn on_own_queue(&self) -> ScenePrep {
+        match self.device.beside() {
+            Ok(device) => ScenePrep {
+                device,
+                ..self.clone()
+            },
+            Err(_) => self.clone(),
+        }
+    }
+
     /// Converts and uploads `maps` (an image's face textures) to the renderers' device,
     /// unless a scene there holds them already, on the calling thread and rayon's global
     /// pool: the renderer of the image then takes them as they are instead of converting

@@ -827,7 +827,7 @@ impl Overlapped<'_> {
                         .iter()
                         .all(|q| q.as_ref().map(ScenePrep::backend) == Some(p.backend())) =>
                 {
-                    Some(p.clone())
+                    Some(p.on_own_queue())
                 }
                 _ => None,
             };

@@ -25,6 +25,10 @@ pub struct ContextOptions {
 pub struct MemoryHeap {
     pub size_bytes: u64,
     pub device_local: bool,
+    /// Some memory type of the heap can be mapped by the host: a device-local one that is
+    /// (a whole GPU's memory with resizable BAR; 256 MB without) takes the upload buffers
+    /// (`MemoryKind::Upload`) and lets `Buffer::resident` fill its buffers in place.
+    pub host_visible: bool,
 }
 
 /// What `synosis info` prints and what backends consult.
@@ -503,9 +507,17 @@ impl Context {
             max_workgroup_count: props.limits.max_compute_work_group_count,
             memory_heaps: mem.memory_heaps[..mem.memory_heap_count as usize]
                 .iter()
-                .map(|h| MemoryHeap {
+                .enumerate()
+                .map(|(i, h)| MemoryHeap {
                     size_bytes: h.size,
                     device_local: h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL),
+                    host_visible: mem.memory_types[..mem.memory_type_count as usize]
+                        .iter()
+                        .any(|t| {
+                            t.heap_index as usize == i
+                                && t.property_flags
+                                    .contains(vk::MemoryPropertyFlags::HOST_VISIBLE)
+                        }),
                 })
                 .collect(),
             validation,
