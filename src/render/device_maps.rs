@@ -13,10 +13,10 @@
 //! hit, and host-visible upload memory may be system memory on a discrete GPU.
 //!
 //! Before this, each renderer converted and uploaded every map of every instance it
-//! rendered (docs/benchmarks/dataset.md, "Each slope map uploaded once a device").
+//! rendered (docs/benchmarks/dataset.md, "Each slope map converted and uploaded once a
+//! device, ahead of its image").
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, Weak};
 
 use ash::vk;
@@ -28,7 +28,7 @@ use crate::vk::{Buffer, Context, VkError};
 
 /// What a shared buffer holds of its map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Content {
+enum Content {
     /// The texel words the shader reads (`slope::texel_words`).
     Texels,
     /// The moment pyramid of `texture_filter = "lean"` (`slope::map_moments`).
@@ -60,13 +60,6 @@ fn entries() -> MutexGuard<'static, HashMap<Key, Entry>> {
     static ENTRIES: std::sync::OnceLock<Mutex<HashMap<Key, Entry>>> = std::sync::OnceLock::new();
     let m = ENTRIES.get_or_init(Default::default);
     m.lock().unwrap_or_else(|p| p.into_inner())
-}
-
-static UPLOADS: AtomicUsize = AtomicUsize::new(0);
-
-/// Buffers made by this process so far (each a map's texels or moments on one device).
-pub fn uploads() -> usize {
-    UPLOADS.load(Ordering::Relaxed)
 }
 
 /// Texel words per conversion task.
@@ -158,7 +151,6 @@ fn shared(
         return Ok(b);
     }
     let b = Arc::new(make(ctx)?);
-    UPLOADS.fetch_add(1, Ordering::Relaxed);
     *held = Arc::downgrade(&b);
     Ok(b)
 }
