@@ -75,6 +75,25 @@ fn a_job_builds_pipelines_once_and_each_mesh_once() {
         2,
         "one more for the second renderer"
     );
+    // The preparing thread's uploads of an image's maps: a map that cannot go up is
+    // named by its index (the run names its face and texture).
+    let prep = dataset::ImageRenderer::scene_prep(&r)
+        .unwrap()
+        .on_own_queue();
+    let good = Arc::new(SlopeMap {
+        width: 4,
+        height: 2,
+        spacing_um: 6.0,
+        data: vec![[0.01, -0.02]; 8],
+    });
+    let mut bad = (*good).clone();
+    bad.data[5][0] = f32::INFINITY;
+    assert!(prep.upload_maps(&[&good]).is_ok());
+    match prep.upload_maps(&[&good, &Arc::new(bad)]) {
+        Err((1, m)) => assert!(m.contains("finite"), "{m}"),
+        Err(e) => panic!("{e:?}"),
+        Ok(_) => panic!("a slope that is not finite went up"),
+    }
 }
 
 /// A slope map's texels go to a device once while scenes there use it: contexts beside one

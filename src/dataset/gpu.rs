@@ -160,13 +160,15 @@ impl ScenePrep {
     /// unless a scene there holds them already, on the calling thread and rayon's global
     /// pool: the renderer of the image then takes them as they are instead of converting
     /// and uploading each map itself on its render thread. Renderers on other devices
-    /// upload their own.
-    pub fn upload_maps(&self, maps: &[&Arc<TextureMap>]) -> Result<MapsAhead, String> {
+    /// upload their own. Fails with the index of the map that could not be uploaded.
+    pub fn upload_maps(&self, maps: &[&Arc<TextureMap>]) -> Result<MapsAhead, (usize, String)> {
         let buffers = maps
             .iter()
-            .map(|m| crate::render::device_maps::texels(&self.device, m))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| format!("slope map: {e}"))?;
+            .enumerate()
+            .map(|(i, m)| {
+                crate::render::device_maps::texels(&self.device, m).map_err(|e| (i, e.to_string()))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(MapsAhead { _buffers: buffers })
     }
 

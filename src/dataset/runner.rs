@@ -1386,19 +1386,24 @@ impl<'p> Inputs<'p> {
         laps.stage("textures", &mut stages);
         let maps_ahead = match &self.scene_prep {
             Some(prep) => {
-                let mut distinct: Vec<&Arc<TextureMap>> = Vec::new();
+                let mut distinct: Vec<&FaceTexture> = Vec::new();
                 for t in &face_textures {
-                    if !distinct.iter().any(|d| Arc::ptr_eq(d, &t.map)) {
-                        distinct.push(&t.map);
+                    if !distinct.iter().any(|d| Arc::ptr_eq(&d.map, &t.map)) {
+                        distinct.push(t);
                     }
                 }
-                let ahead =
-                    prep.upload_maps(&distinct)
-                        .map_err(|message| DatasetError::Render {
-                            index: item.index,
-                            id: item.id(),
-                            message,
-                        })?;
+                let maps: Vec<&Arc<TextureMap>> = distinct.iter().map(|t| &t.map).collect();
+                let ahead = prep.upload_maps(&maps).map_err(|(i, e)| {
+                    let t = distinct[i];
+                    DatasetError::Render {
+                        index: item.index,
+                        id: item.id(),
+                        message: format!(
+                            "the slope map of face {} (finish {:?}, texture {}): {e}",
+                            t.face, t.finish, t.texture_instance
+                        ),
+                    }
+                })?;
                 laps.stage("maps", &mut stages);
                 Some(ahead)
             }
