@@ -137,6 +137,15 @@ pub struct MapsAhead {
 }
 
 impl ScenePrep {
+    /// The preparation of `tracer`'s scenes (its backend and device) from `base`.
+    fn of(tracer: &PathTracer, base: &SceneConfig) -> ScenePrep {
+        ScenePrep {
+            backend: tracer.backend,
+            base: base.clone(),
+            device: tracer.ctx.clone(),
+        }
+    }
+
     /// The backend the scenes are made for.
     pub fn backend(&self) -> Backend {
         self.backend
@@ -225,12 +234,7 @@ fn scene_for<'c>(
         let prepared = match req.scene {
             Some(p) if p.backend() == tracer.backend => p,
             _ => {
-                let prep = ScenePrep {
-                    backend: tracer.backend,
-                    base: base.clone(),
-                    device: tracer.ctx.clone(),
-                };
-                made = prep.prepare(
+                made = ScenePrep::of(tracer, base).prepare(
                     req.mesh,
                     req.materials,
                     req.gltf_materials,
@@ -267,11 +271,7 @@ impl ImageRenderer for GpuRenderer {
     }
 
     fn scene_prep(&self) -> Option<ScenePrep> {
-        Some(ScenePrep {
-            backend: self.tracer.backend,
-            base: self.base.clone(),
-            device: self.ctx.clone(),
-        })
+        Some(ScenePrep::of(&self.tracer, &self.base))
     }
 
     fn last_stages(&self) -> Vec<(String, f64)> {

@@ -1191,7 +1191,8 @@ struct ItemInputs {
 struct RenderedItem<'p> {
     item: &'p ItemPlan,
     img: RenderedImage,
-    /// Every stage so far ("defects", "scene", "textures", "render", the renderer's parts).
+    /// Every stage so far ("defects", "scene", "textures", "maps", "render", the
+    /// renderer's parts).
     stages: BTreeMap<String, f64>,
     /// `ImageRenderer::describe` of the renderer that made it.
     renderer: String,
@@ -1509,11 +1510,10 @@ fn render_stage<'p>(
         id: item.id(),
         message,
     };
-    let img = renderer.render(&req).map_err(fail);
-    // The maps put on the device ahead were found there by the render (or are no longer
-    // needed): let them go with the last scene that holds them.
+    let img = renderer.render(&req).map_err(fail)?;
+    // The maps put on the device ahead were found there by the render: let them go with
+    // the last scene that holds them.
     drop(inputs.maps_ahead);
-    let img = img?;
     if let (Some(p), Some(r)) = (profiler, renderer.last_profile()) {
         p.absorb(r);
     }

@@ -349,9 +349,9 @@ impl<'s> View<'s> {
         let mut acc = g.import(&self.accum);
         let mut noise = g.import(&self.noise_sums);
         let mh = g.import(headers);
-        let [ma, mb, mc] = [0, 1, 2].map(|k| g.import(texels[k]));
+        let [ma, mb, mc] = texels.map(|b| g.import(b));
         let moments = self.scene.moment_buffers();
-        let [m0, m1, m2] = [0, 1, 2].map(|k| g.import(moments[k]));
+        let [m0, m1, m2] = moments.map(|b| g.import(b));
         let labels = g.import(&self.scene.labels);
         // n: the path tracer labels from its first n x n samples (0: it does not), into
         // `targets`.
