@@ -892,7 +892,9 @@ fn whole_part_finish_has_no_border_in_a_face() {
 /// the wide BVH on data-centre GPUs); and Mitsuba's sampling (independent, sampled
 /// direct light, the ring sampled by area) under the ring, a bar and a spot, three
 /// bounces, no energy compensation, on the wide BVH. Each renderer then holds two
-/// path-tracing pipelines (the test fails if the setting were ignored). The constants
+/// path-tracing pipelines (the test fails if the setting were ignored), the one reading
+/// its settings made at its first use (its tracer did not begin it, as in a
+/// `SYNOSIS_SPECIALIZE=1` process). The constants
 /// live in the backends' common code; each backend and setting is a cold compile of its
 /// own (up to a minute on a slow 2-core machine), so not every pair is taken (the
 /// analytic setting gave the same bytes on the child-pair BVH too, 2026-11-28).
@@ -927,8 +929,11 @@ fn specialized_path_tracer_changes_no_pixel() {
         let off = cfg(render, rest, false);
         let mesh = load_object(&on).expect("object");
         for &backend in backends {
-            let r = common::SceneRenderer::own(backend, mesh.clone(), &on);
+            // The pipeline reading its settings at run time not begun with the tracer
+            // (as in a `SYNOSIS_SPECIALIZE=1` process): made at its first use, below.
+            let r = common::SceneRenderer::own(backend, mesh.clone(), &on, false);
             let a = r.render(&on, true);
+            assert_eq!(r.path_pipelines(), 1, "{name}, {}", backend.name());
             let b = r.render(&off, true);
             assert_eq!(r.path_pipelines(), 2, "{name}, {}", backend.name());
             let differing = a

@@ -5,13 +5,13 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use synosis::render::PathTracer;
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
 use synosis::render::noise::{CameraNoise, NoiseStop};
 use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene_on};
 use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
+use synosis::render::{PathTracer, RenderSettings};
 use synosis::scene::assemble::load_object_inspected;
 use synosis::scene::config::{SceneConfig, parse_view};
 use synosis::scene::mesh::is_inspected;
@@ -97,8 +97,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         })
     })?;
     let backend = resolve(cfg.render.accel, &ctx.info)?;
+    let specialized = RenderSettings::from(&cfg).specialize;
     let tracer = profiler.cpu("path tracer (begun)", || {
-        PathTracer::new(&ctx, backend, &tables)
+        PathTracer::beginning(&ctx, backend, &tables, !specialized)
     })?;
     let (object, inspected) = profiler
         .cpu("load object", || load_object_inspected(&cfg))

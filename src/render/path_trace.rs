@@ -302,7 +302,8 @@ pub fn render_scene(
     opts: FrameOptions<'_>,
     progress: impl FnMut(u32),
 ) -> Result<Frame, RenderError> {
-    let tracer = PathTracer::new(ctx, backend, tables)?;
+    let settings: RenderSettings = settings.into();
+    let tracer = PathTracer::beginning(ctx, backend, tables, !settings.specialize)?;
     render_scene_on(&tracer, scene, settings, opts, progress)
 }
 

@@ -44,17 +44,39 @@ pub struct PathTracer {
 }
 
 impl PathTracer {
+    /// The path tracer of `backend` on `ctx`, its pipeline that reads the settings at
+    /// run time begun on a thread of its own, unless `SYNOSIS_SPECIALIZE=1` says that
+    /// this process's renders use specialized ones ([`PathTracer::beginning`]).
     pub fn new(
         ctx: &Arc<Context>,
         backend: Backend,
         tables: &EnergyTables,
     ) -> Result<PathTracer, RenderError> {
-        let unspecialized = {
+        let specialized = super::settings::specialize_from_env()
+            .ok()
+            .flatten()
+            .unwrap_or(false);
+        Self::beginning(ctx, backend, tables, !specialized)
+    }
+
+    /// [`PathTracer::new`], saying whether to begin the pipeline that reads its settings
+    /// at run time now: false where every render will be `specialize`d (the pipeline is
+    /// then made at its first use, if it has one), so that the driver's compile of a
+    /// pipeline no render uses (seconds of a core on lavapipe) is not paid.
+    pub fn beginning(
+        ctx: &Arc<Context>,
+        backend: Backend,
+        tables: &EnergyTables,
+        begin_unspecialized: bool,
+    ) -> Result<PathTracer, RenderError> {
+        let unspecialized = if begin_unspecialized {
             let ctx = ctx.clone();
             std::thread::Builder::new()
                 .name("path tracer pipeline".into())
                 .spawn(move || super::pipelines::path_trace(&ctx, backend, &[]))
                 .ok()
+        } else {
+            None
         };
         let annotate = super::pipelines::annotate(ctx, backend)?;
         let energy = Buffer::from_slice(

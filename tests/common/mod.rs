@@ -327,10 +327,20 @@ impl SceneRenderer {
     }
 
     /// On a device and path tracer of its own (a test that counts the tracer's
-    /// pipelines).
-    pub fn own(backend: Backend, mesh: Mesh, cfg: &SceneConfig) -> SceneRenderer {
-        let tracer = synosis::render::PathTracer::new(&gpu(), backend, &EnergyTables::compute())
-            .expect("tracer");
+    /// pipelines); `begin_unspecialized` as [`synosis::render::PathTracer::beginning`].
+    pub fn own(
+        backend: Backend,
+        mesh: Mesh,
+        cfg: &SceneConfig,
+        begin_unspecialized: bool,
+    ) -> SceneRenderer {
+        let tracer = synosis::render::PathTracer::beginning(
+            &gpu(),
+            backend,
+            &EnergyTables::compute(),
+            begin_unspecialized,
+        )
+        .expect("tracer");
         Self::on(Arc::new(tracer), mesh, cfg)
     }
 
