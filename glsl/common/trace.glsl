@@ -4,7 +4,7 @@
 //                      first triangle index of the level)
 //   TRACE_SOFTWARE   - stack traversal of two flattened obvhs BVH2s, the object's
 //                      (bindings 0, 1) and the second level's (bindings 2, 3), read
-//                      through their device addresses (binding 4)
+//                      as texel buffers
 //   TRACE_SOFTWARE_WIDE - the same with compressed wide BVHs (obvhs CWBVH, eight
 //                      children a node, src/trace/software_bvh.rs)
 // Both answer trace_query (a closest hit, the first light, shadow tests: TQ_* below) and
@@ -142,7 +142,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
 }
 
 #elif defined(TRACE_SOFTWARE)
-#define TRACE_BINDING_COUNT 5
+#define TRACE_BINDING_COUNT 4
 // Triangles in BVH leaf order; v0.w holds the original triangle index.
 struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
 #if defined(TRACE_WIDE)
@@ -158,30 +158,23 @@ struct BvhNode { vec4 l_min; vec4 l_max; vec4 r_min; vec4 r_max; };
 #define TRACE_NODE BvhNode
 #define TRACE_STACK 64
 #endif
-// Bindings 0-3 hold the object's nodes and triangles and the second level's (bound so
-// that the pass's reads of them are declared), binding 4 their device addresses, in that
-// order (src/trace/mod.rs); the traversal reads the levels through the addresses: lavapipe
-// (Mesa 25.0) loads a storage buffer at a per-lane offset one lane and one word at a time,
-// each behind a bounds branch, a buffer reference as one masked gather per word
-// (docs/architecture.md, "Trace backends").
-#extension GL_EXT_buffer_reference : require
+// Bindings 0-3: the object's nodes and triangles and the second level's, in that order
+// (src/trace/mod.rs), read as texel buffers of 16-byte texels (usamplerBuffer,
+// R32G32B32A32_UINT views): lavapipe (Mesa 25.0) fetches a texel with one 16-byte load a
+// lane, without a branch, where a load through a device address is one masked gather
+// per 8-byte word (on CPUs without fast gathers, such as AMD Zen 3, a branch, a scalar
+// load and an insert per lane and word), and a storage buffer at a per-lane offset one
+// lane and one word at a time behind a bounds branch: 0.83 of the path tracing's time
+// with Mitsuba's sampling on a Zen 3 machine, 0.94 on the paper job's crops
+// (docs/benchmarks/rendering.md, "The BVH read as texel buffers").
 #extension GL_EXT_control_flow_attributes : require
-#extension GL_EXT_buffer_reference_uvec2 : require
-layout(std430, set = 0, binding = 4) readonly buffer TraceLevels { uvec2 trace_level_addr[4]; };
-
-// The levels' nodes and triangles are read eight bytes a load: lavapipe (Mesa 25.0) turns
-// each component of a load through an address into one masked gather of that
-// component's size, so 64-bit words halve the gathers of 32-bit ones (0.91 of the
-// path tracing's time with Mitsuba's sampling; docs/benchmarks/rendering.md). The device
-// needs shaderInt64 (checked by trace::resolve).
+layout(set = 0, binding = 0) uniform usamplerBuffer trace_nodes0;
+layout(set = 0, binding = 1) uniform usamplerBuffer trace_tris0;
+layout(set = 0, binding = 2) uniform usamplerBuffer trace_nodes1;
+layout(set = 0, binding = 3) uniform usamplerBuffer trace_tris1;
+// The wide traversal's stack entries are 64-bit words; the device needs shaderInt64
+// (checked by trace::resolve).
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
-layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Words64Ref { uint64_t w[]; };
-
-// The 16 bytes at `addr` + 16 i.
-uvec4 words_uvec4(uvec2 addr, uint i) {
-    Words64Ref r = Words64Ref(addr);
-    return uvec4(unpackUint2x32(r.w[2u * i]), unpackUint2x32(r.w[2u * i + 1u]));
-}
 
 // Slab test; the far distance is widened by 3 ulps-worth (Ize 2013) so rounding never
 // drops a box that the ray grazes.

@@ -1,14 +1,14 @@
 // The BVH traversal of either level (`level` 0: the object, bindings 0 and 1; 1: the
-// view's second level, bindings 2 and 3; both read through their device addresses,
-// binding 4), included by trace.glsl. One function for both levels, the level a value:
+// view's second level, bindings 2 and 3; both read as texel buffers), included by
+// trace.glsl. One function for both levels, the level a value:
 // a shader compiles one traversal per call site of trace_query (lavapipe inlines every
 // call; two per level and query cost it minutes of LLVM compile).
 BvhTri trace_tri(uint level, uint i) {
     uvec4 q[3];
     [[dont_flatten]] if (level == 0u) {
-        [[unroll]] for (uint k = 0u; k < 3u; ++k) q[k] = words_uvec4(trace_level_addr[1], 3u * i + k);
+        [[unroll]] for (uint k = 0u; k < 3u; ++k) q[k] = texelFetch(trace_tris0, int(3u * i + k));
     } else {
-        [[unroll]] for (uint k = 0u; k < 3u; ++k) q[k] = words_uvec4(trace_level_addr[3], 3u * i + k);
+        [[unroll]] for (uint k = 0u; k < 3u; ++k) q[k] = texelFetch(trace_tris1, int(3u * i + k));
     }
     return BvhTri(uintBitsToFloat(q[0]), uintBitsToFloat(q[1]), uintBitsToFloat(q[2]));
 }
@@ -23,10 +23,10 @@ TRACE_NODE trace_node(uint level, uint i) {
     uvec4 q[TRACE_NODE_VEC4S];
     [[dont_flatten]] if (level == 0u) {
         [[unroll]] for (uint k = 0u; k < TRACE_NODE_VEC4S; ++k)
-            q[k] = words_uvec4(trace_level_addr[0], TRACE_NODE_VEC4S * i + k);
+            q[k] = texelFetch(trace_nodes0, int(TRACE_NODE_VEC4S * i + k));
     } else {
         [[unroll]] for (uint k = 0u; k < TRACE_NODE_VEC4S; ++k)
-            q[k] = words_uvec4(trace_level_addr[2], TRACE_NODE_VEC4S * i + k);
+            q[k] = texelFetch(trace_nodes1, int(TRACE_NODE_VEC4S * i + k));
     }
 #if defined(TRACE_WIDE)
     return WideNode(q[0], q[1], q[2], q[3], q[4]);

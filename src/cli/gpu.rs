@@ -55,6 +55,7 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         "max storage buffer range: {} MiB",
         i.max_storage_buffer_range / (1 << 20)
     );
+    println!("max texel buffer elements: {}", i.max_texel_buffer_elements);
     for (k, h) in i.memory_heaps.iter().enumerate() {
         let kind = match (h.device_local, h.host_visible) {
             (true, true) => " (device local, host visible)",

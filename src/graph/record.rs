@@ -32,10 +32,18 @@ pub(super) fn check_dispatch(
     bound: &Bound,
     max_groups: [u32; 3],
 ) -> Result<(), VkError> {
+    // A buffer goes to a storage or texel buffer binding (the pipeline says which).
     let given = bound
         .buffers
         .iter()
-        .map(|&(b, _)| (b, BindingKind::StorageBuffer))
+        .map(|&(b, _)| {
+            let declared = layout.bindings.get(b as usize).copied();
+            let kind = match declared {
+                Some(k) if k.takes_buffer() => k,
+                _ => BindingKind::StorageBuffer,
+            };
+            (b, kind)
+        })
         .chain(
             bound
                 .accels
@@ -58,7 +66,7 @@ pub(super) fn check_dispatch(
     for (binding, &kind) in layout.bindings.iter().enumerate() {
         let binding = binding as u32;
         let list = match kind {
-            BindingKind::StorageBuffer => bound.buffers,
+            BindingKind::StorageBuffer | BindingKind::TexelBuffer => bound.buffers,
             BindingKind::AccelerationStructure => bound.accels,
         };
         if !list.iter().any(|&(b, _)| b == binding) {
@@ -123,6 +131,8 @@ pub(super) struct Descriptors<'c> {
     dev: &'c ash::Device,
     pool: vk::DescriptorPool,
     sets: HashMap<usize, vk::DescriptorSet>,
+    /// The texel buffers' views (destroyed with the pool).
+    views: Vec<vk::BufferView>,
 }
 
 impl<'c> Descriptors<'c> {
@@ -142,6 +152,7 @@ impl<'c> Descriptors<'c> {
             dev,
             pool: vk::DescriptorPool::null(),
             sets: HashMap::new(),
+            views: Vec::new(),
         };
         if sets_needed == 0 {
             return Ok(d);
@@ -170,7 +181,7 @@ impl<'c> Descriptors<'c> {
     }
 
     /// Allocates and writes the set of pass `i` (none for copies and fills).
-    fn write_set(&self, g: &Graph, i: usize) -> Result<Option<vk::DescriptorSet>, VkError> {
+    fn write_set(&mut self, g: &Graph, i: usize) -> Result<Option<vk::DescriptorSet>, VkError> {
         let PassKind::Dispatch {
             pipeline,
             buffers,
@@ -189,8 +200,33 @@ impl<'c> Descriptors<'c> {
             )
         }?[0];
         for &(binding, r) in buffers {
+            let buffer = g.buffers[r].buffer();
+            if pipeline.bindings.get(binding as usize) == Some(&BindingKind::TexelBuffer) {
+                // The whole buffer in 16-byte texels (a trailing part of a texel is
+                // not addressable).
+                let range = buffer.size / 16 * 16;
+                let view = unsafe {
+                    self.dev.create_buffer_view(
+                        &vk::BufferViewCreateInfo::default()
+                            .buffer(buffer.raw)
+                            .format(crate::vk::TEXEL_BUFFER_FORMAT)
+                            .offset(0)
+                            .range(range),
+                        None,
+                    )
+                }?;
+                self.views.push(view);
+                let views = [view];
+                let w = vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(binding)
+                    .descriptor_type(vk::DescriptorType::UNIFORM_TEXEL_BUFFER)
+                    .texel_buffer_view(&views);
+                unsafe { self.dev.update_descriptor_sets(&[w], &[]) };
+                continue;
+            }
             let info = [vk::DescriptorBufferInfo::default()
-                .buffer(g.buffers[r].buffer().raw)
+                .buffer(buffer.raw)
                 .offset(0)
                 .range(vk::WHOLE_SIZE)];
             let w = vk::WriteDescriptorSet::default()
@@ -218,6 +254,9 @@ impl<'c> Descriptors<'c> {
 
 impl Drop for Descriptors<'_> {
     fn drop(&mut self) {
+        for &v in &self.views {
+            unsafe { self.dev.destroy_buffer_view(v, None) };
+        }
         if self.pool != vk::DescriptorPool::null() {
             unsafe { self.dev.destroy_descriptor_pool(self.pool, None) };
         }

@@ -245,18 +245,35 @@ impl TraceGeometry {
                 Data::RayQuery(Some(blas))
             }
             LevelKind::Software { nodes, tris } => {
+                // The passes over a software scene read their own buffers through device
+                // addresses, and the wide traversal's stack holds 64-bit words.
                 if !ctx.info.buffer_device_address {
                     return Err(VkError::NoBufferDeviceAddress);
                 }
                 if !ctx.info.shader_int64 {
                     return Err(VkError::NoShaderInt64);
                 }
-                // Read by the traversal through their device addresses (TraceScene's
-                // address table; every storage buffer has one, `Buffer::new`).
+                // Read by the traversal as texel buffers (16 bytes a fetch;
+                // glsl/common/trace_bvh.glsl `trace_node`, `trace_tri`), each within the
+                // device's texel limit.
+                let max = ctx.info.max_texel_buffer_elements as usize;
+                for (what, bytes) in [
+                    ("nodes", nodes.len()),
+                    ("triangles", std::mem::size_of_val(&tris[..])),
+                ] {
+                    if bytes / 16 > max {
+                        return Err(VkError::Other(format!(
+                            "the BVH's {what} take {} texels of 16 bytes; the device's texel buffers hold at most {max} (maxTexelBufferElements): the mesh has too many triangles ({})",
+                            bytes / 16,
+                            level.triangle_count
+                        )));
+                    }
+                }
+                let texels = storage | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
-                        nodes: Buffer::from_slice(ctx, "bvh nodes", nodes, storage)?,
-                        tris: Buffer::from_slice(ctx, "bvh triangles", tris, storage)?,
+                        nodes: Buffer::from_slice(ctx, "bvh nodes", nodes, texels)?,
+                        tris: Buffer::from_slice(ctx, "bvh triangles", tris, texels)?,
                     })
                 })?
             }
@@ -401,9 +418,6 @@ pub struct TraceScene {
     object: Arc<TraceGeometry>,
     second: TraceGeometry,
     tlas: Option<Tlas>,
-    /// Software backends: the device addresses of the object's nodes and triangles and
-    /// the second level's, in that order (u64 each; binding 4, glsl/common/trace.glsl).
-    addresses: Option<Buffer>,
     /// Triangles of both levels.
     pub triangle_count: usize,
     /// Build time of both levels (and the TLAS), ms.
@@ -413,8 +427,8 @@ pub struct TraceScene {
 /// Handles of a TraceScene inside one graph.
 pub enum TraceRefs {
     RayQuery(AccelRef),
-    /// The object's nodes and triangles, the second level's, and their address table.
-    Software([BufferRef; 5]),
+    /// The object's nodes and triangles, and the second level's (texel buffers).
+    Software([BufferRef; 4]),
 }
 
 impl TraceRefs {
@@ -422,9 +436,7 @@ impl TraceRefs {
     pub fn bind<'g, 'a>(&self, d: DispatchBuilder<'g, 'a>) -> DispatchBuilder<'g, 'a> {
         match self {
             TraceRefs::RayQuery(a) => d.accel(0, *a),
-            TraceRefs::Software([n, t, n2, t2, a]) => {
-                d.read(0, n).read(1, t).read(2, n2).read(3, t2).read(4, a)
-            }
+            TraceRefs::Software([n, t, n2, t2]) => d.read(0, n).read(1, t).read(2, n2).read(3, t2),
         }
     }
 }
@@ -479,24 +491,6 @@ impl TraceScene {
             }
             _ => None,
         };
-        let addresses = match (&object.data, &second.data) {
-            (
-                Data::Software { nodes, tris },
-                Data::Software {
-                    nodes: n2,
-                    tris: t2,
-                },
-            ) => {
-                let a = [nodes, tris, n2, t2].map(|b| b.device_address());
-                Some(Buffer::from_slice(
-                    ctx,
-                    "bvh addresses",
-                    &a,
-                    vk::BufferUsageFlags::STORAGE_BUFFER,
-                )?)
-            }
-            _ => None,
-        };
         let build_ms = second.build_ms + start.elapsed().as_secs_f64() * 1e3;
         Ok(TraceScene {
             backend,
@@ -505,7 +499,6 @@ impl TraceScene {
             object,
             second,
             tlas,
-            addresses,
         })
     }
 
@@ -525,12 +518,12 @@ impl TraceScene {
     }
 
     /// Descriptor kinds of the backend's bindings (they come first in every pipeline):
-    /// the software backends' four level buffers and their address table (as
+    /// the software backends' four level buffers, read as texel buffers (as
     /// TRACE_BINDING_COUNT in glsl/common/trace.glsl).
     pub fn binding_kinds(backend: Backend) -> Vec<BindingKind> {
         match backend {
             Backend::RayQuery => vec![BindingKind::AccelerationStructure],
-            Backend::Software | Backend::SoftwareWide => vec![BindingKind::StorageBuffer; 5],
+            Backend::Software | Backend::SoftwareWide => vec![BindingKind::TexelBuffer; 4],
         }
     }
 
@@ -545,19 +538,7 @@ impl TraceScene {
                     tris: t2,
                 },
                 None,
-            ) => {
-                let addresses = self
-                    .addresses
-                    .as_ref()
-                    .expect("software levels have an address table");
-                TraceRefs::Software([
-                    g.import(nodes),
-                    g.import(tris),
-                    g.import(n2),
-                    g.import(t2),
-                    g.import(addresses),
-                ])
-            }
+            ) => TraceRefs::Software([g.import(nodes), g.import(tris), g.import(n2), g.import(t2)]),
             _ => unreachable!("both levels are built for one backend"),
         }
     }
@@ -636,14 +617,16 @@ mod tests {
             timestamps_supported: true,
             queue_count: 1,
             max_storage_buffer_range: u32::MAX,
+            max_texel_buffer_elements: u32::MAX,
             max_workgroup_count: [65_535; 3],
             memory_heaps: Vec::new(),
             validation: false,
         }
     }
 
-    /// The software backends read their BVHs through buffer device addresses: a device
-    /// without them is refused by name for every choice that would pick one; with them
+    /// The passes over a software scene read their buffers through buffer device
+    /// addresses: a device without them is refused by name for every choice that would
+    /// pick a software backend; with them
     /// the choices resolve as before (ray query only where the device has it).
     #[test]
     fn software_backends_need_buffer_device_addresses() {

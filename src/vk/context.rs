@@ -55,6 +55,9 @@ pub struct DeviceInfo {
     /// [`MAX_QUEUES`]).
     pub queue_count: u32,
     pub max_storage_buffer_range: u32,
+    /// Texels a texel buffer view may span (the software BVH's levels are read as
+    /// texel buffers of 16-byte texels).
+    pub max_texel_buffer_elements: u32,
     pub max_workgroup_count: [u32; 3],
     pub memory_heaps: Vec<MemoryHeap>,
     pub validation: bool,
@@ -504,6 +507,7 @@ impl Context {
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,
             queue_count,
             max_storage_buffer_range: props.limits.max_storage_buffer_range,
+            max_texel_buffer_elements: props.limits.max_texel_buffer_elements,
             max_workgroup_count: props.limits.max_compute_work_group_count,
             memory_heaps: mem.memory_heaps[..mem.memory_heap_count as usize]
                 .iter()

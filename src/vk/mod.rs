@@ -11,7 +11,7 @@ pub mod profiler;
 pub use accel::{AccelStructure, Blas, Tlas};
 pub use context::{Context, ContextOptions, DeviceInfo, ValidationLog};
 pub use memory::{Buffer, Image, MemoryKind};
-pub use pipeline::{BindingKind, ComputePipeline};
+pub use pipeline::{BindingKind, ComputePipeline, TEXEL_BUFFER_FORMAT};
 pub use profiler::{Profiler, Span, timed};
 
 #[derive(Debug, thiserror::Error)]

@@ -11,14 +11,27 @@ use super::{Context, VkError};
 pub enum BindingKind {
     StorageBuffer,
     AccelerationStructure,
+    /// A buffer read as a uniform texel buffer of 16-byte texels
+    /// ([`TEXEL_BUFFER_FORMAT`]; GLSL `usamplerBuffer`, `texelFetch`).
+    TexelBuffer,
 }
+
+/// The format of every [`BindingKind::TexelBuffer`]'s view: four 32-bit words a texel.
+pub const TEXEL_BUFFER_FORMAT: vk::Format = vk::Format::R32G32B32A32_UINT;
 
 impl BindingKind {
     pub fn descriptor_type(self) -> vk::DescriptorType {
         match self {
             BindingKind::StorageBuffer => vk::DescriptorType::STORAGE_BUFFER,
             BindingKind::AccelerationStructure => vk::DescriptorType::ACCELERATION_STRUCTURE_KHR,
+            BindingKind::TexelBuffer => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
         }
+    }
+
+    /// Whether a buffer is bound at a binding of this kind (not an acceleration
+    /// structure).
+    pub fn takes_buffer(self) -> bool {
+        matches!(self, BindingKind::StorageBuffer | BindingKind::TexelBuffer)
     }
 }
 
