@@ -28,7 +28,6 @@ layout(local_size_x = TILE, local_size_y = TILE) in;
 // and the pixel list stay storage buffers (read at a lane-uniform or consecutive index).
 layout(std430, set = 0, binding = PT_ADDRESSES) readonly buffer Addresses { uvec2 pt_addr[]; };
 #define PT_ADDR(b) pt_addr[(b) - TRACE_BINDING_COUNT]
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TriRef { Tri v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer UintRef { uint v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Uvec2Ref { uvec2 v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatRef { float v[]; };
@@ -39,9 +38,23 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Li
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightTriRef { LightTri v[]; };
 // Geometry: the object's triangles (Tri), Materials: their material words,
 // LightGeometry: the view's light triangles (Tri), Lights: per light triangle, x its
-// emitter, y float bits of the inclusive area CDF within it.
-#define OBJECT_TRIS TriRef(PT_ADDR(PT_GEOMETRY)).v
-#define LIGHT_TRIS TriRef(PT_ADDR(PT_LIGHT_GEOMETRY)).v
+// emitter, y float bits of the inclusive area CDF within it. The two triangle arrays are
+// read as texel buffers, a Tri in three 16-byte fetches (lavapipe: one load a lane and
+// texel, where a load through an address is one a lane and word; docs/architecture.md).
+layout(set = 0, binding = PT_GEOMETRY) uniform usamplerBuffer pt_object_tris;
+layout(set = 0, binding = PT_LIGHT_GEOMETRY) uniform usamplerBuffer pt_light_tris;
+Tri object_tri(uint prim) {
+    int i = int(3u * prim);
+    return Tri(uintBitsToFloat(texelFetch(pt_object_tris, i)),
+               uintBitsToFloat(texelFetch(pt_object_tris, i + 1)),
+               uintBitsToFloat(texelFetch(pt_object_tris, i + 2)));
+}
+Tri light_tri(uint k) {
+    int i = int(3u * k);
+    return Tri(uintBitsToFloat(texelFetch(pt_light_tris, i)),
+               uintBitsToFloat(texelFetch(pt_light_tris, i + 1)),
+               uintBitsToFloat(texelFetch(pt_light_tris, i + 2)));
+}
 #define MATERIAL_WORDS UintRef(PT_ADDR(PT_MATERIALS)).v
 #define LIGHT_TRI_WORDS Uvec2Ref(PT_ADDR(PT_LIGHTS)).v
 // LightWeights: per light triangle its centroid, twice its area and unit normal (LightTri).
@@ -133,17 +146,9 @@ float power_heuristic(float a, float b) {
 }
 
 // Triangles are numbered object (with the table) first, then the view's lights: the
-// object's live in `tris`, the lights' in `light_tris` (a second trace level).
-// (Member by member: the two blocks' Tri are distinct SPIR-V types.)
+// object's live in Geometry, the lights' in LightGeometry (a second trace level).
 Tri fetch_tri(uint prim) {
-    Tri t;
-    if (prim < prm.light_first) {
-        t.a = OBJECT_TRIS[prim].a; t.b = OBJECT_TRIS[prim].b; t.c = OBJECT_TRIS[prim].c;
-    } else {
-        uint k = prim - prm.light_first;
-        t.a = LIGHT_TRIS[k].a; t.b = LIGHT_TRIS[k].b; t.c = LIGHT_TRIS[k].c;
-    }
-    return t;
+    return prim < prm.light_first ? object_tri(prim) : light_tri(prim - prm.light_first);
 }
 
 // Material in the low byte, slope-map slot above it (MAT_MAP_SHIFT); light triangles are
@@ -224,8 +229,9 @@ vec3 oct_decode(float code) {
 
 // The smooth normal of an object triangle of a triplanar patch at barycentrics bary.
 vec3 smooth_normal(uint prim, vec2 bary) {
-    vec3 n = oct_decode(OBJECT_TRIS[prim].a.w) * (1.0 - bary.x - bary.y)
-        + oct_decode(OBJECT_TRIS[prim].b.w) * bary.x + oct_decode(OBJECT_TRIS[prim].c.w) * bary.y;
+    Tri t = object_tri(prim);
+    vec3 n = oct_decode(t.a.w) * (1.0 - bary.x - bary.y)
+        + oct_decode(t.b.w) * bary.x + oct_decode(t.c.w) * bary.y;
     float l = length(n);
     return l > 0.0 ? n / l : n;
 }
@@ -546,9 +552,10 @@ void pixel_plane_init(uint px, uint py) {
     Hit h = trace(o, d, 0.0, 3.0e38);
     if (h.prim == NO_HIT) return;
     if (h.prim < prm.light_first) {
-        pix_hint.a = OBJECT_TRIS[h.prim].a.xyz;
-        pix_hint.b = OBJECT_TRIS[h.prim].b.xyz;
-        pix_hint.c = OBJECT_TRIS[h.prim].c.xyz;
+        Tri ht = object_tri(h.prim);
+        pix_hint.a = ht.a.xyz;
+        pix_hint.b = ht.b.xyz;
+        pix_hint.c = ht.c.xyz;
         pix_hint.prim = h.prim;
         // The pixel's camera rays as one bundle (their object hits among a few triangles).
         vec3 right = normalize(prm.cam.right.xyz), up = normalize(prm.cam.up.xyz);

@@ -61,7 +61,7 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
         &ctx,
         "hits",
         Backend::Software,
-        HitsBinding::COUNT,
+        &[synosis::vk::BindingKind::StorageBuffer; HitsBinding::COUNT],
         16,
         [64, 1, 1],
         &[],

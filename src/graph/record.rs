@@ -375,6 +375,41 @@ mod tests {
         check_dispatch("p", &l, &bound(&[(1, 0), (2, 1)], &[(0, 0)]), LIMIT).unwrap();
     }
 
+    /// A buffer goes to a storage or a texel buffer binding, as the pipeline declares;
+    /// an acceleration structure at a texel buffer binding, or a texel buffer binding
+    /// left unbound, is an error.
+    #[test]
+    fn a_buffer_binds_to_a_texel_buffer_binding() {
+        use BindingKind::TexelBuffer as Texels;
+        let l = layout(&[Texels, Storage]);
+        check_dispatch("p", &l, &bound(&[(0, 0), (1, 1)], &[]), LIMIT).unwrap();
+        let e = check_dispatch("p", &l, &bound(&[(1, 1)], &[(0, 0)]), LIMIT).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                VkError::BindingMismatch {
+                    binding: 0,
+                    bound: Accel,
+                    declared: Some(Texels),
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        let e = check_dispatch("p", &l, &bound(&[(1, 1)], &[]), LIMIT).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                VkError::UnboundBinding {
+                    binding: 0,
+                    kind: Texels,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+    }
+
     #[test]
     fn an_unbound_binding_names_pass_pipeline_and_binding() {
         let l = layout(&[Storage, Storage]);

@@ -22,7 +22,7 @@ use crate::scene::Camera;
 use crate::scene::assemble::{RenderScene, load_object};
 use crate::scene::config::SceneConfig;
 use crate::trace::{Backend, TraceScene, trace_pipeline};
-use crate::vk::{ComputePipeline, Context, ContextOptions, VkError};
+use crate::vk::{BindingKind, ComputePipeline, Context, ContextOptions, VkError};
 
 /// The path tracer (`glsl/path_trace.comp`), with `specialization` (from
 /// `PathParams::specialization`) its settings compiled in, or none: read at run time.
@@ -36,11 +36,29 @@ pub fn path_trace(
         ctx,
         "path_trace",
         backend,
-        PathTraceBinding::COUNT,
+        &path_trace_kinds(),
         push,
         [TILE, TILE, 1],
         specialization,
     )
+}
+
+/// The path tracer's bindings after the backend's: storage buffers, but the object's
+/// and the lights' triangles, which `fetch_tri` reads as texel buffers (16 bytes a
+/// fetch: lavapipe reads a texel a lane with one load where a storage buffer or a
+/// device address is a load a lane and word, docs/architecture.md).
+fn path_trace_kinds() -> Vec<BindingKind> {
+    (0..PathTraceBinding::COUNT)
+        .map(|i| {
+            if i == PathTraceBinding::Geometry as usize
+                || i == PathTraceBinding::LightGeometry as usize
+            {
+                BindingKind::TexelBuffer
+            } else {
+                BindingKind::StorageBuffer
+            }
+        })
+        .collect()
 }
 
 /// The annotation pass (`glsl/annotate.comp`).
@@ -50,7 +68,7 @@ pub fn annotate(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline,
         ctx,
         "annotate",
         backend,
-        AnnotateBinding::COUNT,
+        &[BindingKind::StorageBuffer; AnnotateBinding::COUNT],
         push,
         [TILE, TILE, 1],
         &[],
@@ -64,7 +82,7 @@ pub fn hits(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkE
         ctx,
         "hits",
         backend,
-        HitsBinding::COUNT,
+        &[BindingKind::StorageBuffer; HitsBinding::COUNT],
         push,
         [64, 1, 1],
         &[],
@@ -78,7 +96,7 @@ pub fn raycast(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, 
         ctx,
         "raycast",
         backend,
-        RaycastBinding::COUNT,
+        &[BindingKind::StorageBuffer; RaycastBinding::COUNT],
         push,
         [TILE, TILE, 1],
         &[],

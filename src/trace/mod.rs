@@ -230,8 +230,10 @@ impl TraceGeometry {
         profiler: Option<&Profiler>,
     ) -> Result<Self, VkError> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let texels = storage | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         let backend = level.backend;
-        let shade_tris = Buffer::from_slice(ctx, "shade triangles", &level.shade, storage)?;
+        // Read by the path tracer as a texel buffer too (its `fetch_tri`).
+        let shade_tris = Buffer::from_slice(ctx, "shade triangles", &level.shade, texels)?;
         let start = std::time::Instant::now();
         let data = match &level.kind {
             LevelKind::RayQuery { positions, .. } if positions.is_empty() => Data::RayQuery(None),
@@ -269,7 +271,6 @@ impl TraceGeometry {
                         )));
                     }
                 }
-                let texels = storage | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
                         nodes: Buffer::from_slice(ctx, "bvh nodes", nodes, texels)?,
@@ -544,14 +545,14 @@ impl TraceScene {
     }
 }
 
-/// Creates the pipeline of shader `name` for `backend`, with `extra` pass bindings
-/// (storage buffers) after the backend's and the given specialization constants
-/// ((constant_id, value); none: the shader's defaults).
+/// Creates the pipeline of shader `name` for `backend`, with the pass's bindings `extra`
+/// after the backend's and the given specialization constants ((constant_id, value);
+/// none: the shader's defaults).
 pub fn trace_pipeline(
     ctx: &Arc<Context>,
     name: &str,
     backend: Backend,
-    extra: usize,
+    extra: &[BindingKind],
     push_size: u32,
     local_size: [u32; 3],
     specialization: &[(u32, u32)],
@@ -560,7 +561,7 @@ pub fn trace_pipeline(
     let spirv = crate::shaders::spirv(&variant)
         .ok_or_else(|| VkError::Other(format!("no shader variant {variant}")))?;
     let mut kinds = TraceScene::binding_kinds(backend);
-    kinds.extend(std::iter::repeat_n(BindingKind::StorageBuffer, extra));
+    kinds.extend_from_slice(extra);
     ComputePipeline::new(
         ctx,
         &variant,
