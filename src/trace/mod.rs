@@ -232,7 +232,22 @@ impl TraceGeometry {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let texels = storage | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         let backend = level.backend;
-        // Read by the path tracer as a texel buffer too (its `fetch_tri`).
+        // Read by the path tracer as a texel buffer (its `fetch_tri`), as the software
+        // levels' nodes and triangles are by the traversal (16 bytes a fetch;
+        // glsl/common/trace_bvh.glsl `trace_node`, `trace_tri`): each within the device's
+        // texel limit.
+        let within_texels = |what: &str, bytes: usize| {
+            let max = ctx.info.max_texel_buffer_elements as usize;
+            if bytes / 16 > max {
+                return Err(VkError::Other(format!(
+                    "the {what} take {} texels of 16 bytes; the device's texel buffers hold at most {max} (maxTexelBufferElements): the mesh has too many triangles ({})",
+                    bytes / 16,
+                    level.triangle_count
+                )));
+            }
+            Ok(())
+        };
+        within_texels("shading triangles", std::mem::size_of_val(&level.shade[..]))?;
         let shade_tris = Buffer::from_slice(ctx, "shade triangles", &level.shade, texels)?;
         let start = std::time::Instant::now();
         let data = match &level.kind {
@@ -255,22 +270,8 @@ impl TraceGeometry {
                 if !ctx.info.shader_int64 {
                     return Err(VkError::NoShaderInt64);
                 }
-                // Read by the traversal as texel buffers (16 bytes a fetch;
-                // glsl/common/trace_bvh.glsl `trace_node`, `trace_tri`), each within the
-                // device's texel limit.
-                let max = ctx.info.max_texel_buffer_elements as usize;
-                for (what, bytes) in [
-                    ("nodes", nodes.len()),
-                    ("triangles", std::mem::size_of_val(&tris[..])),
-                ] {
-                    if bytes / 16 > max {
-                        return Err(VkError::Other(format!(
-                            "the BVH's {what} take {} texels of 16 bytes; the device's texel buffers hold at most {max} (maxTexelBufferElements): the mesh has too many triangles ({})",
-                            bytes / 16,
-                            level.triangle_count
-                        )));
-                    }
-                }
+                within_texels("BVH's nodes", nodes.len())?;
+                within_texels("BVH's triangles", std::mem::size_of_val(&tris[..]))?;
                 timed(profiler, "upload BVH", || -> Result<Data, VkError> {
                     Ok(Data::Software {
                         nodes: Buffer::from_slice(ctx, "bvh nodes", nodes, texels)?,
