@@ -472,8 +472,8 @@ impl Context {
         let mut rq_on = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let mut as_on = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
             .acceleration_structure(true);
-        // 64-bit integers: the software traversal loads its nodes and triangles eight
-        // bytes at a time (glsl/common/trace.glsl, `words_uvec4`).
+        // 64-bit integers: the wide software traversal's stack entries are 64-bit words
+        // (glsl/common/trace_bvh.glsl).
         let shader_int64 =
             unsafe { instance.get_physical_device_features(physical) }.shader_int64 == vk::TRUE;
         let features = vk::PhysicalDeviceFeatures::default().shader_int64(shader_int64);
