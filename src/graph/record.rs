@@ -131,8 +131,9 @@ pub(super) struct Descriptors<'c> {
     dev: &'c ash::Device,
     pool: vk::DescriptorPool,
     sets: HashMap<usize, vk::DescriptorSet>,
-    /// The texel buffers' views (destroyed with the pool).
-    views: Vec<vk::BufferView>,
+    /// The texel buffers' views, one per graph buffer however many dispatches read it
+    /// (destroyed with the pool).
+    views: HashMap<usize, vk::BufferView>,
 }
 
 impl<'c> Descriptors<'c> {
@@ -152,7 +153,7 @@ impl<'c> Descriptors<'c> {
             dev,
             pool: vk::DescriptorPool::null(),
             sets: HashMap::new(),
-            views: Vec::new(),
+            views: HashMap::new(),
         };
         if sets_needed == 0 {
             return Ok(d);
@@ -202,20 +203,26 @@ impl<'c> Descriptors<'c> {
         for &(binding, r) in buffers {
             let buffer = g.buffers[r].buffer();
             if pipeline.bindings.get(binding as usize) == Some(&BindingKind::TexelBuffer) {
-                // The whole buffer in 16-byte texels (a trailing part of a texel is
-                // not addressable).
-                let range = buffer.size / 16 * 16;
-                let view = unsafe {
-                    self.dev.create_buffer_view(
-                        &vk::BufferViewCreateInfo::default()
-                            .buffer(buffer.raw)
-                            .format(crate::vk::TEXEL_BUFFER_FORMAT)
-                            .offset(0)
-                            .range(range),
-                        None,
-                    )
-                }?;
-                self.views.push(view);
+                let view = match self.views.get(&r) {
+                    Some(&v) => v,
+                    None => {
+                        // The whole buffer in 16-byte texels (a trailing part of a texel
+                        // is not addressable).
+                        let range = buffer.size / 16 * 16;
+                        let v = unsafe {
+                            self.dev.create_buffer_view(
+                                &vk::BufferViewCreateInfo::default()
+                                    .buffer(buffer.raw)
+                                    .format(crate::vk::TEXEL_BUFFER_FORMAT)
+                                    .offset(0)
+                                    .range(range),
+                                None,
+                            )
+                        }?;
+                        self.views.insert(r, v);
+                        v
+                    }
+                };
                 let views = [view];
                 let w = vk::WriteDescriptorSet::default()
                     .dst_set(set)
@@ -254,7 +261,7 @@ impl<'c> Descriptors<'c> {
 
 impl Drop for Descriptors<'_> {
     fn drop(&mut self) {
-        for &v in &self.views {
+        for &v in self.views.values() {
             unsafe { self.dev.destroy_buffer_view(v, None) };
         }
         if self.pool != vk::DescriptorPool::null() {
