@@ -24,8 +24,9 @@ layout(local_size_x = TILE, local_size_y = TILE) in;
 // Addresses in src/gpu_interface.in: one uvec2 per binding, in binding order; the
 // bindings stay bound so that the graph sees the reads): lavapipe (Mesa 25.0) loads a
 // storage buffer at a per-lane index one lane and one word at a time behind branches,
-// a buffer reference as one masked gather per word. Params, the sums, the label targets
-// and the pixel list stay storage buffers (read at a lane-uniform or consecutive index).
+// a buffer reference as one masked gather per word. Params, the light list, the sums,
+// the label targets and the pixel list stay storage buffers (read at a lane-uniform or
+// consecutive index).
 layout(std430, set = 0, binding = PT_ADDRESSES) readonly buffer Addresses { uvec2 pt_addr[]; };
 #define PT_ADDR(b) pt_addr[(b) - TRACE_BINDING_COUNT]
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer UintRef { uint v[]; };
@@ -34,7 +35,6 @@ layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Flo
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MapHeaderRef { MapHeader v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer CurvedMapRef { CurvedMapBlock v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SurfaceRef { SurfaceBlock v[]; };
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightBlockRef { LightBlock v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightTriRef { LightTri v[]; };
 // Geometry: the object's triangles (Tri), Materials: their material words,
 // LightGeometry: the view's light triangles (Tri), Lights: per light triangle, x its
@@ -43,6 +43,10 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Li
 // texel, where a load through an address is one a lane and word; docs/architecture.md).
 layout(set = 0, binding = PT_GEOMETRY) uniform usamplerBuffer pt_object_tris;
 layout(set = 0, binding = PT_LIGHT_GEOMETRY) uniform usamplerBuffer pt_light_tris;
+// LightList: one LightBlock a light (lights.glsl EMITTERS), a storage buffer read at a
+// lane-uniform index only (lavapipe then loads a word once for all lanes; emitter_block
+// picks a lane's own block by a uniform loop over the few lights).
+layout(std430, set = 0, binding = PT_LIGHT_LIST) readonly buffer LightList { LightBlock pt_emitters[]; };
 Tri object_tri(uint prim) {
     int i = int(3u * prim);
     return Tri(uintBitsToFloat(texelFetch(pt_object_tris, i)),
@@ -646,7 +650,7 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
     if (k >= 32u || (mask & (1u << k)) == 0u) return 0.0;
     float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
     if (!(cos_l > 0.0)) return 0.0;
-    return EMITTERS[k].emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
+    return emitter_block(k).emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
         / float(max(PRM_BSDF_SAMPLES, 1u));
 }
 
@@ -767,7 +771,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             if (k < lights) {
                 float ue = sample_1d(rng);
                 uint ei = choose_emitter(ue);
-                LightBlock e = EMITTERS[ei];
+                LightBlock e = emitter_block(ei);
                 vec2 ul = sample_2d(rng);
                 // The sample's shadow ray (one trace for both kinds of light, below) and what
                 // it adds where nothing blocks it.

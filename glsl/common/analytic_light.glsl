@@ -364,22 +364,24 @@ bool ring_cv_valid(uint k, vec3 x) {
     if (!(sin_k < 0.8)) return false;
     float far_k = dist + big_r + r;
     float cone_k = asin(sin_k);
+    // Every other light checked, at a lane-uniform index (EMITTERS, lights.glsl).
+    bool clear = true;
     for (uint j = 0u; j < PRM_EMITTER_COUNT; j++) {
         LightBlock o = EMITTERS[j];
         if (j == k || o.reach.y < 0.0) continue;   // itself, or a spot (nothing to hit)
         vec3 dj = o.pos.xyz - x;
         float lj = length(dj);
+        bool ok_j;
         if (lj < o.reach.x) {
             // x inside the light's inner shell (a dome): all of it beyond the ring?
-            if (o.reach.x - lj > far_k) continue;
-            return false;
+            ok_j = o.reach.x - lj > far_k;
+        } else {
+            ok_j = !(lj <= o.reach.y || lj - o.reach.y <= far_k
+                     && acos(clamp(dot(dj, d) / (lj * dist), -1.0, 1.0)) <= cone_k + asin(o.reach.y / lj));
         }
-        if (lj <= o.reach.y || lj - o.reach.y <= far_k
-                && acos(clamp(dot(dj, d) / (lj * dist), -1.0, 1.0)) <= cone_k + asin(o.reach.y / lj)) {
-            return false;
-        }
+        clear = clear && ok_j;
     }
-    return true;
+    return clear;
 }
 
 // The control variate's closed form at x (shading and geometric normals ns, ng): the
@@ -391,12 +393,14 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
     float a = 0.0;
     for (uint k = 0u; k < min(PRM_EMITTER_COUNT, 32u); k++) {
         LightBlock e = EMITTERS[k];
-        if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
-        bool ok;
-        float integral = ring_integral(e, l, x, ns, ng, divisor, -1, ok);
-        if (!ok) continue;
-        a += l.c * e.emit.x * integral;
-        mask |= 1u << k;
+        if (e.emit.z > 0.0 && ring_cv_valid(k, x)) {
+            bool ok;
+            float integral = ring_integral(e, l, x, ns, ng, divisor, -1, ok);
+            if (ok) {
+                a += l.c * e.emit.x * integral;
+                mask |= 1u << k;
+            }
+        }
     }
     return a;
 }
@@ -426,15 +430,16 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
     Lobe unused;   // the walk records only: no lobe is evaluated
     unused.t1 = unused.t2 = unused.r = ng;
     unused.a1 = unused.a2 = unused.c = 1.0;
-    for (uint k = 0u; k < min(PRM_EMITTER_COUNT, 32u) && rec_rings < REC_RINGS; k++) {
+    for (uint k = 0u; k < min(PRM_EMITTER_COUNT, 32u); k++) {
         LightBlock e = EMITTERS[k];
-        if (e.emit.z <= 0.0 || !ring_cv_valid(k, x)) continue;
-        bool ok;
-        ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ok);
-        if (ok) {
-            rec_le[rec_rings] = e.emit.x;
-            rec_cone[rec_rings] = recorded_cone(rec_rings);
-            rec_rings++;
+        if (rec_rings < REC_RINGS && e.emit.z > 0.0 && ring_cv_valid(k, x)) {
+            bool ok;
+            ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ok);
+            if (ok) {
+                rec_le[rec_rings] = e.emit.x;
+                rec_cone[rec_rings] = recorded_cone(rec_rings);
+                rec_rings++;
+            }
         }
     }
 }

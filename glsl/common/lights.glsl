@@ -11,22 +11,47 @@
 // edge and of the inner edge of the soft falloff. `LIGHT_TRI_WORDS[k]`: emitter of light
 // triangle k (x) and the inclusive area CDF of k within its emitter (y, float bits).
 
-// (LightList, read through its address as path_trace.comp's other buffers.)
-#define EMITTERS LightBlockRef(PT_ADDR(PT_LIGHT_LIST)).v
+// (LightList, a storage buffer: path_trace.comp.) Read only at a lane-uniform index:
+// lavapipe then loads each word once for all lanes, where a per-lane index costs a
+// branch and a load per lane and word (docs/architecture.md). A lane's own light, at a
+// per-lane index, comes from emitter_block; loops over the lights keep their index
+// uniform (no per-lane `continue`, `break` or `return` inside them).
+#define EMITTERS pt_emitters
+
+// Light ei's block, for an index that may differ between lanes: every block is read at
+// a uniform index and the lane's kept (one light: one read, no loop).
+LightBlock emitter_block(uint ei) {
+    LightBlock b = EMITTERS[0];
+    for (uint k = 1u; k < uint(EMITTERS.length()); k++) {
+        LightBlock c = EMITTERS[k];
+        if (k == ei) b = c;
+    }
+    return b;
+}
 
 // Probability of choosing emitter e.
 float emitter_pdf(uint e) {
-    float lo = e == 0u ? 0.0 : EMITTERS[e - 1u].emit.w;
-    return EMITTERS[e].emit.w - lo;
+    float lo = 0.0, hi = EMITTERS[0].emit.w;
+    for (uint k = 1u; k < uint(EMITTERS.length()); k++) {
+        float below = EMITTERS[k - 1u].emit.w, w = EMITTERS[k].emit.w;
+        if (k == e) { lo = below; hi = w; }
+    }
+    return hi - lo;
 }
 
 // Chooses an emitter with u in [0, 1) by the CDF and rescales u to [0, 1) within the
-// chosen interval (one light: u unchanged).
+// chosen interval (one light: u unchanged): the first emitter whose inclusive CDF
+// exceeds u, else the last (the CDF does not decrease).
 uint choose_emitter(inout float u) {
     uint e = 0u;
-    while (e + 1u < PRM_EMITTER_COUNT && !(u < EMITTERS[e].emit.w)) e++;
-    float lo = e == 0u ? 0.0 : EMITTERS[e - 1u].emit.w;
-    float p = EMITTERS[e].emit.w - lo;
+    float lo = 0.0, hi = EMITTERS[0].emit.w;
+    bool found = false;
+    for (uint k = 0u; k + 1u < PRM_EMITTER_COUNT; k++) {
+        float w = EMITTERS[k].emit.w, next = EMITTERS[k + 1u].emit.w;
+        found = found || u < w;
+        if (!found) { e = k + 1u; lo = w; hi = next; }
+    }
+    float p = hi - lo;
     if (p > 0.0) u = clamp((u - lo) / p, 0.0, 0.99999994);
     return e;
 }
@@ -40,36 +65,42 @@ uint choose_emitter(inout float u) {
 // largest at the slab's faces). Rays within a twentieth of parallel to a ring's plane
 // are not decided. Dark lights (no emitter counted) still block rays: not decided.
 // Never with `[render] light_shortcuts = false` (PathParams::shortcuts 0).
+// misses_lights for one light b (dd = dot(d, d)).
+bool light_missed(LightBlock b, vec3 o, vec3 d, float dd) {
+    if (b.reach.y < 0.0) return true;   // a spot: nothing to hit
+    vec3 p = o - b.pos.xyz;
+    float r = b.reach.y * 1.0001 + 1e-3;
+    float pd = dot(p, d);
+    float c = dot(p, p) - r * r;
+    if (c > 0.0 && (pd >= 0.0 || pd * pd < dd * c)) return true;   // the sphere missed
+    if (b.reach.w <= 0.0) return false;   // not a ring: met for all we know
+    vec3 a = b.dir.xyz;
+    float z0 = dot(p, a);
+    float dz = dot(d, a);
+    if (abs(dz) < 0.05 * sqrt(dd)) return false;
+    float t1 = (-b.reach.w - z0) / dz;
+    float t2 = (b.reach.w - z0) / dz;
+    float thi = max(t1, t2);
+    if (thi < 0.0) return true;   // the slab behind the ray
+    vec3 q1 = p + max(min(t1, t2), 0.0) * d;
+    vec3 q2 = p + thi * d;
+    vec3 r1 = q1 - dot(q1, a) * a;
+    vec3 r2 = q2 - dot(q2, a) * a;
+    float h2 = b.reach.z * b.reach.z;
+    return dot(r1, r1) < h2 && dot(r2, r2) < h2;   // through the hole only
+}
+
 bool misses_lights(vec3 o, vec3 d) {
     if (PRM_SHORTCUTS == 0u) return false;   // [render] light_shortcuts = false
     if (PRM_LIGHT_COUNT == 0u) return true;
     if (PRM_EMITTER_COUNT == 0u) return false;
     float dd = dot(d, d);
+    bool missed = true;
     for (uint e = 0u; e < PRM_EMITTER_COUNT; e++) {
-        LightBlock b = EMITTERS[e];
-        if (b.reach.y < 0.0) continue;   // a spot: nothing to hit
-        vec3 p = o - b.pos.xyz;
-        float r = b.reach.y * 1.0001 + 1e-3;
-        float pd = dot(p, d);
-        float c = dot(p, p) - r * r;
-        if (c > 0.0 && (pd >= 0.0 || pd * pd < dd * c)) continue;   // the sphere missed
-        if (b.reach.w <= 0.0) return false;   // not a ring: met for all we know
-        vec3 a = b.dir.xyz;
-        float z0 = dot(p, a);
-        float dz = dot(d, a);
-        if (abs(dz) < 0.05 * sqrt(dd)) return false;
-        float t1 = (-b.reach.w - z0) / dz;
-        float t2 = (b.reach.w - z0) / dz;
-        float thi = max(t1, t2);
-        if (thi < 0.0) continue;   // the slab behind the ray
-        vec3 q1 = p + max(min(t1, t2), 0.0) * d;
-        vec3 q2 = p + thi * d;
-        vec3 r1 = q1 - dot(q1, a) * a;
-        vec3 r2 = q2 - dot(q2, a) * a;
-        float h2 = b.reach.z * b.reach.z;
-        if (!(dot(r1, r1) < h2 && dot(r2, r2) < h2)) return false;   // not through the hole
+        bool m = light_missed(EMITTERS[e], o, d, dd);
+        missed = missed && m;
     }
-    return true;
+    return missed;
 }
 
 // Whether no other light triangle can hide light triangle `li` from point x: x lies in
@@ -88,7 +119,7 @@ bool light_unhidden(uint li, vec3 x) {
 uint emitter_of(uint tri) { return LIGHT_TRI_WORDS[tri - prm.light_first].x; }
 
 // Radiance of light triangle `tri`.
-float tri_radiance(uint tri) { return EMITTERS[emitter_of(tri)].emit.x; }
+float tri_radiance(uint tri) { return emitter_block(emitter_of(tri)).emit.x; }
 
 // A triangle of area light e by area, from its CDF.
 uint pick_area_tri(LightBlock e, float u) {
@@ -158,7 +189,7 @@ float segment_weight_memo(uint base, uint segment_tris, vec3 x, vec3 n) {
 float light_area_pdf(uint tri, vec3 x, vec3 n) {
     if (tri < prm.light_first) return 0.0;
     uint ei = emitter_of(tri);
-    LightBlock e = EMITTERS[ei];
+    LightBlock e = emitter_block(ei);
     float sel = emitter_pdf(ei);
     if (e.shape.z != LIGHT_FACING) return (1.0 / e.emit.y) * sel;
     uint segments = e.shape.w;

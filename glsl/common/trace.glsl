@@ -177,14 +177,22 @@ layout(set = 0, binding = 3) uniform usamplerBuffer trace_tris1;
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 
 // Slab test; the far distance is widened by 3 ulps-worth (Ize 2013) so rounding never
-// drops a box that the ray grazes.
+// drops a box that the ray grazes. The minima and maxima are selects, not min() and
+// max(): no value here is NaN (inv_d is finite, trace_prepare), and lavapipe compiles a
+// select of a comparison to one vminps or vmaxps where GLSL's min and max also carry
+// NaN handling (a compare and a blend each); the same values either way.
 bool trace_box(vec3 bmin, vec3 bmax, vec3 o, vec3 inv_d, float tmin, float tmax, out float tnear) {
     vec3 t0 = (bmin - o) * inv_d;
     vec3 t1 = (bmax - o) * inv_d;
-    vec3 lo = min(t0, t1);
-    vec3 hi = max(t0, t1);
-    tnear = max(max(lo.x, lo.y), max(lo.z, tmin));
-    float tfar = min(min(hi.x, hi.y), min(hi.z, tmax)) * 1.0000004;
+    bvec3 lt = lessThan(t0, t1);
+    vec3 lo = mix(t1, t0, lt);
+    vec3 hi = mix(t0, t1, lt);
+    float n0 = lo.x > lo.y ? lo.x : lo.y;
+    float n1 = lo.z > tmin ? lo.z : tmin;
+    tnear = n0 > n1 ? n0 : n1;
+    float f0 = hi.x < hi.y ? hi.x : hi.y;
+    float f1 = hi.z < tmax ? hi.z : tmax;
+    float tfar = (f0 < f1 ? f0 : f1) * 1.0000004;
     return tnear <= tfar;
 }
 

@@ -250,7 +250,6 @@ impl<'s> View<'s> {
             (B::Slopes1, texels[1]),
             (B::Slopes2, texels[2]),
             (B::LightGeometry, trace.second_shade_tris()),
-            (B::LightList, &emitters),
             (B::Surfaces, &scene.surfaces),
             (B::CurvedMaps, scene.curved_buffer()),
             (B::Moments0, moments[0]),
