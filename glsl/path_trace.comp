@@ -31,14 +31,15 @@ layout(std430, set = 0, binding = PT_ADDRESSES) readonly buffer Addresses { uvec
 #define PT_ADDR(b) pt_addr[(b) - TRACE_BINDING_COUNT]
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer UintRef { uint v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Uvec2Ref { uvec2 v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Uvec4Ref { uvec4 v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatRef { float v[]; };
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MapHeaderRef { MapHeader v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer CurvedMapRef { CurvedMapBlock v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SurfaceRef { SurfaceBlock v[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer LightTriRef { LightTri v[]; };
 // Geometry: the object's triangles (Tri), Materials: their material words,
 // LightGeometry: the view's light triangles (Tri), Lights: per light triangle, x its
-// emitter, y float bits of the inclusive area CDF within it. The two triangle arrays are
+// emitter, y float bits of the inclusive area CDF within it, zw a guide table's entry
+// (lights.glsl pick_area_tri). The two triangle arrays are
 // read as texel buffers, a Tri in three 16-byte fetches (lavapipe: one load a lane and
 // texel, where a load through an address is one a lane and word; docs/architecture.md).
 layout(set = 0, binding = PT_GEOMETRY) uniform usamplerBuffer pt_object_tris;
@@ -60,7 +61,7 @@ Tri light_tri(uint k) {
                uintBitsToFloat(texelFetch(pt_light_tris, i + 2)));
 }
 #define MATERIAL_WORDS UintRef(PT_ADDR(PT_MATERIALS)).v
-#define LIGHT_TRI_WORDS Uvec2Ref(PT_ADDR(PT_LIGHTS)).v
+#define LIGHT_TRI_WORDS Uvec4Ref(PT_ADDR(PT_LIGHTS)).v
 // LightWeights: per light triangle its centroid, twice its area and unit normal (LightTri).
 #define LIGHT_TRI_WEIGHTS LightTriRef(PT_ADDR(PT_LIGHT_WEIGHTS)).v
 #include "common/ggx.glsl"
@@ -92,7 +93,19 @@ layout(std430, set = 0, binding = PT_PIXEL_LIST) readonly buffer PixelList { uin
 // planar region r of the object; see src/render/slope.rs. MapHeader: origin (xyz map
 // centre, world mm; w texels per mm), axis_x (map x axis), axis_up (map up axis, -y),
 // dims (width, height, first texel, buffer + 1 | MAP_WRAP; 0 = no map).
-#define MAP_HEADERS MapHeaderRef(PT_ADDR(PT_MAP_HEADERS)).v
+// MapHeaders: per map slot its MapHeader, read as a texel buffer (four 16-byte texels a
+// header; the slot differs between lanes: a texel is one load a lane, where a word
+// through an address is a branch and a load a lane, docs/architecture.md).
+layout(set = 0, binding = PT_MAP_HEADERS) uniform usamplerBuffer pt_map_headers;
+MapHeader map_header(uint slot) {
+    int i = int(4u * slot);
+    return MapHeader(uintBitsToFloat(texelFetch(pt_map_headers, i)),
+                     uintBitsToFloat(texelFetch(pt_map_headers, i + 1)),
+                     uintBitsToFloat(texelFetch(pt_map_headers, i + 2)),
+                     texelFetch(pt_map_headers, i + 3));
+}
+// A slot's MapHeader::dims alone.
+uvec4 map_dims(uint slot) { return texelFetch(pt_map_headers, int(4u * slot + 3u)); }
 // Texels of up to three distinct maps, one buffer each (Slopes0-2): two f16 slopes
 // [dh/dx, dh/dy] per uint.
 
@@ -214,7 +227,7 @@ vec2 slopes_at(MapHeader m, vec2 q) {
 
 // Bilinear slopes at p on a planar or revolved slot (zero without a map).
 vec2 map_slopes(uint slot, vec3 p) {
-    MapHeader m = MAP_HEADERS[slot];
+    MapHeader m = map_header(slot);
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return vec2(0.0);
     return slopes_at(m, map_plane(slot, m, p));
 }
@@ -284,7 +297,7 @@ vec3 triplanar_normal(uint slot, MapHeader m, vec3 p, vec3 ng, vec3 ns) {
 // projected into the triangle's plane, so triangles that are not coplanar with the
 // region (defect patches given to it) still get a normal in their own hemisphere.
 vec3 shading_normal(uint slot, vec3 p, vec3 ng, uint prim, vec2 bary) {
-    MapHeader m = MAP_HEADERS[slot];
+    MapHeader m = map_header(slot);
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
     if ((m.dims.w & MAP_TRIPLANAR) != 0u) {
         return triplanar_normal(slot, m, p, ng, smooth_normal(prim, bary));
@@ -325,7 +338,7 @@ uint lean_top(MapHeader m) {
 bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
     mean = vec2(0.0);
     var = 0.0;
-    MapHeader m = MAP_HEADERS[slot];
+    MapHeader m = map_header(slot);
     uint buf = m.dims.w & MAP_BUFFER_MASK;
     uint w = (m.dims.x + (1u << k) - 1u) >> k;
     uint ht = (m.dims.y + (1u << k) - 1u) >> k;
@@ -385,7 +398,7 @@ bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
 vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
     var = 0.0;
     vec2 m0 = map_slopes(slot, p);
-    MapHeader m = MAP_HEADERS[slot];
+    MapHeader m = map_header(slot);
     uint top = lean_top(m);
     if (!(lambda > 0.0) || top == 0u) return m0;
     float l = min(lambda, float(top));
@@ -423,7 +436,7 @@ vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
 // variance under the footprint (0 where the map does not apply).
 vec3 shading_normal_lean(uint slot, vec3 p, vec3 ng, float lambda, out float var) {
     var = 0.0;
-    MapHeader m = MAP_HEADERS[slot];
+    MapHeader m = map_header(slot);
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return ng;
     if (dot(cross(m.axis_x.xyz, m.axis_up.xyz), ng) <= 0.0) return ng;
     vec2 s = lean_slopes(slot, p, lambda, var);
@@ -460,7 +473,7 @@ vec3 surface_normal(Hit h, vec3 d, vec3 p, vec3 ng, uint word, uint depth, inout
     uint mat = word & 0xffu;
     uint slot = (word >> MAT_MAP_SHIFT) & MAT_SLOT_MASK;
     if (mat == MAT_TABLE || slot == 0u || ((word & MAT_LABELLED) == 0u
-            && (MAP_HEADERS[slot].dims.w & MAP_LABELLED_ONLY) != 0u)) {
+            && (map_dims(slot).w & MAP_LABELLED_ONLY) != 0u)) {
         return ng;
     }
     // LEAN at the primary hit: footprint = the pixel cone's width at the hit (its angle
@@ -469,10 +482,10 @@ vec3 surface_normal(Hit h, vec3 d, vec3 p, vec3 ng, uint word, uint depth, inout
     // done: lean_level uses the planar projection).
     float lambda = 0.0;
     if (PRM_TEXTURE_FILTER == FILTER_LEAN && depth == 0u
-            && (MAP_HEADERS[slot].dims.w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
+            && (map_dims(slot).w & (MAP_REVOLVED | MAP_TRIPLANAR)) == 0u) {
         float c = max(dot(d, prm.cam.forward.xyz), 0.1);
         float width = prm.pixel_angle * c * sqrt(c) * h.t / max(abs(dot(ng, d)), LEAN_MIN_COS);
-        lambda = log2(width * MAP_HEADERS[slot].origin.w * prm.filter_scale);
+        lambda = log2(width * map_header(slot).origin.w * prm.filter_scale);
     }
     if (lambda > 0.0) {
         float var;

@@ -9,7 +9,8 @@
 // intensity times 1e6 mm^2/m^2 (spot), emit.y its area (mm^2), emit.w the inclusive CDF
 // of choosing it (by power); pos / dir the spot's position and axis, w: cos of the cone
 // edge and of the inner edge of the soft falloff. `LIGHT_TRI_WORDS[k]`: emitter of light
-// triangle k (x) and the inclusive area CDF of k within its emitter (y, float bits).
+// triangle k (x), the inclusive area CDF of k within its emitter (y, float bits), and
+// the guide table's entry of the emitter's bucket k - shape.x (zw: pick_area_tri).
 
 // (LightList, a storage buffer: path_trace.comp.) Read only at a lane-uniform index:
 // lavapipe then loads each word once for all lanes, where a per-lane index costs a
@@ -121,9 +122,18 @@ uint emitter_of(uint tri) { return LIGHT_TRI_WORDS[tri - prm.light_first].x; }
 // Radiance of light triangle `tri`.
 float tri_radiance(uint tri) { return emitter_block(emitter_of(tri)).emit.x; }
 
-// A triangle of area light e by area, from its CDF.
+// A triangle of area light e by area, from its CDF: the first whose inclusive CDF
+// exceeds u, else the last. Searched within the range the guide table gives for u's
+// bucket (one of shape.y equal parts of [0, 1), bucket j's entry in the zw of light
+// triangle shape.x + j; src/render/view.rs `area_guide`): the same triangle as a search
+// of all of them, in a step or two instead of log2(shape.y).
 uint pick_area_tri(LightBlock e, float u) {
     uint lo = e.shape.x, hi = e.shape.x + e.shape.y - 1u;
+    if (e.shape.y > 0u) {
+        uvec2 range = LIGHT_TRI_WORDS[e.shape.x + min(uint(u * float(e.shape.y)), e.shape.y - 1u)].zw;
+        lo = e.shape.x + range.x;
+        hi = e.shape.x + range.y;
+    }
     while (lo < hi) {
         uint mid = (lo + hi) / 2u;
         if (u < uintBitsToFloat(LIGHT_TRI_WORDS[mid].y)) hi = mid; else lo = mid + 1u;

@@ -44,7 +44,8 @@ pub fn path_trace(
 }
 
 /// The path tracer's bindings after the backend's: storage buffers, but the object's
-/// and the lights' triangles, which `fetch_tri` reads as texel buffers (16 bytes a
+/// and the lights' triangles, which `fetch_tri` reads as texel buffers, and the slope
+/// maps' headers (`map_header`), read the same way (16 bytes a
 /// fetch: lavapipe reads a texel a lane with one load where a storage buffer or a
 /// device address is a load a lane and word, docs/architecture.md).
 fn path_trace_kinds() -> Vec<BindingKind> {
@@ -52,6 +53,7 @@ fn path_trace_kinds() -> Vec<BindingKind> {
         .map(|i| {
             if i == PathTraceBinding::Geometry as usize
                 || i == PathTraceBinding::LightGeometry as usize
+                || i == PathTraceBinding::MapHeaders as usize
             {
                 BindingKind::TexelBuffer
             } else {

@@ -177,16 +177,7 @@ impl<'s> View<'s> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let light = &setup.light;
         let trace = TraceScene::layered(ctx, scene.geometry.clone(), &light.tris, profiler)?;
-        let light_words: Vec<[u32; 2]> = if light.lights.is_empty() {
-            vec![[0, 0]] // a binding may not be empty; no light triangle: never read
-        } else {
-            light
-                .lights
-                .iter()
-                .zip(&light.owner)
-                .map(|(&(_, c), &e)| [e, c.to_bits()])
-                .collect()
-        };
+        let light_words = light_words(light);
         let mut blocks = light_blocks(light);
         let emitting = light.selection().iter().any(|&p| p > 0.0);
         if blocks.is_empty() {
@@ -238,14 +229,13 @@ impl<'s> View<'s> {
             &light_tri_blocks(&light.tris, &cover),
             storage,
         )?;
-        let (headers, texels) = scene.map_buffers();
+        let (_, texels) = scene.map_buffers();
         let moments = scene.moment_buffers();
         let table = address_table(&[
             (B::Geometry, trace.shade_tris()),
             (B::Materials, &scene.materials),
             (B::Lights, &lights),
             (B::Energy, &tracer.energy),
-            (B::MapHeaders, headers),
             (B::Slopes0, texels[0]),
             (B::Slopes1, texels[1]),
             (B::Slopes2, texels[2]),
@@ -581,6 +571,89 @@ fn light_tri_blocks(tris: &TriangleSoup, cover: &LightCover) -> Vec<LightTri> {
     blocks
 }
 
+/// Per light triangle (`LightGeometry::lights`' order) what glsl/common/lights.glsl
+/// reads as `LIGHT_TRI_WORDS`: its emitter, the float bits of its inclusive area CDF
+/// within the emitter, and the guide entry of the emitter's bucket of that index
+/// ([`area_guide`]: where `pick_area_tri` searches); one zero entry when there is no
+/// light triangle (a binding may not be empty; never read).
+fn light_words(light: &LightGeometry) -> Vec<[u32; 4]> {
+    let mut words: Vec<[u32; 4]> = light
+        .lights
+        .iter()
+        .zip(&light.owner)
+        .map(|(&(_, c), &e)| [e, c.to_bits(), 0, 0])
+        .collect();
+    for e in &light.emitters {
+        let range = e.first_tri as usize..(e.first_tri + e.tri_count) as usize;
+        let cdf: Vec<f32> = light.lights[range.clone()]
+            .iter()
+            .map(|&(_, c)| c)
+            .collect();
+        for (w, g) in words[range].iter_mut().zip(area_guide(&cdf)) {
+            w[2] = g[0];
+            w[3] = g[1];
+        }
+    }
+    if words.is_empty() {
+        words.push([0; 4]);
+    }
+    words
+}
+
+/// The triangle an area light's CDF gives u (glsl/common/lights.glsl `pick_area_tri`):
+/// the first whose inclusive CDF exceeds u, else the last (the CDF does not decrease).
+fn pick_by_cdf(cdf: &[f32], u: f32) -> u32 {
+    cdf.partition_point(|&c| c <= u).min(cdf.len() - 1) as u32
+}
+
+/// The bucket of u among n equal parts of [0, 1), as the shader computes it in f32:
+/// `min(uint(u * float(n)), n - 1)`.
+fn guide_bucket(u: f32, n: u32) -> u32 {
+    ((u * n as f32) as u32).min(n - 1)
+}
+
+/// A guide table for choosing a triangle by an area light's CDF (the cutpoint method,
+/// Chen and Asau 1974): for each of n = cdf.len() buckets of u, the first and last
+/// triangle [`pick_by_cdf`] gives for a u in it. Both are exact: the bucket's u values
+/// are a run of consecutive floats (u * n rounds monotonically), found by bisecting the
+/// float bits, and the triangle chosen does not decrease with u, so searching that range
+/// gives the triangle a search of all of them gives, for every u in [0, 1).
+fn area_guide(cdf: &[f32]) -> Vec<[u32; 2]> {
+    if cdf.is_empty() {
+        return Vec::new(); // a spot: no triangles, no buckets
+    }
+    let n = cdf.len() as u32;
+    let one = 1.0f32.to_bits();
+    // The bits of the least u in [0, 1) whose bucket is at least j (`one` if none).
+    let first_of = |j: u32| {
+        let (mut lo, mut hi) = (0u32, one);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if guide_bucket(f32::from_bits(mid), n) >= j {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        lo
+    };
+    let mut start = first_of(0);
+    (0..n)
+        .map(|j| {
+            let next = first_of(j + 1);
+            let guide = if start < next {
+                let lo = pick_by_cdf(cdf, f32::from_bits(start));
+                let hi = pick_by_cdf(cdf, f32::from_bits(next - 1));
+                [lo, hi]
+            } else {
+                [0, n - 1] // no u falls in this bucket: never read, the whole range
+            };
+            start = next;
+            guide
+        })
+        .collect()
+}
+
 /// The lights as the shader takes them (glsl/common/lights.glsl). When no light emits,
 /// `View::new` turns next-event estimation off (as it always was for zero radiance).
 fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
@@ -657,6 +730,94 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
 mod tests {
     use super::*;
     use glam::Vec3;
+
+    /// The guide table's range for u's bucket always holds the triangle a search of the
+    /// whole CDF gives: checked at every bucket's edges (the floats on both sides of
+    /// each j / n) and at random u, for areas from equal to wildly unequal, with runs of
+    /// zero-area triangles (a flat CDF) and a single triangle.
+    #[test]
+    fn the_area_guide_brackets_the_full_search() {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        let lights: Vec<Vec<f32>> = vec![
+            vec![1.0],
+            vec![1.0; 7],
+            (0..3072).map(|i| 1.0 + (i % 48) as f32 / 10.0).collect(),
+            (0..500)
+                .map(|i| if i % 5 == 0 { 0.0 } else { (i * i) as f32 })
+                .collect(),
+            (0..257).map(|_| ((next() % 1000) as f32).powi(3)).collect(),
+        ];
+        for areas in lights {
+            let total: f64 = areas.iter().map(|&a| a as f64).sum();
+            let mut acc = 0.0f64;
+            let cdf: Vec<f32> = areas
+                .iter()
+                .enumerate()
+                .map(|(i, &a)| {
+                    acc += a as f64;
+                    if i + 1 == areas.len() {
+                        1.0
+                    } else {
+                        (acc / total) as f32
+                    }
+                })
+                .collect();
+            let n = cdf.len() as u32;
+            let guide = area_guide(&cdf);
+            assert_eq!(guide.len(), cdf.len());
+            let check = |u: f32| {
+                let want = pick_by_cdf(&cdf, u);
+                let [lo, hi] = guide[guide_bucket(u, n) as usize];
+                assert!(
+                    lo <= want && want <= hi,
+                    "u {u}: {want} outside [{lo}, {hi}] ({n} triangles)"
+                );
+                // The shader's search within the range.
+                let (mut a, mut b) = (lo, hi);
+                while a < b {
+                    let mid = (a + b) / 2;
+                    if u < cdf[mid as usize] {
+                        b = mid
+                    } else {
+                        a = mid + 1
+                    }
+                }
+                assert_eq!(a, want, "u {u}");
+            };
+            for j in 0..=n {
+                let edge = j as f32 / n as f32;
+                let mut u = edge;
+                for _ in 0..3 {
+                    u = f32::from_bits(u.to_bits().saturating_sub(1));
+                }
+                for _ in 0..7 {
+                    if (0.0..1.0).contains(&u) {
+                        check(u);
+                    }
+                    u = f32::from_bits(u.to_bits() + 1);
+                }
+            }
+            for &c in &cdf {
+                for u in [c, f32::from_bits(c.to_bits().saturating_sub(1))] {
+                    if (0.0..1.0).contains(&u) {
+                        check(u);
+                    }
+                }
+            }
+            for _ in 0..20_000 {
+                check((next() >> 40) as f32 / (1u64 << 24) as f32);
+            }
+            check(0.0);
+            check(f32::from_bits(1.0f32.to_bits() - 1));
+        }
+        assert!(area_guide(&[]).is_empty());
+    }
 
     /// The facing sampler's per-triangle data: the corners' mean, twice the area and the
     /// unit normal of cross(b - a, c - a); a degenerate triangle weighs nothing (zero
