@@ -74,7 +74,7 @@ fn group_chunks(groups: u32, max_groups: u32) -> impl Iterator<Item = (u32, u32)
 /// The path tracer's address table (`PathTraceBinding::Addresses`): per binding, in
 /// binding order, the device address of the buffer given for it (a u64, the shader's
 /// uvec2, as TraceScene's table), zero for the bindings not given (those the shader
-/// reads as storage buffers).
+/// reads as storage or texel buffers).
 fn address_table(buffers: &[(B, &Buffer)]) -> Vec<vk::DeviceAddress> {
     let mut table = vec![0; B::COUNT];
     for &(binding, buffer) in buffers {
