@@ -395,17 +395,13 @@ fn upload_maps(
     all.extend(curved.iter().map(|c| c.map.clone()));
     let (mut headers, distinct) = slope::pack_headers(&all, slots, max_bytes)?;
     let blocks = slope::curved_blocks(curved, &mut headers)?;
-    // The headers are read as a texel buffer (path_trace.comp `map_header`), four texels
-    // a slot: within the device's texel limit.
-    let max_texels = ctx.info.max_texel_buffer_elements as usize;
-    if headers.len() * 4 > max_texels {
-        return Err(crate::vk::VkError::Other(format!(
-            "the scene has {} slope-map slots; the device's texel buffers hold {} slots' headers at most (maxTexelBufferElements {max_texels}, four texels a header)",
-            headers.len(),
-            max_texels / 4
-        ))
-        .into());
-    }
+    // The headers are read as a texel buffer (path_trace.comp `map_header`, four texels
+    // a slot): within the device's texel limit.
+    ctx.info.fits_texel_buffer(
+        "slope maps' headers",
+        std::mem::size_of_val(&headers[..]),
+        &format!("the scene has too many slope-map slots ({})", headers.len()),
+    )?;
     // A binding may not be empty; a slot without a map never reads it.
     let unused = Arc::new(Buffer::from_slice(ctx, "no slope map", &[0u32], storage)?);
     let shared_error = |map: &Arc<slope::SlopeMap>, e: SharedMapError| -> RenderError {
@@ -434,8 +430,7 @@ fn upload_maps(
     Ok(MapBuffers {
         any: !placed.is_empty() || !curved.is_empty(),
         key,
-        // Read as a uniform texel buffer (path_trace.comp `map_header`): a few headers,
-        // far below any device's texel limit (maxTexelBufferElements >= 65536).
+        // Read as a uniform texel buffer (path_trace.comp `map_header`; checked above).
         headers: Buffer::from_slice(
             ctx,
             "slope map headers",

@@ -637,7 +637,7 @@ fn area_guide(cdf: &[f32]) -> Vec<[u32; 2]> {
         }
         lo
     };
-    let mut start = first_of(0);
+    let mut start = 0; // u = 0 is in bucket 0
     (0..n)
         .map(|j| {
             let next = first_of(j + 1);

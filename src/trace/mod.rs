@@ -236,17 +236,9 @@ impl TraceGeometry {
         // levels' nodes and triangles are by the traversal (16 bytes a fetch;
         // glsl/common/trace_bvh.glsl `trace_node`, `trace_tri`): each within the device's
         // texel limit.
-        let within_texels = |what: &str, bytes: usize| {
-            let max = ctx.info.max_texel_buffer_elements as usize;
-            if bytes / 16 > max {
-                return Err(VkError::Other(format!(
-                    "the {what} take {} texels of 16 bytes; the device's texel buffers hold at most {max} (maxTexelBufferElements): the mesh has too many triangles ({})",
-                    bytes / 16,
-                    level.triangle_count
-                )));
-            }
-            Ok(())
-        };
+        let cause = format!("the mesh has too many triangles ({})", level.triangle_count);
+        let within_texels =
+            |what: &str, bytes: usize| ctx.info.fits_texel_buffer(what, bytes, &cause);
         within_texels("shading triangles", std::mem::size_of_val(&level.shade[..]))?;
         let shade_tris = Buffer::from_slice(ctx, "shade triangles", &level.shade, texels)?;
         let start = std::time::Instant::now();

@@ -45,8 +45,8 @@ pub struct DeviceInfo {
     /// from 1.3) are on: the path tracer and the software trace backends read their
     /// buffers through them (ray query needs them too).
     pub buffer_device_address: bool,
-    /// 64-bit integers in shaders (`shaderInt64`) are on: the software trace backends
-    /// load their BVH eight bytes at a time.
+    /// 64-bit integers in shaders (`shaderInt64`) are on: the wide software traversal's
+    /// stack entries are 64-bit words.
     pub shader_int64: bool,
     pub is_cpu: bool,
     pub timestamp_period_ns: f32,
@@ -55,12 +55,29 @@ pub struct DeviceInfo {
     /// [`MAX_QUEUES`]).
     pub queue_count: u32,
     pub max_storage_buffer_range: u32,
-    /// Texels a texel buffer view may span (the software BVH's levels are read as
-    /// texel buffers of 16-byte texels).
+    /// Texels a texel buffer view may span (the software BVH's levels, the shading
+    /// triangles and the slope maps' headers are read as texel buffers of 16-byte
+    /// texels: [`DeviceInfo::fits_texel_buffer`]).
     pub max_texel_buffer_elements: u32,
     pub max_workgroup_count: [u32; 3],
     pub memory_heaps: Vec<MemoryHeap>,
     pub validation: bool,
+}
+
+impl DeviceInfo {
+    /// Whether `bytes` of `what`, read as one texel buffer of 16-byte texels
+    /// (`TEXEL_BUFFER_FORMAT`), fit the device's `maxTexelBufferElements`; if not, an
+    /// error naming them, the limit and `cause` (what the user can change).
+    pub fn fits_texel_buffer(&self, what: &str, bytes: usize, cause: &str) -> Result<(), VkError> {
+        let max = self.max_texel_buffer_elements as usize;
+        if bytes / 16 > max {
+            return Err(VkError::Other(format!(
+                "the {what} take {} texels of 16 bytes; the device's texel buffers hold at most {max} (maxTexelBufferElements): {cause}",
+                bytes / 16
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// A validation or driver message caught by the debug messenger.
