@@ -560,9 +560,11 @@ PixelPlane pix_plane;
 // less traversal); prim NO_HIT: none.
 TraceHint pix_hint;
 
-// Sets the pixel's reference point and records its rings (none where the centre ray
-// meets no conductor); sets pix_hint where that ray meets the object (main clears it).
-void pixel_plane_init(uint px, uint py) {
+// Sets pix_hint and the pixel's camera-ray bundle where the pixel's centre ray meets the
+// object (main clears the hint); with `plane` (the analytic direct light's extra camera
+// rays) also the pixel's reference point and its rings (none where the centre ray meets
+// no conductor). One function for both: lavapipe inlines a traversal per trace call.
+void pixel_plane_init(uint px, uint py, bool plane) {
     rec_rings = 0u;
     vec3 o, d;
     camera_ray(prm.cam, vec2(px, py) + 0.5, vec2(prm.width, prm.height), vec2(0.5), o, d);
@@ -584,6 +586,7 @@ void pixel_plane_init(uint px, uint py) {
         trace_bundle_init(prm.cam.eye.xyz, right, up, fwd, lens, zf, q, pix_hint.a,
                           cross(pix_hint.b - pix_hint.a, pix_hint.c - pix_hint.a));
     }
+    if (!plane) return;
     uint word = mat_word(h.prim);
     uint mat = word & 0xffu;
     if (mat == MAT_LIGHT) return;
@@ -998,7 +1001,14 @@ void main() {
     // the pass would), so a first batch of fewer samples needs no pass either.
     uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
     pix_hint = trace_no_hint();
-    if (PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u) pixel_plane_init(px, py);
+    // The centre ray's hint and bundle serve every camera ray of the software traversal
+    // (the ray query takes no hint); the reference plane only the analytic extra rays.
+    bool plane = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u;
+#if defined(TRACE_RAY_QUERY)
+    if (plane) pixel_plane_init(px, py, true);
+#else
+    pixel_plane_init(px, py, plane);
+#endif
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();
     for (uint s = 0u; s < max(pc.sample_count, label_count); s++) {
