@@ -229,29 +229,19 @@ uint trace_wide_half(uint metas, uvec3 qlos, uvec3 qhis, vec3 nmin, vec3 cell,
 // and the edge functions are evaluated in 2D, so a ray through a shared edge or vertex
 // hits at least one of the triangles (no leaks). `precise` keeps the compiler from
 // fusing multiply-adds, so the results match the CPU reference (src/trace/watertight.rs).
-// The axes are a rotation of (x, y, z) that ends in the direction's largest component
-// kz: kx = kz + 1, ky = kz + 2 (mod 3). Woop et al. also swap kx and ky where d[kz] < 0,
-// to keep the triangles' winding; the test here takes either winding, and the swap
-// only negates u, v, w, det and tt exactly, so t and the barycentrics are the same
-// without it. Without it the permutation is a function of kz alone: two lane masks for
-// every corner's three selects (six with the swap), fewer registers in the traversal.
-// o is kept permuted.
-struct TraceRay { vec3 o; uint kz; vec3 s; };
-
-// (p[kx], p[ky], p[kz]).
-vec3 trace_perm(vec3 p, uint kz) {
-    return kz == 0u ? p.yzx : kz == 1u ? p.zxy : p;
-}
+struct TraceRay { vec3 o; uint kx; uint ky; uint kz; vec3 s; };
 
 TraceRay trace_setup(vec3 o, vec3 d) {
     TraceRay r;
+    r.o = o;
     vec3 a = abs(d);
     r.kz = a.x > a.y ? (a.x > a.z ? 0u : 2u) : (a.y > a.z ? 1u : 2u);
-    r.o = trace_perm(o, r.kz);
-    vec3 dp = trace_perm(d, r.kz);
-    precise float sz = 1.0 / dp.z;
-    precise float sx = dp.x * sz;
-    precise float sy = dp.y * sz;
+    r.kx = (r.kz + 1u) % 3u;
+    r.ky = (r.kx + 1u) % 3u;
+    if (d[r.kz] < 0.0) { uint t = r.kx; r.kx = r.ky; r.ky = t; }
+    precise float sz = 1.0 / d[r.kz];
+    precise float sx = d[r.kx] * sz;
+    precise float sy = d[r.ky] * sz;
     r.s = vec3(sx, sy, sz);
     return r;
 }

@@ -40,21 +40,21 @@ TRACE_NODE trace_node(uint level, uint i) {
 // `level`) against ray r, taken into h where it is the closer hit.
 void trace_tri_test(vec3 v0, vec3 v1, vec3 v2, uint prim, uint level, TraceRay r, float tmin,
                     inout Hit h) {
-    precise vec3 a = trace_perm(v0, r.kz) - r.o;   // (a[kx], a[ky], a[kz])
-    precise vec3 b = trace_perm(v1, r.kz) - r.o;
-    precise vec3 c = trace_perm(v2, r.kz) - r.o;
-    precise float ax = a.x - r.s.x * a.z;
-    precise float ay = a.y - r.s.y * a.z;
-    precise float bx = b.x - r.s.x * b.z;
-    precise float by = b.y - r.s.y * b.z;
-    precise float cx = c.x - r.s.x * c.z;
-    precise float cy = c.y - r.s.y * c.z;
+    precise vec3 a = v0 - r.o;
+    precise vec3 b = v1 - r.o;
+    precise vec3 c = v2 - r.o;
+    precise float ax = a[r.kx] - r.s.x * a[r.kz];
+    precise float ay = a[r.ky] - r.s.y * a[r.kz];
+    precise float bx = b[r.kx] - r.s.x * b[r.kz];
+    precise float by = b[r.ky] - r.s.y * b[r.kz];
+    precise float cx = c[r.kx] - r.s.x * c[r.kz];
+    precise float cy = c[r.ky] - r.s.y * c[r.kz];
     precise float u = cx * by - cy * bx;
     precise float v = ax * cy - ay * cx;
     precise float w = bx * ay - by * ax;
     bool inside = !((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0));
     precise float det = u + v + w;
-    precise float tt = (u * (r.s.z * a.z) + v * (r.s.z * b.z)) + w * (r.s.z * c.z);
+    precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
     precise float t = tt / det;
     // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
     // triangle index, so the result does not depend on the traversal order. Taken

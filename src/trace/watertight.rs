@@ -22,10 +22,11 @@ impl ShearedRay {
         } else {
             2
         };
-        // A rotation of the axes ending in kz, without Woop et al.'s swap of kx and ky
-        // for d[kz] < 0: the test takes either winding, and the swap would only negate
-        // u, v, w, det and tt exactly (the shader's trace_setup, glsl/common/trace.glsl).
-        let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
         let sz = 1.0 / d[kz];
         ShearedRay {
             o,
