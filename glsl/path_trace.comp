@@ -39,9 +39,9 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Li
 // Geometry: the object's triangles (Tri), Materials: their material words,
 // LightGeometry: the view's light triangles (Tri), Lights: per light triangle, x its
 // emitter, y float bits of the inclusive area CDF within it, zw a guide table's entry
-// (lights.glsl pick_area_tri). The two triangle arrays are
-// read as texel buffers, a Tri in three 16-byte fetches (lavapipe: one load a lane and
-// texel, where a load through an address is one a lane and word; docs/architecture.md).
+// (lights.glsl pick_area_tri). The two triangle arrays are read as texel buffers, a Tri
+// in three 16-byte fetches (lavapipe: one load a lane and texel, where a load through an
+// address is one a lane and word; docs/architecture.md).
 layout(set = 0, binding = PT_GEOMETRY) uniform usamplerBuffer pt_object_tris;
 layout(set = 0, binding = PT_LIGHT_GEOMETRY) uniform usamplerBuffer pt_light_tris;
 // LightList: one LightBlock a light (lights.glsl EMITTERS), a storage buffer read at a

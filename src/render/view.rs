@@ -584,7 +584,7 @@ fn light_words(light: &LightGeometry) -> Vec<[u32; 4]> {
         .map(|(&(_, c), &e)| [e, c.to_bits(), 0, 0])
         .collect();
     for e in &light.emitters {
-        let range = e.first_tri as usize..(e.first_tri + e.tri_count) as usize;
+        let range = e.tri_range();
         let cdf: Vec<f32> = light.lights[range.clone()]
             .iter()
             .map(|&(_, c)| c)
@@ -704,9 +704,7 @@ fn light_blocks(light: &LightGeometry) -> Vec<LightBlock> {
             // A ring's segments around the ring (0: not a ring).
             let ring = e.torus.map_or(0.0, |t| t.segments_major as f32);
             let room = e.torus.map_or([0.0, 0.0], |t| {
-                let first = e.first_tri as usize;
-                let tris: Vec<[Vec3; 3]> = light.tris.triangles
-                    [first..first + e.tri_count as usize]
+                let tris: Vec<[Vec3; 3]> = light.tris.triangles[e.tri_range()]
                     .iter()
                     .map(|t| t.map(|i| light.tris.positions[i as usize]))
                     .collect();

@@ -526,6 +526,13 @@ pub struct Emitter {
     pub reach: Option<Reach>,
 }
 
+impl Emitter {
+    /// Its triangles' indices in the light soup (`first_tri .. first_tri + tri_count`).
+    pub fn tri_range(&self) -> std::ops::Range<usize> {
+        self.first_tri as usize..(self.first_tri + self.tri_count) as usize
+    }
+}
+
 /// A shell holding a light's surface: every point of its triangles lies between `inner`
 /// and `outer` mm from `centre` (the centre of a ring's torus or of a dome's sphere,
 /// else the mean of the vertices). The analytic direct light uses it to tell whether a light can stand in
