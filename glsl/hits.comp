@@ -21,6 +21,10 @@ layout(std430, set = 0, binding = HT_HINTS) readonly buffer Hints { Tri hints[];
 layout(std430, set = 0, binding = HT_BUNDLES) readonly buffer Bundles { BundleBlock bundles[]; };
 layout(std430, set = 0, binding = HT_BUNDLE_USE) writeonly buffer BundleUse { uint bundle_use[]; };
 
+// With pc.hinted 3: each ray is an occlusion test (TQ_BLOCKED) with a shadow bundle of
+// its own built first (trace_shadow_init), which must not change the answer.
+layout(std430, set = 0, binding = HT_SHADOWS) readonly buffer Shadows { ShadowBlock shadows[]; };
+
 layout(push_constant) uniform Push { HitsPush pc; };
 
 void main() {
@@ -28,6 +32,17 @@ void main() {
     uint i = g * 64u + gl_LocalInvocationID.x;
     if (i >= pc.count) return;
     RayIn r = rays[i];
+    if (pc.hinted == 3u) {
+        ShadowBlock b = shadows[i];
+        if (b.origin_lo.w != 0.0) {
+            trace_shadow_init(b.origin_lo.xyz, b.origin_hi.xyz, b.light_lo.xyz, b.light_hi.xyz);
+        }
+        bool blocked = trace_query(TQ_BLOCKED, r.o_tmin.xyz, r.d_tmax.xyz, r.o_tmin.w, r.d_tmax.w,
+                                   0.0).blocked;
+        bundle_use[i] = !trace_shadow_built() ? 0u : trace_shadow_answered ? 2u : 1u;
+        hits[i] = vec4(blocked ? 1.0 : 0.0, 0.0, 0.0, 0.0);
+        return;
+    }
     TraceHint hint = trace_no_hint();
     if (pc.hinted != 0u) {
         hint.a = hints[i].a.xyz;

@@ -585,6 +585,16 @@ void pixel_plane_init(uint px, uint py, bool plane) {
                                         right, up, fwd, zf);
         trace_bundle_init(prm.cam.eye.xyz, right, up, fwd, lens, zf, q, pix_hint.a,
                           cross(pix_hint.b - pix_hint.a, pix_hint.c - pix_hint.a));
+        // Its shadow rays as one bundle: from where its camera rays meet that triangle's
+        // plane, moved off it by offset_ray (at most 256 ulps, 3.05e-5 of a coordinate,
+        // or 1/65536 near 0; widened to 4e-5 and 2e-5 for the hit point's rounding), to
+        // the lights' box.
+        vec3 flo, fhi;
+        if (PRM_EMITTER_COUNT > 0u && prm.lights_lo.w != 0.0 && trace_bundle_footprint(flo, fhi)) {
+            vec3 big = max(abs(flo), abs(fhi));
+            float m = 4e-5 * max(big.x, max(big.y, big.z)) + 2e-5;
+            trace_shadow_init(flo - m, fhi + m, prm.lights_lo.xyz, prm.lights_hi.xyz);
+        }
     }
     if (!plane) return;
     uint word = mat_word(h.prim);

@@ -5,9 +5,11 @@ mod common;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use synosis::render::raycast::{
-    BundleUse, HitOut, RayBundle, RayHint, RayIn, trace_rays, trace_rays_bundled, trace_rays_hinted,
+    BundleUse, HitOut, RayBundle, RayHint, RayIn, RayShadow, trace_rays, trace_rays_bundled,
+    trace_rays_hinted, trace_rays_shadowed,
 };
 use synosis::scene::procedural::bumpy_sphere;
+use synosis::scene::{Variant, testbody};
 use synosis::trace::TraceScene;
 use synosis::trace::software_bvh::{build_bvh, cpu_closest_hit, obvhs_triangles};
 
@@ -420,6 +422,148 @@ fn a_pixel_bundle_never_changes_the_closest_hit() {
                     rays.len()
                 );
             }
+        }
+    }
+    common::assert_clean(&ctx);
+}
+
+/// The path tracer's shadow rays of a pixel test the object's triangles of a shadow
+/// bundle instead of traversing it: those whose leaf boxes meet the convex hull of a box
+/// the rays start in (the pixel's footprint on the surface) and a box their segments end
+/// in (the lights'; glsl/common/trace.glsl, trace_shadow_init), taken only by a ray that
+/// starts in the one and ends in the other. Whatever the patch (lit from above, facing
+/// away, beside a concave edge), origins on the surface or moved off it to either side, segments that end short of the light box, in it or past it, and
+/// origins outside their box, whether a ray is blocked must be the same as by the
+/// traversal; with the software traversals many rays must have been answered from their
+/// bundle and some traversed.
+#[test]
+fn a_shadow_bundle_never_changes_what_blocks_a_ray() {
+    let ctx = common::gpu();
+    // The built-in test body (flat faces at several angles, meeting at convex and
+    // concave edges) under a light box as wide as it and a fifth of that thick, two of
+    // its sizes above its top.
+    let mesh = testbody(Variant::B);
+    let n = mesh.triangles.len();
+    let (lo, hi) = mesh.bounds();
+    let size = (hi - lo).max_element();
+    let centre = (lo + hi) * 0.5;
+    let light_lo = Vec3::new(
+        centre.x - 0.5 * size,
+        centre.y - 0.5 * size,
+        hi.z + 2.0 * size,
+    );
+    let light_hi = Vec3::new(
+        centre.x + 0.5 * size,
+        centre.y + 0.5 * size,
+        hi.z + 2.2 * size,
+    );
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
+    let (mut rays, mut shadows) = (Vec::new(), Vec::new());
+    for k in 0..600 {
+        let mut t = rng.random_range(0..n);
+        let normal_of = |t: usize| {
+            let [a, b, c] = mesh.corners(t);
+            (b - a).cross(c - a).normalize()
+        };
+        // Two thirds of the patches on faces turned towards the light.
+        while k % 3 != 0 && normal_of(t).z < 0.3 {
+            t = rng.random_range(0..n);
+        }
+        let [a, b, c] = mesh.corners(t);
+        let normal = normal_of(t);
+        // The patch: a point of the triangle and a box 0.04 mm wide about it (a pixel's
+        // footprint), widened as the path tracer widens it.
+        let (u, v) = (rng.random::<f32>(), rng.random::<f32>());
+        let (u, v) = if u + v > 1.0 {
+            (1.0 - u, 1.0 - v)
+        } else {
+            (u, v)
+        };
+        let p = a + (b - a) * u + (c - a) * v;
+        let m = Vec3::splat(0.02 + 1e-3);
+        let origin = [p - m, p + m];
+        for s in 0..8 {
+            // Within the patch along the surface: in the triangle's plane, 0.015 mm at
+            // most from p along two of its directions.
+            let e1 = (b - a).normalize();
+            let e2 = normal.cross(e1);
+            let mut o =
+                p + e1 * rng.random_range(-0.015..0.015) + e2 * rng.random_range(-0.015..0.015);
+            // Every other ray moved off the surface (either side), as offset_ray does;
+            // every eighth starts outside its box.
+            if s % 2 == 1 {
+                o += normal * rng.random_range(-2e-4..5e-4);
+            }
+            if s == 7 {
+                o += Vec3::new(0.0, 0.0, 0.1);
+            }
+            let target = Vec3::new(
+                rng.random_range(light_lo.x..light_hi.x),
+                rng.random_range(light_lo.y..light_hi.y),
+                rng.random_range(light_lo.z..light_hi.z),
+            );
+            let d = target - o;
+            let dist = d.length();
+            // Mostly at the point (the light's hit), some short of the box or past it.
+            let tmax = match s {
+                0 => dist * 0.5,
+                5 => dist * 1.5,
+                _ => dist,
+            };
+            rays.push(RayIn {
+                origin: o.into(),
+                tmin: 0.0,
+                dir: (d / dist).into(),
+                tmax,
+            });
+            shadows.push((k % 10 != 9).then_some(RayShadow {
+                origin: origin.map(Into::into),
+                light: [light_lo.into(), light_hi.into()],
+            }));
+        }
+    }
+    let none: Vec<Option<RayShadow>> = vec![None; rays.len()];
+    for backend in common::BACKENDS {
+        let scene = TraceScene::build(&ctx, &mesh, backend, None).unwrap();
+        let (plain, plain_uses) = trace_rays_shadowed(&ctx, &scene, &rays, &none).unwrap();
+        assert!(plain_uses.iter().all(|&u| u == BundleUse::None));
+        let (bundled, uses) = trace_rays_shadowed(&ctx, &scene, &rays, &shadows).unwrap();
+        let differ: Vec<usize> = (0..rays.len())
+            .filter(|&i| plain[i] != bundled[i])
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "{}: {} of {} rays blocked otherwise with a shadow bundle; first: ray {} ({:?}), blocked {} against {}",
+            backend.name(),
+            differ.len(),
+            rays.len(),
+            differ[0],
+            uses[differ[0]],
+            bundled[differ[0]],
+            plain[differ[0]]
+        );
+        let blocked = plain.iter().filter(|&&b| b).count();
+        let count = |u: BundleUse| uses.iter().filter(|&&x| x == u).count();
+        let (answered, traversed, no) = (
+            count(BundleUse::Answered),
+            count(BundleUse::Traversed),
+            count(BundleUse::None),
+        );
+        eprintln!(
+            "{}: {} rays, {blocked} blocked; answered {answered}, traversed {traversed}, no bundle {no}",
+            backend.name(),
+            rays.len()
+        );
+        assert!(blocked * 10 > rays.len() && blocked * 10 < rays.len() * 9);
+        if backend == synosis::trace::Backend::RayQuery {
+            assert_eq!(no, rays.len(), "the ray query builds no shadow bundle");
+        } else {
+            assert!(
+                answered * 4 > rays.len() && traversed * 20 > rays.len(),
+                "{}: answered {answered}, traversed {traversed} of {}",
+                backend.name(),
+                rays.len()
+            );
         }
     }
     common::assert_clean(&ctx);

@@ -107,6 +107,11 @@ uint trace_bundle_size() { return 0u; }
 bool trace_bundle_answered = false;
 void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, float zf, vec4 q,
                        vec3 plane_p, vec3 plane_n) {}
+// Nor a shadow bundle.
+bool trace_bundle_footprint(out vec3 lo, out vec3 hi) { lo = hi = vec3(0.0); return false; }
+bool trace_shadow_built() { return false; }
+bool trace_shadow_answered = false;
+void trace_shadow_init(vec3 olo, vec3 ohi, vec3 llo, vec3 lhi) {}
 
 // The query `kind` (TQ_*) of ray o + t d, t in [tmin, tmax]. The view's lights are the
 // instances of mask 0x02 (src/trace/mod.rs), the object's 0x01. A shadow test: the
@@ -302,7 +307,94 @@ bool trace_bundle_add(uint first, uint count) {
     return true;
 }
 
+// A pixel's shadow rays as one bundle (trace_shadow_init): rays from an origin box (where
+// the pixel's camera rays meet the plane of its centre ray's triangle, offset off the
+// surface) whose segments end in a light box (the lights' bounds). Every such segment
+// lies in the convex hull of the two boxes: one traversal per pixel collects the
+// object's triangles whose leaf boxes meet that hull (at most TRACE_SHADOW_MAX; more:
+// none), and an occlusion test of the object (a shadow ray's, the query's step with
+// `any`) whose origin lies in the origin box and whose segment ends in the light box
+// tests those alone: a triangle that blocks the segment meets the hull, so it was
+// collected, and the answer is the traversal's. The hull test is widened by
+// TRACE_BUNDLE_SLACK, as the camera rays' bundle.
+#define TRACE_SHADOW_MAX 16u
+uint trace_shadow_tri[TRACE_SHADOW_MAX];  // level-0 triangles, BVH leaf order
+uint trace_shadow_n = 0u;
+bool trace_shadow_on = false;             // built (the list may be empty: nothing blocks)
+vec3 trace_shadow_olo, trace_shadow_ohi;  // the origin box
+vec3 trace_shadow_llo, trace_shadow_lhi;  // the light box
+// Whether the last occlusion query of the object took its answer from the shadow
+// bundle (tests).
+bool trace_shadow_answered = false;
+
+bool trace_shadow_built() { return trace_shadow_on; }
+
+// Whether box [bmin, bmax] may meet the hull of the origin and light boxes (conservative).
+// The hull is the union over s in [0, 1] of the boxes (1 - s) O + s L, so a box meets it
+// where one s puts that box over it on every axis: per axis and bound, a s <= c, an
+// interval of s; their intersection with [0, 1] not empty.
+bool trace_shadow_box(vec3 bmin, vec3 bmax) {
+    float e = TRACE_BUNDLE_SLACK;
+    vec3 o0 = trace_shadow_olo - e, o1 = trace_shadow_ohi + e;
+    vec3 l0 = trace_shadow_llo - e, l1 = trace_shadow_lhi + e;
+    float lo = 0.0, hi = 1.0;
+    bool ok = true;
+    // (1 - s) o0 + s l0 <= bmax + e and (1 - s) o1 + s l1 >= bmin - e.
+    [[unroll]] for (uint k = 0u; k < 2u; k++) {
+        vec3 a = k == 0u ? l0 - o0 : o1 - l1;
+        vec3 c = k == 0u ? bmax + e - o0 : o1 - bmin + e;
+        [[unroll]] for (uint i = 0u; i < 3u; i++) {
+            float q = c[i] / a[i];
+            hi = a[i] > 0.0 ? min(hi, q) : hi;
+            lo = a[i] < 0.0 ? max(lo, q) : lo;
+            ok = ok && (a[i] != 0.0 || c[i] >= 0.0);
+        }
+    }
+    return ok && lo <= hi;
+}
+
+// Adds `count` consecutive level-0 triangles from `first` to the shadow bundle's list;
+// false once it would overflow (the bundle is then dropped).
+bool trace_shadow_add(uint first, uint count) {
+    if (trace_shadow_n + count > TRACE_SHADOW_MAX) return false;
+    for (uint k = 0u; k < count; k++) trace_shadow_tri[trace_shadow_n + k] = first + k;
+    trace_shadow_n += count;
+    return true;
+}
+
+// Whether the object's occlusion test of ray o + t d, t up to tmax, may take its answer
+// from the shadow bundle: built, o in the origin box and the segment's end in the light
+// box.
+bool trace_shadow_covers(vec3 o, vec3 d, float tmax) {
+    vec3 e = o + tmax * d;
+    return trace_shadow_on
+        && all(greaterThanEqual(o, trace_shadow_olo)) && all(lessThanEqual(o, trace_shadow_ohi))
+        && all(greaterThanEqual(e, trace_shadow_llo)) && all(lessThanEqual(e, trace_shadow_lhi));
+}
+
 #include "trace_bvh.glsl"
+
+// Sets the pixel's shadow bundle (above) from its origin box and light box (min and max
+// corners); none where more than TRACE_SHADOW_MAX triangles meet their hull.
+void trace_shadow_init(vec3 olo, vec3 ohi, vec3 llo, vec3 lhi) {
+    trace_shadow_n = 0u;
+    trace_shadow_olo = olo;
+    trace_shadow_ohi = ohi;
+    trace_shadow_llo = llo;
+    trace_shadow_lhi = lhi;
+    trace_shadow_on = trace_bundle_collect(true);
+}
+
+// The bounding box of the points where the last trace_bundle_init's rays meet the plane
+// it was given (the pixel's camera rays' footprint on it); false where it made no bundle
+// because a ray of it could meet that plane behind the lens or along it.
+vec3 trace_foot_lo, trace_foot_hi;
+bool trace_foot_ok = false;
+bool trace_bundle_footprint(out vec3 lo, out vec3 hi) {
+    lo = trace_foot_lo;
+    hi = trace_foot_hi;
+    return trace_foot_ok;
+}
 
 // Sets the pixel's bundle (above): eye, unit right, up and forward axes, the aperture's
 // radius `lens` (0: a pinhole) and the depth of the plane of focus zf (any positive
@@ -319,6 +411,12 @@ void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, floa
     float zfar = 0.0;
     bool ok = true;
     float dir_sign = 0.0;
+    // Where those rays meet the plane: a ray from any point of the lens's square through
+    // any of the footprint's box meets it in the hull of the sixteen (for a fixed end,
+    // the map from the other end to the plane is projective, and the plane lies ahead
+    // of every ray: convex sets stay convex).
+    trace_foot_lo = vec3(3.0e38);
+    trace_foot_hi = vec3(-3.0e38);
     for (uint k = 0u; k < 16u; k++) {
         vec2 l = vec2((k & 1u) != 0u ? lens : -lens, (k & 2u) != 0u ? lens : -lens);
         vec2 f = vec2((k & 4u) != 0u ? q.y : q.x, (k & 8u) != 0u ? q.w : q.z);
@@ -330,7 +428,11 @@ void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, floa
         ok = ok && sg != 0.0 && (k == 0u || sg == dir_sign) && s > 0.0;
         dir_sign = sg;
         zfar = max(zfar, s * zf);
+        vec3 at = from + s * (to - from);
+        trace_foot_lo = min(trace_foot_lo, at);
+        trace_foot_hi = max(trace_foot_hi, at);
     }
+    trace_foot_ok = ok;
     if (!ok) return;
     trace_bundle_zf = zf;
     trace_bundle_zfar = zfar * 1.00001;
@@ -352,7 +454,7 @@ void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, floa
             trace_bundle_plane[part * 4u + a * 2u + 1u] = vec4(n1, -dot(n1, eye) + m);
         }
     }
-    if (!trace_bundle_collect()) trace_bundle_n = 0u;
+    if (!trace_bundle_collect(false)) trace_bundle_n = 0u;
 }
 
 // The traversal's view of ray (o, d): reciprocal direction for the slab tests (zero
@@ -411,8 +513,19 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
         skip_first = h.prim != NO_HIT && h.t >= t_light;
         if (!skip_first) h = hit_none(tmax);
     }
+    trace_shadow_answered = false;
     for (uint step = 0u; step < 2u; step++) {
-        if (!(step == 0u && skip_first)) trace_bvh(level, o, inv_d, tr, tmin, h, any);
+        // The object's occlusion test inside the pixel's shadow bundle: its list.
+        bool listed = any && level == 0u && trace_shadow_covers(o, d, h.t);
+        if (listed) {
+            for (uint k = 0u; k < trace_shadow_n; k++) {
+                BvhTri t = trace_tri(0u, trace_shadow_tri[k]);
+                trace_tri_test(t.v0.xyz, t.v1.xyz, t.v2.xyz, floatBitsToUint(t.v0.w), 0u, tr, tmin, h);
+            }
+            trace_shadow_answered = true;
+        } else if (!(step == 0u && skip_first)) {
+            trace_bvh(level, o, inv_d, tr, tmin, h, any);
+        }
         if (step == 1u || kind == TQ_OBJECT) break;
         if (kind == TQ_CLOSEST) {
             level = 1u;

@@ -6,7 +6,9 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::view::{Tiling, camera_block};
-use crate::gpu_interface::{BundleBlock, HitsBinding, HitsPush, ImagePush, RaycastBinding, Tri};
+use crate::gpu_interface::{
+    BundleBlock, HitsBinding, HitsPush, ImagePush, RaycastBinding, ShadowBlock, Tri,
+};
 use crate::graph::{Graph, PassTiming};
 use crate::scene::Camera;
 use crate::trace::{TraceScene, scramble_multiplier};
@@ -145,7 +147,7 @@ pub fn trace_rays_hinted(
     hints: Option<&[RayHint]>,
     profiler: Option<&Profiler>,
 ) -> Result<(Vec<HitOut>, PassTiming), VkError> {
-    trace_rays_with(ctx, scene, rays, hints, None, profiler).map(|(h, _, t)| (h, t))
+    trace_rays_with(ctx, scene, rays, hints, None, None, profiler).map(|(h, _, t)| (h, t))
 }
 
 /// A pixel's camera-ray bundle for [`trace_rays_bundled`] (glsl/common/trace.glsl
@@ -192,7 +194,40 @@ pub fn trace_rays_bundled(
     hints: &[RayHint],
     bundles: &[RayBundle],
 ) -> Result<(Vec<HitOut>, Vec<BundleUse>), VkError> {
-    trace_rays_with(ctx, scene, rays, Some(hints), Some(bundles), None).map(|(h, u, _)| (h, u))
+    trace_rays_with(ctx, scene, rays, Some(hints), Some(bundles), None, None)
+        .map(|(h, u, _)| (h, u))
+}
+
+/// A pixel's shadow bundle for [`trace_rays_shadowed`] (glsl/common/trace.glsl
+/// `trace_shadow_init`): the box the shadow rays start in and the box their segments end
+/// in (min and max corners).
+#[derive(Clone, Copy, Debug)]
+pub struct RayShadow {
+    pub origin: [[f32; 3]; 2],
+    pub light: [[f32; 3]; 2],
+}
+
+/// Occlusion tests (the path tracer's shadow-ray query of the object, TQ_BLOCKED: is
+/// anything within [tmin, tmax]), each ray with a shadow bundle of its own built first
+/// (`Some`) or none: the answer must be the same. Returns whether each ray is blocked and
+/// what became of its bundle (`Answered`: from the bundle's list, without the object's
+/// traversal; the ray-query backend builds none).
+///
+/// # Panics
+/// If `shadows` is not as many as `rays`.
+pub fn trace_rays_shadowed(
+    ctx: &Arc<Context>,
+    scene: &TraceScene,
+    rays: &[RayIn],
+    shadows: &[Option<RayShadow>],
+) -> Result<(Vec<bool>, Vec<BundleUse>), VkError> {
+    assert_eq!(
+        shadows.len(),
+        rays.len(),
+        "trace_rays_shadowed: one entry a ray"
+    );
+    trace_rays_with(ctx, scene, rays, None, None, Some(shadows), None)
+        .map(|(h, u, _)| (h.iter().map(|h| h.t != 0.0).collect(), u))
 }
 
 fn trace_rays_with(
@@ -201,6 +236,7 @@ fn trace_rays_with(
     rays: &[RayIn],
     hints: Option<&[RayHint]>,
     bundles: Option<&[RayBundle]>,
+    shadows: Option<&[Option<RayShadow>]>,
     profiler: Option<&Profiler>,
 ) -> Result<(Vec<HitOut>, Vec<BundleUse>, PassTiming), VkError> {
     if let Some(h) = hints {
@@ -246,9 +282,27 @@ fn trace_rays_with(
         None => vec![bytemuck::Zeroable::zeroed()],
     };
     let bundle_buf = Buffer::from_slice(ctx, "ray bundles", &bundle_blocks, storage)?;
+    let p4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
+    let shadow_blocks: Vec<ShadowBlock> = match shadows {
+        Some(s) => s
+            .iter()
+            .map(|s| match s {
+                Some(s) => ShadowBlock {
+                    origin_lo: p4(s.origin[0], 1.0),
+                    origin_hi: p4(s.origin[1], 0.0),
+                    light_lo: p4(s.light[0], 0.0),
+                    light_hi: p4(s.light[1], 0.0),
+                },
+                None => bytemuck::Zeroable::zeroed(),
+            })
+            .collect(),
+        None => vec![bytemuck::Zeroable::zeroed()],
+    };
+    let shadow_buf = Buffer::from_slice(ctx, "ray shadow bundles", &shadow_blocks, storage)?;
     let readback =
         |name: &str, bytes: u64| Buffer::new(ctx, name, bytes, storage, MemoryKind::Readback);
-    let use_buf = readback("bundle use", bundle_blocks.len() as u64 * 4)?;
+    let uses_len = bundle_blocks.len().max(shadow_blocks.len());
+    let use_buf = readback("bundle use", uses_len as u64 * 4)?;
     let hit_buf = readback("hits", rays.len() as u64 * 16)?;
     // More groups than one dispatch allows: the graph refuses it (VkError::WorkgroupLimit).
     let groups = (rays.len() as u32).div_ceil(64);
@@ -256,7 +310,9 @@ fn trace_rays_with(
         count: rays.len() as u32,
         groups,
         mult: scramble_multiplier(groups),
-        hinted: if bundles.is_some() {
+        hinted: if shadows.is_some() {
+            3
+        } else if bundles.is_some() {
             2
         } else {
             u32::from(hints.is_some())
@@ -269,18 +325,20 @@ fn trace_rays_with(
     let mut h = g.import(&hit_buf);
     let bb = g.import(&bundle_buf);
     let mut ub = g.import(&use_buf);
+    let sb = g.import(&shadow_buf);
     refs.bind(g.dispatch("trace", &pipeline, [groups, 1, 1]))
         .read(HitsBinding::Rays.at(off), &r)
         .read(HitsBinding::Hints.at(off), &hb)
         .read(HitsBinding::Bundles.at(off), &bb)
+        .read(HitsBinding::Shadows.at(off), &sb)
         .write(HitsBinding::Hits.at(off), &mut h)
         .write(HitsBinding::BundleUse.at(off), &mut ub)
         .push(&push)
         .submit();
     let timings = g.execute(profiler)?;
     let raw: Vec<[f32; 4]> = crate::vk::timed(profiler, "readback", || hit_buf.read())?;
-    let uses: Vec<BundleUse> = match bundles {
-        Some(_) => use_buf
+    let uses: Vec<BundleUse> = if bundles.is_some() || shadows.is_some() {
+        use_buf
             .read::<u32>()?
             .iter()
             .map(|&u| match u {
@@ -288,8 +346,9 @@ fn trace_rays_with(
                 1 => BundleUse::Traversed,
                 _ => BundleUse::Answered,
             })
-            .collect(),
-        None => Vec::new(),
+            .collect()
+    } else {
+        Vec::new()
     };
     let hits = raw
         .iter()

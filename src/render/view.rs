@@ -509,6 +509,7 @@ fn path_params(
         n: m.ior_n,
         k: m.ior_k,
     };
+    let (lights_lo, lights_hi) = lights_box(light);
     PathParams {
         cam: camera_block(cam),
         width: cam.width,
@@ -533,8 +534,36 @@ fn path_params(
         light_samples: s.light_samples.max(1),
         bsdf_samples: s.bsdf_samples.max(1),
         shortcuts: s.light_shortcuts as u32,
+        lights_lo,
+        lights_hi,
         ..Default::default()
     }
+}
+
+/// The shadow bundle's light box (`PathParams::lights_lo`, `lights_hi`): the bounds of
+/// every light triangle's corners and spot position, widened by 1e-4 of the largest
+/// coordinate plus 1e-3 mm (a shadow ray's end is computed as o + t d, a few ulps off
+/// the light); w 1. All zero (no bundle) without lights.
+fn lights_box(light: &LightGeometry) -> ([f32; 4], [f32; 4]) {
+    let spots = light.emitters.iter().filter_map(|e| match e.sampling {
+        EmitterSampling::Spot { position, .. } => Some(position),
+        _ => None,
+    });
+    let corners = light
+        .tris
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| light.tris.positions[i as usize]);
+    let (lo, hi) = corners.chain(spots).fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    );
+    if lo.x > hi.x {
+        return ([0.0; 4], [0.0; 4]);
+    }
+    let m = 1e-4 * lo.abs().max(hi.abs()).max_element() + 1e-3;
+    ((lo - m).extend(1.0).into(), (hi + m).extend(1.0).into())
 }
 
 /// The pixel cone's angle (rad): the square root of the centre pixel's solid angle,
