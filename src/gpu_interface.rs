@@ -102,9 +102,11 @@ mod tests {
 
     #[test]
     fn layouts_match_what_the_shaders_were_written_for() {
-        assert_eq!(std::mem::size_of::<PathParams>(), 224);
+        assert_eq!(std::mem::size_of::<PathParams>(), 256);
         assert_eq!(std::mem::offset_of!(PathParams, cover_lo), 192);
         assert_eq!(std::mem::offset_of!(PathParams, cover_cell), 208);
+        assert_eq!(std::mem::offset_of!(PathParams, lights_lo), 224);
+        assert_eq!(std::mem::offset_of!(PathParams, lights_hi), 240);
         assert_eq!(std::mem::offset_of!(PathParams, texture_filter), 176);
         assert_eq!(std::mem::offset_of!(PathParams, width), 96);
         assert_eq!(std::mem::offset_of!(PathParams, light_first), 160);

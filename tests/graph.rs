@@ -90,6 +90,7 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
         .read(HitsBinding::Hints.at(off), &a)
         .read(HitsBinding::Bundles.at(off), &a)
         .write(HitsBinding::BundleUse.at(off), &mut u)
+        .read(HitsBinding::Shadows.at(off), &a)
         .submit();
         g.execute(None)
     };
