@@ -401,12 +401,7 @@ fn a_pixel_bundle_never_changes_the_closest_hit() {
                 bundled[differ[0]],
                 plain[differ[0]]
             );
-            let count = |u: BundleUse| uses.iter().filter(|&&x| x == u).count();
-            let (answered, traversed, none) = (
-                count(BundleUse::Answered),
-                count(BundleUse::Traversed),
-                count(BundleUse::None),
-            );
+            let (answered, traversed, none) = use_counts(&uses);
             eprintln!(
                 "{} (lens {lens}, focus {zf}): {} rays, answered {answered}, traversed {traversed}, no bundle {none}",
                 backend.name(),
@@ -543,12 +538,7 @@ fn a_shadow_bundle_never_changes_what_blocks_a_ray() {
             plain[differ[0]]
         );
         let blocked = plain.iter().filter(|&&b| b).count();
-        let count = |u: BundleUse| uses.iter().filter(|&&x| x == u).count();
-        let (answered, traversed, no) = (
-            count(BundleUse::Answered),
-            count(BundleUse::Traversed),
-            count(BundleUse::None),
-        );
+        let (answered, traversed, no) = use_counts(&uses);
         eprintln!(
             "{}: {} rays, {blocked} blocked; answered {answered}, traversed {traversed}, no bundle {no}",
             backend.name(),
@@ -567,4 +557,14 @@ fn a_shadow_bundle_never_changes_what_blocks_a_ray() {
         }
     }
     common::assert_clean(&ctx);
+}
+
+/// How many bundles answered their ray, were traversed past, or were not built.
+fn use_counts(uses: &[BundleUse]) -> (usize, usize, usize) {
+    let count = |u: BundleUse| uses.iter().filter(|&&x| x == u).count();
+    (
+        count(BundleUse::Answered),
+        count(BundleUse::Traversed),
+        count(BundleUse::None),
+    )
 }
