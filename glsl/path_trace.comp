@@ -560,8 +560,8 @@ PixelPlane pix_plane;
 // less traversal); prim NO_HIT: none.
 TraceHint pix_hint;
 
-// Sets pix_hint and the pixel's camera-ray bundle where the pixel's centre ray meets the
-// object (main clears the hint); with `plane` (the analytic direct light's extra camera
+// Sets pix_hint and the pixel's camera-ray and shadow-ray bundles where the pixel's centre
+// ray meets the object (main clears the hint); with `plane` (the analytic direct light's extra camera
 // rays) also the pixel's reference point and its rings (none where the centre ray meets
 // no conductor). One function for both: lavapipe inlines a traversal per trace call.
 void pixel_plane_init(uint px, uint py, bool plane) {
@@ -1011,14 +1011,10 @@ void main() {
     // the pass would), so a first batch of fewer samples needs no pass either.
     uint label_count = min(pc.labels * pc.labels, LABEL_MAX_SAMPLES);
     pix_hint = trace_no_hint();
-    // The centre ray's hint and bundle serve every camera ray of the software traversal
-    // (the ray query takes no hint); the reference plane only the analytic extra rays.
+    // The centre ray's hint and bundles serve every camera ray and first-hit shadow ray
+    // of a traversal that takes them; the reference plane only the analytic extra rays.
     bool plane = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u;
-#if defined(TRACE_RAY_QUERY)
-    if (plane) pixel_plane_init(px, py, true);
-#else
-    pixel_plane_init(px, py, plane);
-#endif
+    if (plane || TRACE_TAKES_HINTS) pixel_plane_init(px, py, plane);
     uint words[LABEL_MAX_SAMPLES];
     seg_memo_clear();
     for (uint s = 0u; s < max(pc.sample_count, label_count); s++) {

@@ -81,6 +81,9 @@ TraceHint trace_no_hint() {
 #if defined(TRACE_RAY_QUERY)
 #extension GL_EXT_ray_query : require
 #define TRACE_BINDING_COUNT 1
+// Whether the traversal takes hints and bundles (trace_query_hinted's hint,
+// trace_bundle_init, trace_shadow_init): the ray query traverses in hardware, without.
+const bool TRACE_TAKES_HINTS = false;
 layout(set = 0, binding = 0) uniform accelerationStructureEXT trace_tlas;
 
 // One ray query over the instances whose mask meets `mask`: the closest hit, or with
@@ -151,6 +154,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
 
 #elif defined(TRACE_SOFTWARE)
 #define TRACE_BINDING_COUNT 4
+const bool TRACE_TAKES_HINTS = true;
 // Triangles in BVH leaf order; v0.w holds the original triangle index.
 struct BvhTri { vec4 v0; vec4 v1; vec4 v2; };
 #if defined(TRACE_WIDE)
