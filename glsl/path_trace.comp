@@ -560,10 +560,11 @@ PixelPlane pix_plane;
 // less traversal); prim NO_HIT: none.
 TraceHint pix_hint;
 
-// Sets pix_hint and the pixel's camera-ray and shadow-ray bundles where the pixel's centre
-// ray meets the object (main clears the hint); with `plane` (the analytic direct light's extra camera
-// rays) also the pixel's reference point and its rings (none where the centre ray meets
-// no conductor). One function for both: lavapipe inlines a traversal per trace call.
+// Sets pix_hint and the pixel's camera-ray and shadow-ray bundles where the pixel's
+// centre ray meets the object (main clears the hint); with `plane` (the analytic direct
+// light's extra camera rays) also the pixel's reference point and its rings (none where
+// the centre ray meets no conductor). One function for both: lavapipe inlines a
+// traversal per trace call.
 void pixel_plane_init(uint px, uint py, bool plane) {
     rec_rings = 0u;
     vec3 o, d;

@@ -271,9 +271,16 @@ TraceRay trace_setup(vec3 o, vec3 d) {
 // plane of the pixel centre's triangle. Every test is widened by TRACE_BUNDLE_SLACK so
 // that rounding only ever keeps a box.
 #define TRACE_BUNDLE_MAX 16u
+#define TRACE_SHADOW_MAX 16u              // the shadow bundle's (trace_shadow_init)
 const float TRACE_BUNDLE_SLACK = 1e-3;   // scene units (mm)
-uint trace_bundle_tri[TRACE_BUNDLE_MAX];  // level-0 triangles, BVH leaf order
-uint trace_bundle_n = 0u;                 // how many; 0: no bundle (each invocation starts without)
+// Both bundles' triangle lists in one store (level-0 triangles, BVH leaf order): list
+// TRACE_LIST_CAMERA first (at most TRACE_BUNDLE_MAX), TRACE_LIST_SHADOW after it (at most
+// TRACE_SHADOW_MAX); trace_list_n: how many in each (each invocation starts with none;
+// the camera's 0: no bundle).
+const uint TRACE_LIST_CAMERA = 0u;
+const uint TRACE_LIST_SHADOW = 1u;
+uint trace_list_tri[TRACE_BUNDLE_MAX + TRACE_SHADOW_MAX];
+uint trace_list_n[2] = uint[2](0u, 0u);
 vec4 trace_bundle_plane[8];               // n.p + w >= 0: 0-3 up to the plane of focus, 4-7 beyond
 vec4 trace_bundle_axis;                   // xyz: unit forward; w: -dot(forward, eye): depth = dot(xyz, p) + w
 float trace_bundle_zf;
@@ -282,7 +289,7 @@ float trace_bundle_zfar;
 // Whether the last camera-ray query took its object hit from the bundle (tests).
 bool trace_bundle_answered = false;
 
-uint trace_bundle_size() { return trace_bundle_n; }
+uint trace_bundle_size() { return trace_list_n[TRACE_LIST_CAMERA]; }
 
 // Whether box [bmin, bmax] may meet the bundle no deeper than zfar (conservative).
 bool trace_bundle_box(vec3 bmin, vec3 bmax) {
@@ -302,12 +309,17 @@ bool trace_bundle_box(vec3 bmin, vec3 bmax) {
     return near || far;
 }
 
-// Adds `count` consecutive level-0 triangles from `first` to the bundle's list; false
-// once it would overflow (the list is then dropped).
-bool trace_bundle_add(uint first, uint count) {
-    if (trace_bundle_n + count > TRACE_BUNDLE_MAX) return false;
-    for (uint k = 0u; k < count; k++) trace_bundle_tri[trace_bundle_n + k] = first + k;
-    trace_bundle_n += count;
+// Where list `list` starts in the store.
+uint trace_list_base(uint list) { return list == TRACE_LIST_CAMERA ? 0u : TRACE_BUNDLE_MAX; }
+
+// Adds `count` consecutive level-0 triangles from `first` to list `list`; false once it
+// would overflow (the bundle is then dropped).
+bool trace_list_add(uint list, uint first, uint count) {
+    uint cap = list == TRACE_LIST_CAMERA ? TRACE_BUNDLE_MAX : TRACE_SHADOW_MAX;
+    uint n = trace_list_n[list];
+    if (n + count > cap) return false;
+    for (uint k = 0u; k < count; k++) trace_list_tri[trace_list_base(list) + n + k] = first + k;
+    trace_list_n[list] = n + count;
     return true;
 }
 
@@ -321,9 +333,6 @@ bool trace_bundle_add(uint first, uint count) {
 // tests those alone: a triangle that blocks the segment meets the hull, so it was
 // collected, and the answer is the traversal's. The hull test is widened by
 // TRACE_BUNDLE_SLACK, as the camera rays' bundle.
-#define TRACE_SHADOW_MAX 16u
-uint trace_shadow_tri[TRACE_SHADOW_MAX];  // level-0 triangles, BVH leaf order
-uint trace_shadow_n = 0u;
 bool trace_shadow_on = false;             // built (the list may be empty: nothing blocks)
 vec3 trace_shadow_olo, trace_shadow_ohi;  // the origin box
 vec3 trace_shadow_llo, trace_shadow_lhi;  // the light box
@@ -357,13 +366,9 @@ bool trace_shadow_box(vec3 bmin, vec3 bmax) {
     return ok && lo <= hi;
 }
 
-// Adds `count` consecutive level-0 triangles from `first` to the shadow bundle's list;
-// false once it would overflow (the bundle is then dropped).
-bool trace_shadow_add(uint first, uint count) {
-    if (trace_shadow_n + count > TRACE_SHADOW_MAX) return false;
-    for (uint k = 0u; k < count; k++) trace_shadow_tri[trace_shadow_n + k] = first + k;
-    trace_shadow_n += count;
-    return true;
+// Whether box [bmin, bmax] may meet list `list`'s bundle (trace_bundle_collect).
+bool trace_list_box(uint list, vec3 bmin, vec3 bmax) {
+    return list == TRACE_LIST_CAMERA ? trace_bundle_box(bmin, bmax) : trace_shadow_box(bmin, bmax);
 }
 
 // Whether the object's occlusion test of ray o + t d, t up to tmax, may take its answer
@@ -378,15 +383,23 @@ bool trace_shadow_covers(vec3 o, vec3 d, float tmax) {
 
 #include "trace_bvh.glsl"
 
+// Tests list `list`'s triangles against ray tr, taking each hit into h (trace_tri_test).
+void trace_list_test(uint list, TraceRay tr, float tmin, inout Hit h) {
+    for (uint k = 0u; k < trace_list_n[list]; k++) {
+        BvhTri t = trace_tri(0u, trace_list_tri[trace_list_base(list) + k]);
+        trace_tri_test(t.v0.xyz, t.v1.xyz, t.v2.xyz, floatBitsToUint(t.v0.w), 0u, tr, tmin, h);
+    }
+}
+
 // Sets the pixel's shadow bundle (above) from its origin box and light box (min and max
 // corners); none where more than TRACE_SHADOW_MAX triangles meet their hull.
 void trace_shadow_init(vec3 olo, vec3 ohi, vec3 llo, vec3 lhi) {
-    trace_shadow_n = 0u;
+    trace_list_n[TRACE_LIST_SHADOW] = 0u;
     trace_shadow_olo = olo;
     trace_shadow_ohi = ohi;
     trace_shadow_llo = llo;
     trace_shadow_lhi = lhi;
-    trace_shadow_on = trace_bundle_collect(true);
+    trace_shadow_on = trace_bundle_collect(TRACE_LIST_SHADOW);
 }
 
 // The bounding box of the points where the last trace_bundle_init's rays meet the plane
@@ -404,11 +417,11 @@ bool trace_bundle_footprint(out vec3 lo, out vec3 hi) {
 // radius `lens` (0: a pinhole) and the depth of the plane of focus zf (any positive
 // depth for a pinhole), the footprint's bounding box on it in the right and up
 // coordinates (q: x0, x1, y0, y1), and the plane of the pixel centre's triangle (a point
-// and a normal of any length). No bundle (trace_bundle_n 0) where a ray of the bundle
+// and a normal of any length). No bundle (trace_bundle_size() 0) where a ray of the bundle
 // could meet that plane behind the lens or along it, or too many triangles meet it.
 void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, float zf, vec4 q,
                        vec3 plane_p, vec3 plane_n) {
-    trace_bundle_n = 0u;
+    trace_list_n[TRACE_LIST_CAMERA] = 0u;
     // The deepest point of the plane on a ray from a corner of the lens's square to a
     // corner of the footprint's box: where a ray's depth on the plane is largest
     // (a ratio of functions linear in each end point takes its extremes at corners).
@@ -458,7 +471,7 @@ void trace_bundle_init(vec3 eye, vec3 right, vec3 up, vec3 fwd, float lens, floa
             trace_bundle_plane[part * 4u + a * 2u + 1u] = vec4(n1, -dot(n1, eye) + m);
         }
     }
-    if (!trace_bundle_collect(false)) trace_bundle_n = 0u;
+    if (!trace_bundle_collect(TRACE_LIST_CAMERA)) trace_list_n[TRACE_LIST_CAMERA] = 0u;
 }
 
 // The traversal's view of ray (o, d): reciprocal direction for the slab tests (zero
@@ -495,11 +508,8 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     // no deeper than the bundle reaches.
     bool skip_first = false;   // the first level's traversal answered without it
     if ((kind == TQ_CLOSEST || kind == TQ_OBJECT) && hint.prim != NO_HIT) {
-        if (trace_bundle_n > 0u) {
-            for (uint k = 0u; k < trace_bundle_n; k++) {
-                BvhTri t = trace_tri(0u, trace_bundle_tri[k]);
-                trace_tri_test(t.v0.xyz, t.v1.xyz, t.v2.xyz, floatBitsToUint(t.v0.w), 0u, tr, tmin, h);
-            }
+        if (trace_bundle_size() > 0u) {
+            trace_list_test(TRACE_LIST_CAMERA, tr, tmin, h);
             float depth = dot(trace_bundle_axis.xyz, o) + trace_bundle_axis.w
                 + h.t * dot(trace_bundle_axis.xyz, d);
             skip_first = h.prim != NO_HIT && depth <= trace_bundle_zfar;
@@ -522,10 +532,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
         // The object's occlusion test inside the pixel's shadow bundle: its list.
         bool listed = any && level == 0u && trace_shadow_covers(o, d, h.t);
         if (listed) {
-            for (uint k = 0u; k < trace_shadow_n; k++) {
-                BvhTri t = trace_tri(0u, trace_shadow_tri[k]);
-                trace_tri_test(t.v0.xyz, t.v1.xyz, t.v2.xyz, floatBitsToUint(t.v0.w), 0u, tr, tmin, h);
-            }
+            trace_list_test(TRACE_LIST_SHADOW, tr, tmin, h);
             trace_shadow_answered = true;
         } else if (!(step == 0u && skip_first)) {
             trace_bvh(level, o, inv_d, tr, tmin, h, any);

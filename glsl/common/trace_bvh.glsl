@@ -141,8 +141,9 @@ void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hi
 
 // The bundle's triangles (trace_bundle_init, glsl/common/trace.glsl): every object leaf
 // whose box meets the bundle, in any order; false where they are more than
-// TRACE_BUNDLE_MAX. With `shadow` the shadow bundle's instead (trace_shadow_init).
-bool trace_bundle_collect(bool shadow) {
+// TRACE_BUNDLE_MAX. Into list `list` (TRACE_LIST_*, glsl/common/trace.glsl): the camera
+// rays' bundle or the shadow rays' (trace_shadow_init, at most TRACE_SHADOW_MAX).
+bool trace_bundle_collect(uint list) {
     uvec2 stack[TRACE_WIDE_STACK];
     int sp = 0;
     uvec2 group = uvec2(0u, 0x80000000u);
@@ -172,17 +173,14 @@ bool trace_bundle_collect(bool shadow) {
                 vec3 bmin = nmin + vec3((qlo >> sh) & 0xffu) * cell;
                 vec3 bmax = nmin + vec3((qhi >> sh) & 0xffu) * cell;
                 uint at = meta & 0x1fu;
-                bool meets = shadow ? trace_shadow_box(bmin, bmax) : trace_bundle_box(bmin, bmax);
-                hitmask |= meta != 0u && meets ? ((meta >> 5u) & 7u) << at : 0u;
+                hitmask |= meta != 0u && trace_list_box(list, bmin, bmax) ? ((meta >> 5u) & 7u) << at : 0u;
             }
             group = uvec2(n.meta.x, (hitmask & 0xff000000u) | (ew >> 24u));
             uint tris = hitmask & 0x00ffffffu;
             while (tris != 0u) {
                 int b = findLSB(tris);
                 tris &= ~(1u << uint(b));
-                bool added = shadow ? trace_shadow_add(n.meta.y + uint(b), 1u)
-                                    : trace_bundle_add(n.meta.y + uint(b), 1u);
-                if (!added) return false;
+                if (!trace_list_add(list, n.meta.y + uint(b), 1u)) return false;
             }
         } else {
             group = uvec2(0u);
@@ -241,29 +239,22 @@ void trace_bvh(uint level, vec3 o, vec3 inv_d, TraceRay tr, float tmin, inout Hi
 
 // The bundle's triangles (trace_bundle_init, glsl/common/trace.glsl): every object leaf
 // whose box meets the bundle, in any order; false where they are more than
-// TRACE_BUNDLE_MAX. With `shadow` the shadow bundle's instead (trace_shadow_init).
-bool trace_bundle_collect(bool shadow) {
+// TRACE_BUNDLE_MAX. Into list `list` (TRACE_LIST_*, glsl/common/trace.glsl): the camera
+// rays' bundle or the shadow rays' (trace_shadow_init, at most TRACE_SHADOW_MAX).
+bool trace_bundle_collect(uint list) {
     uint stack[TRACE_STACK];
     int sp = 0;
     uint node = 0u;
     while (true) {
         BvhNode n = trace_node(0u, node);
-        bool hl = shadow ? trace_shadow_box(n.l_min.xyz, n.l_max.xyz)
-                         : trace_bundle_box(n.l_min.xyz, n.l_max.xyz);
-        bool hr = shadow ? trace_shadow_box(n.r_min.xyz, n.r_max.xyz)
-                         : trace_bundle_box(n.r_min.xyz, n.r_max.xyz);
+        bool hl = trace_list_box(list, n.l_min.xyz, n.l_max.xyz);
+        bool hr = trace_list_box(list, n.r_min.xyz, n.r_max.xyz);
         uint lc = floatBitsToUint(n.l_max.w);
         uint rc = floatBitsToUint(n.r_max.w);
         uint li = floatBitsToUint(n.l_min.w);
         uint ri = floatBitsToUint(n.r_min.w);
-        if (hl && lc > 0u) {
-            if (!(shadow ? trace_shadow_add(li, lc) : trace_bundle_add(li, lc))) return false;
-            hl = false;
-        }
-        if (hr && rc > 0u) {
-            if (!(shadow ? trace_shadow_add(ri, rc) : trace_bundle_add(ri, rc))) return false;
-            hr = false;
-        }
+        if (hl && lc > 0u) { if (!trace_list_add(list, li, lc)) return false; hl = false; }
+        if (hr && rc > 0u) { if (!trace_list_add(list, ri, rc)) return false; hr = false; }
         if (hl && hr) {
             if (sp >= TRACE_STACK) return false;
             stack[sp] = ri;
