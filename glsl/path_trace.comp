@@ -1,6 +1,7 @@
 #version 460
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
 //! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
 // object (materials per region: common/material.glsl), Lambertian table, lights (area

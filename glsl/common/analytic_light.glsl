@@ -492,16 +492,22 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     float sum0 = 0.0, sum1 = 0.0;
     bool ab0 = first0.z > 0.0, ab1 = first1.z > 0.0;
     uint n = rec_n[i];
-    for (uint j = 1u; j < n; j++) {
+    // To the subgroup's longest loop, so that j (and with it the private array's index)
+    // is one value for all lanes: lavapipe then reads rec_w with one vector load instead
+    // of a load per lane; a lane past its own loop keeps its sums.
+    uint n_all = subgroupMax(n);
+    for (uint j = 1u; j < n_all; j++) {
         w = rec_w[base + j];
-        vec3 v0 = recorded_point(w, t10, t20, l0.r);
-        vec3 v1 = recorded_point(w, t11, t21, l1.r);
-        sum0 += edge_z_unit(prev0, v0);
-        sum1 += edge_z_unit(prev1, v1);
-        prev0 = v0;
-        prev1 = v1;
-        ab0 = ab0 && v0.z > 0.0;
-        ab1 = ab1 && v1.z > 0.0;
+        if (j < n) {
+            vec3 v0 = recorded_point(w, t10, t20, l0.r);
+            vec3 v1 = recorded_point(w, t11, t21, l1.r);
+            sum0 += edge_z_unit(prev0, v0);
+            sum1 += edge_z_unit(prev1, v1);
+            prev0 = v0;
+            prev1 = v1;
+            ab0 = ab0 && v0.z > 0.0;
+            ab1 = ab1 && v1.z > 0.0;
+        }
     }
     above = bvec2(ab0, ab1);
     return vec2(sum0 + edge_z_unit(prev0, first0), sum1 + edge_z_unit(prev1, first1));
@@ -515,7 +521,10 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
 // be one function of the camera ray.)
 vec2 recorded_rings2(Lobe l0, vec3 ns0, Lobe l1, vec3 ns1) {
     vec2 a = vec2(0.0);
-    for (uint r = 0u; r < rec_rings; r++) {
+    // Lane-uniform as recorded_loop2's vertex loop, for its loop index.
+    uint rings_all = subgroupMax(rec_rings);
+    for (uint r = 0u; r < rings_all; r++) {
+        if (r >= rec_rings) continue;
         bvec2 above_lo, above_hi;
         vec2 lo = recorded_loop2(2u * r, l0, l1, above_lo);
         vec2 hi = recorded_loop2(2u * r + 1u, l0, l1, above_hi);

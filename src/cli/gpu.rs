@@ -46,6 +46,10 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         "64-bit integers: {} (the software backends load their BVH eight bytes at a time)",
         if i.shader_int64 { "yes" } else { "no" }
     );
+    println!(
+        "subgroup arithmetic: {} (the path tracer's extra camera rays walk their loops in step)",
+        if i.subgroup_arithmetic { "yes" } else { "no" }
+    );
     println!("auto backend:    {} ({why})", auto.name());
     println!(
         "timestamps:      {} (period {} ns)",

@@ -69,6 +69,9 @@ impl PathTracer {
         tables: &EnergyTables,
         begin_unspecialized: bool,
     ) -> Result<PathTracer, RenderError> {
+        if !ctx.info.subgroup_arithmetic {
+            return Err(VkError::NoSubgroupArithmetic.into());
+        }
         let unspecialized = if begin_unspecialized {
             let ctx = ctx.clone();
             std::thread::Builder::new()

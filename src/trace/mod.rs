@@ -606,6 +606,7 @@ mod tests {
             ray_query_enabled: ray_query,
             buffer_device_address,
             shader_int64,
+            subgroup_arithmetic: true,
             is_cpu: false,
             timestamp_period_ns: 1.0,
             timestamps_supported: true,

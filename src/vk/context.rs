@@ -48,6 +48,10 @@ pub struct DeviceInfo {
     /// 64-bit integers in shaders (`shaderInt64`) are on: the wide software traversal's
     /// stack entries are 64-bit words.
     pub shader_int64: bool,
+    /// Subgroup arithmetic (`subgroupMax`) in compute shaders (Vulkan 1.1 subgroup
+    /// properties): the path tracer makes the extra camera rays' loops lane-uniform with
+    /// it (glsl/common/analytic_light.glsl `recorded_loop2`).
+    pub subgroup_arithmetic: bool,
     pub is_cpu: bool,
     pub timestamp_period_ns: f32,
     pub timestamps_supported: bool,
@@ -505,9 +509,18 @@ impl Context {
         let device = unsafe { instance.create_device(physical, &create, None) }?;
 
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
-        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+        let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+        let mut props2 = vk::PhysicalDeviceProperties2::default()
+            .push_next(&mut driver)
+            .push_next(&mut subgroup);
         unsafe { instance.get_physical_device_properties2(physical, &mut props2) };
         let props = props2.properties;
+        let subgroup_arithmetic = subgroup
+            .supported_stages
+            .contains(vk::ShaderStageFlags::COMPUTE)
+            && subgroup
+                .supported_operations
+                .contains(vk::SubgroupFeatureFlags::ARITHMETIC);
         let mem = unsafe { instance.get_physical_device_memory_properties(physical) };
         let info = DeviceInfo {
             name: cstr_field(&props.device_name),
@@ -519,6 +532,7 @@ impl Context {
             ray_query_enabled,
             buffer_device_address,
             shader_int64,
+            subgroup_arithmetic,
             is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,

@@ -38,6 +38,10 @@ pub enum VkError {
         "this device does not offer 64-bit integers in shaders (Vulkan 1.0 feature shaderInt64), with which the software trace backends load their BVH; use --accel ray-query where the device has ray query"
     )]
     NoShaderInt64,
+    #[error(
+        "this device does not offer subgroup arithmetic in compute shaders (Vulkan 1.1 subgroup properties: supportedOperations ARITHMETIC, supportedStages COMPUTE), which the path tracer uses"
+    )]
+    NoSubgroupArithmetic,
     #[error("buffer {0:?} is not host-visible")]
     NotMappable(String),
     /// The software backend's BVH cannot be traversed (src/trace/software_bvh.rs).
