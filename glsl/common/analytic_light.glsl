@@ -476,9 +476,10 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r) {
 // the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The
 // lobes' widths are taken as reciprocals and the edges from edge_z_unit
 // (roundings of their own: A' needs only to be one function of the camera ray). Each
-// vertex is read once for both lobes (a private array's read is a per-lane gather on
-// lavapipe) and the two sums give the loop's body independent work; each sum is what a
-// pass of its own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
+// vertex is read once for both lobes (a private array's read at a per-lane index is a
+// load a lane on lavapipe; the lane-uniform loop below makes it one vector load) and
+// the two sums give the loop's body independent work; each sum is what a pass of its
+// own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
 // of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
 // rays' edge sums in pairs").
 vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
