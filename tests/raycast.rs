@@ -10,6 +10,7 @@ use synosis::scene::Camera;
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::scene::{Mesh, TriLabel, export_mesh};
 use synosis::trace::{Backend, TraceScene};
+use synosis::vk::LaneWidth;
 
 /// A bumpy sphere standing on a thin slab: depth edges, grazing silhouettes, a plane.
 fn test_mesh() -> Mesh {
@@ -39,6 +40,22 @@ fn test_mesh() -> Mesh {
         m.labels.extend([TriLabel::default(); 2]);
     }
     m
+}
+
+// Lavapipe compiles for the vector width vk::lanes chose, or the user's: its device name
+// ends in "(LLVM x, N bits)". Fails if the width was set after the driver had loaded.
+#[test]
+fn lavapipe_runs_at_the_chosen_lane_width() {
+    let ctx = common::gpu();
+    if !ctx.info.is_cpu {
+        return;
+    }
+    let name = &ctx.info.name;
+    match &ctx.info.cpu_lanes {
+        LaneWidth::Wide => assert!(name.contains(", 512 bits)"), "{name}"),
+        LaneWidth::User(v) => assert!(name.contains(&format!(", {v} bits)")), "{name}"),
+        LaneWidth::Driver => assert!(!name.contains(", 512 bits)"), "{name}"),
+    }
 }
 
 #[test]

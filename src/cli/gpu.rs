@@ -50,6 +50,9 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
         "subgroup arithmetic: {} (the path tracer's extra camera rays walk their loops in step)",
         if i.subgroup_arithmetic { "yes" } else { "no" }
     );
+    if i.is_cpu {
+        println!("lanes:           {}", i.cpu_lanes.describe());
+    }
     println!("auto backend:    {} ({why})", auto.name());
     println!(
         "timestamps:      {} (period {} ns)",

@@ -608,6 +608,7 @@ mod tests {
             shader_int64,
             subgroup_arithmetic: true,
             is_cpu: false,
+            cpu_lanes: crate::vk::LaneWidth::Driver,
             timestamp_period_ns: 1.0,
             timestamps_supported: true,
             queue_count: 1,

@@ -53,6 +53,9 @@ pub struct DeviceInfo {
     /// it (glsl/common/analytic_light.glsl `recorded_loop2`).
     pub subgroup_arithmetic: bool,
     pub is_cpu: bool,
+    /// How lavapipe's vector width was chosen for this process (`vk::lanes`; read by
+    /// lavapipe only).
+    pub cpu_lanes: super::LaneWidth,
     pub timestamp_period_ns: f32,
     pub timestamps_supported: bool,
     /// How many queues of the chosen family the device was opened with (at most
@@ -227,6 +230,8 @@ fn lifecycle_lock() -> std::sync::MutexGuard<'static, ()> {
 impl Context {
     pub fn new(opts: &ContextOptions) -> Result<Arc<Context>, VkError> {
         let _lifecycle = lifecycle_lock();
+        // Lavapipe's vector width, before the first driver loads (it reads it then).
+        super::lanes::choose();
         // SAFETY: loading the system Vulkan loader; failure is reported as an error.
         let entry = unsafe { ash::Entry::load() }.map_err(|e| VkError::Loader(e.to_string()))?;
         let validation = opts.validation || validation_from_env();
@@ -534,6 +539,7 @@ impl Context {
             shader_int64,
             subgroup_arithmetic,
             is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
+            cpu_lanes: super::lanes::choose(),
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,
             queue_count,

@@ -4,12 +4,14 @@
 pub mod accel;
 pub mod commands;
 pub mod context;
+pub mod lanes;
 pub mod memory;
 pub mod pipeline;
 pub mod profiler;
 
 pub use accel::{AccelStructure, Blas, Tlas};
 pub use context::{Context, ContextOptions, DeviceInfo, ValidationLog};
+pub use lanes::LaneWidth;
 pub use memory::{Buffer, Image, MemoryKind};
 pub use pipeline::{BindingKind, ComputePipeline, TEXEL_BUFFER_FORMAT};
 pub use profiler::{Profiler, Span, timed};
