@@ -336,3 +336,68 @@ fn distorted_camera_rays_match_the_cpu_model_on_both_backends() {
     }
     common::assert_clean(&ctx);
 }
+
+// Processes at different lavapipe lane widths, one after the other, on one shader-cache
+// folder: each compiles into its own width's folder (vk::lanes). Mesa keys lavapipe's
+// cached texel-fetch functions by the texture's format alone, so without the folders a
+// shader compiled at one width (here: the other backend's raycast, not yet cached) calls
+// the functions another width compiled: measured with Mesa 25.0.7, the second run below
+// (128 bits after 256) died of a segmentation fault, and at 512 bits after 256 a raycast
+// missed every triangle without an error. 128 and 256 bits run on every x86-64 CPU with
+// AVX. The two backends' depths are the same bytes; each run under a deadline.
+#[test]
+fn lane_widths_one_after_another_share_a_cache_folder() {
+    if !common::gpu().info.is_cpu || !cfg!(target_arch = "x86_64") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("body.glb");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        .args(["testbody", "--out"])
+        .arg(&mesh)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let cache = dir.path().join("cache");
+    let mut depths = Vec::new();
+    let runs = [
+        ("256", "software"),
+        ("128", "software-wide"),
+        ("256", "software-wide"),
+    ];
+    for (i, (bits, accel)) in runs.into_iter().enumerate() {
+        let out = dir.path().join(format!("out{i}"));
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+            .args([
+                "raycast", "--width", "48", "--height", "32", "--accel", accel,
+            ])
+            .arg("--out")
+            .arg(&out)
+            .arg(&mesh)
+            .env("LP_NATIVE_VECTOR_WIDTH", bits)
+            .env("MESA_SHADER_CACHE_DIR", &cache)
+            .spawn()
+            .unwrap();
+        let start = std::time::Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if start.elapsed() > std::time::Duration::from_secs(300) {
+                child.kill().unwrap();
+                panic!("run {i} ({accel} at {bits} bits) hung");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        };
+        assert!(
+            status.success(),
+            "run {i} ({accel} at {bits} bits): {status}"
+        );
+        assert!(
+            cache.join(format!("lavapipe-lanes-{bits}")).is_dir(),
+            "no cache folder of {bits} bits"
+        );
+        depths.push(std::fs::read(out.join("depth.exr")).unwrap());
+    }
+    assert!(depths.iter().all(|d| *d == depths[0]), "the depths differ");
+}

@@ -52,6 +52,13 @@ pub fn info(a: InfoArgs) -> anyhow::Result<()> {
     );
     if i.is_cpu {
         println!("lanes:           {}", i.cpu_lanes.describe());
+        println!(
+            "shader cache:    {}",
+            match &i.cpu_shader_cache {
+                Some(d) => format!("{d} (this lane width's own folder)"),
+                None => "Mesa's own folder (the driver's default lane width)".into(),
+            }
+        );
     }
     println!("auto backend:    {} ({why})", auto.name());
     println!(

@@ -609,6 +609,7 @@ mod tests {
             subgroup_arithmetic: true,
             is_cpu: false,
             cpu_lanes: crate::vk::LaneWidth::Driver,
+            cpu_shader_cache: None,
             timestamp_period_ns: 1.0,
             timestamps_supported: true,
             queue_count: 1,

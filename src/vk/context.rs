@@ -56,6 +56,9 @@ pub struct DeviceInfo {
     /// How lavapipe's vector width was chosen for this process (`vk::lanes`; read by
     /// lavapipe only).
     pub cpu_lanes: super::LaneWidth,
+    /// The shader-cache folder `vk::lanes` set for that width (None: Mesa's own, at the
+    /// driver's default width).
+    pub cpu_shader_cache: Option<String>,
     pub timestamp_period_ns: f32,
     pub timestamps_supported: bool,
     /// How many queues of the chosen family the device was opened with (at most
@@ -540,6 +543,7 @@ impl Context {
             subgroup_arithmetic,
             is_cpu: props.device_type == vk::PhysicalDeviceType::CPU,
             cpu_lanes: super::lanes::choose(),
+            cpu_shader_cache: super::lanes::cache_dir().map(|d| d.display().to_string()),
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps_supported: families[queue_family as usize].timestamp_valid_bits > 0,
             queue_count,

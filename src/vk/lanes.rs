@@ -10,11 +10,33 @@
 //! So a process asks for 512-bit lanes on an Intel CPU with AVX-512F, unless the user set
 //! the variable (`LP_NATIVE_VECTOR_WIDTH=256` keeps the driver's width), and leaves the
 //! driver's default elsewhere. Other drivers do not read the variable.
+//!
+//! **Each width its own shader cache.** Mesa's on-disk shader cache keys lavapipe's
+//! compiled code by the shader and the CPU, not by the vector width, and its texel-fetch
+//! and sampling functions (which every `texelFetch` calls) by the texture's format alone.
+//! A process at one width given a cache filled at another runs the cached shaders at
+//! their width's speed, and where a shader is not cached yet (another backend, a changed
+//! shader: a new version of synosis) it compiles it at its own width and calls the cached
+//! functions of the other: measured with Mesa 25.0.7 (the other backend's raycast), one
+//! at 128 bits after one at 256 and one at 256 after one at 512 died of a segmentation
+//! fault, one at 512 after one at 256 missed every triangle without an error (test `tests/raycast.rs`
+//! `lane_widths_one_after_another_share_a_cache_folder`). So where the width is set
+//! through the environment (here, or by the user), [`choose`] also points
+//! `MESA_SHADER_CACHE_DIR` at a folder of that value's own, `lavapipe-lanes-<bits>` inside
+//! the folder Mesa would use (`MESA_SHADER_CACHE_DIR`, else `XDG_CACHE_HOME`, else
+//! `~/.cache`); a process at the driver's default width keeps Mesa's folder. Mesa's other
+//! drivers read the variable too: on a machine whose GPU has a Mesa driver such a process
+//! compiles into that folder as well (once).
 
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 /// The environment variable lavapipe takes its vector width from, in bits.
 pub const WIDTH_VAR: &str = "LP_NATIVE_VECTOR_WIDTH";
+
+/// The environment variable naming the folder of Mesa's on-disk shader cache.
+pub const CACHE_VAR: &str = "MESA_SHADER_CACHE_DIR";
 
 /// How this process's lavapipe vector width was chosen.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -68,27 +90,90 @@ fn host_cpu() -> (String, bool) {
     }
 }
 
+/// The shader-cache folder of a process whose lane width is set to `bits` through the
+/// environment: `lavapipe-lanes-<bits>` (the value's letters and digits, others as `_`)
+/// inside the folder Mesa would use (`mesa_dir`, the value of `MESA_SHADER_CACHE_DIR`,
+/// else `xdg`, `XDG_CACHE_HOME`, else `home`'s `.cache`; empty values count as unset), or
+/// `mesa_dir` itself where it already is that folder (a process started by one that set
+/// it). Values that differ get folders that differ, also where lavapipe reads them as one
+/// width ("512", "0x200"). None where no folder is known (Mesa keeps no cache).
+pub fn cache_dir_for(
+    bits: &str,
+    mesa_dir: Option<&OsStr>,
+    xdg: Option<&OsStr>,
+    home: Option<&OsStr>,
+) -> Option<PathBuf> {
+    let value: String = bits
+        .trim()
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let name = format!("lavapipe-lanes-{value}");
+    fn set(v: Option<&OsStr>) -> Option<&Path> {
+        v.filter(|v| !v.is_empty()).map(Path::new)
+    }
+    if let Some(dir) = set(mesa_dir) {
+        if dir.file_name() == Some(OsStr::new(&name)) {
+            return Some(dir.to_path_buf());
+        }
+        return Some(dir.join(name));
+    }
+    if let Some(dir) = set(xdg) {
+        return Some(dir.join(name));
+    }
+    set(home).map(|h| h.join(".cache").join(name))
+}
+
 static CHOICE: OnceLock<LaneWidth> = OnceLock::new();
+static CACHE: OnceLock<Option<PathBuf>> = OnceLock::new();
+
+/// The shader-cache folder [`choose`] set for this process's width, or None where it left
+/// Mesa's (the driver's default width; before `choose`).
+pub fn cache_dir() -> Option<&'static Path> {
+    CACHE.get().and_then(|c| c.as_deref())
+}
 
 /// The process's choice, made at the first call: sets `LP_NATIVE_VECTOR_WIDTH=512` where
-/// [`wide_preferred`] says so and the environment does not set it already. Called by
-/// `Context::new` before it loads the Vulkan loader (a driver loaded earlier keeps the
-/// width it read).
+/// [`wide_preferred`] says so and the environment does not set it already, and, where the
+/// width is set through the environment, `MESA_SHADER_CACHE_DIR` to that width's folder
+/// ([`cache_dir_for`]). Called by `Context::new` before it loads the Vulkan loader (a
+/// driver loaded earlier keeps the width and the folder it read).
 pub fn choose() -> LaneWidth {
     CHOICE
         .get_or_init(|| {
-            if let Some(v) = std::env::var_os(WIDTH_VAR) {
-                return LaneWidth::User(v.to_string_lossy().into_owned());
+            let width = if let Some(v) = std::env::var_os(WIDTH_VAR) {
+                LaneWidth::User(v.to_string_lossy().into_owned())
+            } else {
+                let (vendor, avx512f) = host_cpu();
+                if wide_preferred(&vendor, avx512f) {
+                    // SAFETY: set once, before this process loads any Vulkan driver (the
+                    // first `Context::new`, under its lifecycle lock), so no driver thread
+                    // reads the environment yet; Rust's own readers take std's lock.
+                    unsafe { std::env::set_var(WIDTH_VAR, "512") };
+                    LaneWidth::Wide
+                } else {
+                    LaneWidth::Driver
+                }
+            };
+            let bits = match &width {
+                LaneWidth::User(v) => Some(v.as_str()),
+                LaneWidth::Wide => Some("512"),
+                LaneWidth::Driver => None,
+            };
+            let dir = bits.and_then(|b| {
+                cache_dir_for(
+                    b,
+                    std::env::var_os(CACHE_VAR).as_deref(),
+                    std::env::var_os("XDG_CACHE_HOME").as_deref(),
+                    std::env::var_os("HOME").as_deref(),
+                )
+            });
+            if let Some(d) = &dir {
+                // SAFETY: as above, before any driver has loaded.
+                unsafe { std::env::set_var(CACHE_VAR, d) };
             }
-            let (vendor, avx512f) = host_cpu();
-            if !wide_preferred(&vendor, avx512f) {
-                return LaneWidth::Driver;
-            }
-            // SAFETY: set once, before this process loads any Vulkan driver (the first
-            // `Context::new`, under its lifecycle lock), so no driver thread reads the
-            // environment yet; Rust's own readers take std's environment lock.
-            unsafe { std::env::set_var(WIDTH_VAR, "512") };
-            LaneWidth::Wide
+            let _ = CACHE.set(dir);
+            width
         })
         .clone()
 }
@@ -103,5 +188,45 @@ mod tests {
         assert!(!wide_preferred("GenuineIntel", false));
         assert!(!wide_preferred("AuthenticAMD", true));
         assert!(!wide_preferred("", false));
+    }
+
+    #[test]
+    fn each_width_caches_in_a_folder_of_its_own() {
+        let os = |s: &'static str| Some(OsStr::new(s));
+        let dir = |b, m, x, h| cache_dir_for(b, m, x, h).map(|p| p.display().to_string());
+        // Mesa's order: its variable, XDG_CACHE_HOME, then ~/.cache; empty is unset.
+        assert_eq!(
+            dir("512", os("/c/m"), os("/x"), os("/h")).as_deref(),
+            Some("/c/m/lavapipe-lanes-512")
+        );
+        assert_eq!(
+            dir("256", None, os("/x"), os("/h")).as_deref(),
+            Some("/x/lavapipe-lanes-256")
+        );
+        assert_eq!(
+            dir(" 512\n", os(""), os(""), os("/h")).as_deref(),
+            Some("/h/.cache/lavapipe-lanes-512")
+        );
+        // A child of a process that set the folder keeps it, not a folder inside it.
+        assert_eq!(
+            dir("512", os("/c/m/lavapipe-lanes-512"), None, None).as_deref(),
+            Some("/c/m/lavapipe-lanes-512")
+        );
+        // ... unless its width is another.
+        assert_eq!(
+            dir("256", os("/c/m/lavapipe-lanes-512"), None, None).as_deref(),
+            Some("/c/m/lavapipe-lanes-512/lavapipe-lanes-256")
+        );
+        // Any value its own folder (lavapipe reads "0x200" as 512, "wide" as its default).
+        assert_eq!(
+            dir("0x200", os("/c"), None, None).as_deref(),
+            Some("/c/lavapipe-lanes-0x200")
+        );
+        assert_eq!(
+            dir("a/../b", os("/c"), None, None).as_deref(),
+            Some("/c/lavapipe-lanes-a____b")
+        );
+        // No folder at all: Mesa keeps no cache.
+        assert_eq!(dir("512", None, None, None), None);
     }
 }
