@@ -19,14 +19,14 @@
 //! shader: a new version of synosis) it compiles it at its own width and calls the cached
 //! functions of the other: measured with Mesa 25.0.7 (the other backend's raycast), one
 //! at 128 bits after one at 256 and one at 256 after one at 512 died of a segmentation
-//! fault, one at 512 after one at 256 missed every triangle without an error (test `tests/raycast.rs`
-//! `lane_widths_one_after_another_share_a_cache_folder`). So where the width is set
-//! through the environment (here, or by the user), [`choose`] also points
-//! `MESA_SHADER_CACHE_DIR` at a folder of that value's own, `lavapipe-lanes-<bits>` inside
-//! the folder Mesa would use (`MESA_SHADER_CACHE_DIR`, else `XDG_CACHE_HOME`, else
-//! `~/.cache`); a process at the driver's default width keeps Mesa's folder. Mesa's other
-//! drivers read the variable too: on a machine whose GPU has a Mesa driver such a process
-//! compiles into that folder as well (once).
+//! fault, one at 512 after one at 256 missed every triangle without an error (test
+//! `tests/raycast.rs` `lane_widths_one_after_another_share_a_cache_folder`). So where the
+//! width is set through the environment (here, or by the user), [`choose`] also points
+//! `MESA_SHADER_CACHE_DIR` at a folder of that value's own, `lavapipe-lanes-<bits>`
+//! inside the folder Mesa would use (`MESA_SHADER_CACHE_DIR`, else `XDG_CACHE_HOME`,
+//! else `~/.cache`); a process at the driver's default width keeps Mesa's folder. Mesa's
+//! other drivers read the variable too: on a machine whose GPU has a Mesa driver such a
+//! process compiles into that folder as well (once).
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
