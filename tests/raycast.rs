@@ -10,7 +10,7 @@ use synosis::scene::Camera;
 use synosis::scene::procedural::bumpy_sphere;
 use synosis::scene::{Mesh, TriLabel, export_mesh};
 use synosis::trace::{Backend, TraceScene};
-use synosis::vk::LaneWidth;
+use synosis::vk::{LaneWidth, lanes};
 
 /// A bumpy sphere standing on a thin slab: depth edges, grazing silhouettes, a plane.
 fn test_mesh() -> Mesh {
@@ -352,7 +352,7 @@ fn lane_widths_one_after_another_share_a_cache_folder() {
     }
     let dir = tempfile::tempdir().unwrap();
     let mesh = dir.path().join("body.glb");
-    let st = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+    let st = synosis()
         .args(["testbody", "--out"])
         .arg(&mesh)
         .status()
@@ -367,15 +367,15 @@ fn lane_widths_one_after_another_share_a_cache_folder() {
     ];
     for (i, (bits, accel)) in runs.into_iter().enumerate() {
         let out = dir.path().join(format!("out{i}"));
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+        let mut child = synosis()
             .args([
                 "raycast", "--width", "48", "--height", "32", "--accel", accel,
             ])
             .arg("--out")
             .arg(&out)
             .arg(&mesh)
-            .env("LP_NATIVE_VECTOR_WIDTH", bits)
-            .env("MESA_SHADER_CACHE_DIR", &cache)
+            .env(lanes::WIDTH_VAR, bits)
+            .env(lanes::CACHE_VAR, &cache)
             .spawn()
             .unwrap();
         let start = std::time::Instant::now();
