@@ -896,8 +896,9 @@ fn whole_part_finish_has_no_border_in_a_face() {
 /// its settings made at its first use (its tracer did not begin it, as in a
 /// `SYNOSIS_SPECIALIZE=1` process). The constants
 /// live in the backends' common code; each backend and setting is a cold compile of its
-/// own (up to a minute on a slow 2-core machine), so not every pair is taken (the
-/// analytic setting gave the same bytes on the child-pair BVH too, 2026-11-28).
+/// own (up to a minute on a slow 2-core machine; they run on threads of their own), so
+/// not every pair is taken (the analytic setting gave the same bytes on the child-pair
+/// BVH too, 2026-11-28).
 #[test]
 fn specialized_path_tracer_changes_no_pixel() {
     let cfg = |render: &str, rest: &str, specialize: bool| {
@@ -924,40 +925,48 @@ fn specialized_path_tracer_changes_no_pixel() {
         ),
         ("Mitsuba's sampling", mitsuba, &[Backend::SoftwareWide][..]),
     ];
-    for (name, (render, rest), backends) in cases {
-        let on = cfg(render, rest, true);
-        let off = cfg(render, rest, false);
-        let mesh = load_object(&on).expect("object");
-        for &backend in backends {
-            // The pipeline reading its settings at run time not begun with the tracer
-            // (as in a `SYNOSIS_SPECIALIZE=1` process): made at its first use, below.
-            let r = common::SceneRenderer::own(backend, mesh.clone(), &on, false);
-            let a = r.render(&on, true);
-            assert_eq!(r.path_pipelines(), 1, "{name}, {}", backend.name());
-            let b = r.render(&off, true);
-            assert_eq!(r.path_pipelines(), 2, "{name}, {}", backend.name());
-            let differing = a
-                .radiance
-                .data
-                .iter()
-                .zip(&b.radiance.data)
-                .filter(|(x, y)| x.to_bits() != y.to_bits())
-                .count();
-            let mean = mean(&a.radiance.data);
-            println!(
-                "{name}, {}: mean {mean:.5}, {differing} pixels differ",
-                backend.name()
-            );
-            assert!(mean > 0.0, "{name}: a black image proves nothing");
-            assert_eq!(differing, 0, "{name}, {}", backend.name());
-            let (la, lb) = (a.annotation.expect("labels"), b.annotation.expect("labels"));
-            assert_eq!(la.face, lb.face, "{name}, {}: faces", backend.name());
-            assert_eq!(
-                la.coverage,
-                lb.coverage,
-                "{name}, {}: coverage",
-                backend.name()
-            );
+    // Each backend and setting on a thread of its own: the cold compiles overlap (on a
+    // 2-core machine with 512-bit lanes each took about a minute, one after another).
+    std::thread::scope(|scope| {
+        for (name, (render, rest), backends) in cases {
+            let on = cfg(render, rest, true);
+            let off = cfg(render, rest, false);
+            let mesh = load_object(&on).expect("object");
+            for &backend in backends {
+                let (on, off, mesh) = (on.clone(), off.clone(), mesh.clone());
+                scope.spawn(move || {
+                    // The pipeline reading its settings at run time not begun with the
+                    // tracer (as in a `SYNOSIS_SPECIALIZE=1` process): made at its first
+                    // use, below.
+                    let r = common::SceneRenderer::own(backend, mesh, &on, false);
+                    let a = r.render(&on, true);
+                    assert_eq!(r.path_pipelines(), 1, "{name}, {}", backend.name());
+                    let b = r.render(&off, true);
+                    assert_eq!(r.path_pipelines(), 2, "{name}, {}", backend.name());
+                    let differing = a
+                        .radiance
+                        .data
+                        .iter()
+                        .zip(&b.radiance.data)
+                        .filter(|(x, y)| x.to_bits() != y.to_bits())
+                        .count();
+                    let mean = mean(&a.radiance.data);
+                    println!(
+                        "{name}, {}: mean {mean:.5}, {differing} pixels differ",
+                        backend.name()
+                    );
+                    assert!(mean > 0.0, "{name}: a black image proves nothing");
+                    assert_eq!(differing, 0, "{name}, {}", backend.name());
+                    let (la, lb) = (a.annotation.expect("labels"), b.annotation.expect("labels"));
+                    assert_eq!(la.face, lb.face, "{name}, {}: faces", backend.name());
+                    assert_eq!(
+                        la.coverage,
+                        lb.coverage,
+                        "{name}, {}: coverage",
+                        backend.name()
+                    );
+                });
+            }
         }
-    }
+    });
 }
