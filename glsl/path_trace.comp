@@ -671,14 +671,15 @@ float bsdf_mis_weight(uint prim, float t, float cos_l, vec3 o, vec3 n, float pdf
 // has told `light`, the first light triangle on the ray o, d with occluders ignored (or
 // a miss): its radiance times its MIS weight as E's own (BSDF pdf `pdf`, shading
 // point's geometric normal n) where that triangle faces o and belongs to a ring of
-// `mask`, else 0.
+// `mask` on the kept side of its table clip (ring_table_clip), else 0.
 float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
     if (light.prim == NO_HIT) return 0.0;
     uint k = emitter_of(light.prim);
     if (k >= 32u || (mask & (1u << k)) == 0u) return 0.0;
     float cos_l = -dot(normalize(tri_normal(fetch_tri(light.prim))), d);
-    if (!(cos_l > 0.0)) return 0.0;
-    return emitter_block(k).emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
+    LightBlock e = emitter_block(k);
+    if (!(cos_l > 0.0) || !ring_clip_keeps(ring_table_clip(e, o), d)) return 0.0;
+    return e.emit.x * bsdf_mis_weight(light.prim, light.t, cos_l, o, n, pdf)
         / float(max(PRM_BSDF_SAMPLES, 1u));
 }
 
@@ -836,7 +837,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                     bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
                     // The control variate's light sample: on a ring it uses (cv_rings; such a
                     // ring lies above both horizons, so the sample is also lit, up to rounding).
-                    bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0;
+                    bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0
+                        && ring_clip_keeps(ring_table_clip(e, origin), wi_w);
                     float pdf_b = 0.0;
                     float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
                     float pdf_light = dist2 / cos_l * area_pdf;

@@ -117,47 +117,118 @@ vec3 lobe_point(Lobe l, vec3 ns, vec3 ng, vec3 w) {
 // clamped-cosine integral over the region it bounds when every vertex is above the
 // horizons (`above`, lobe_point). With `rec` >= 0 the loop only records its world
 // vertices as recorded loop `rec` (`n` of them; more than REC_LOOP_VERTS: not recorded),
-// `above` then where each is above the geometric horizon (ng).
+// `above` then where each is above the geometric horizon (ng). With a clip (`clip.w` >
+// 0, ring_table_clip) the loop is first cut to the directions w with dot(w, clip.xyz) >
+// 0 (Sutherland-Hodgman against that great circle: each crossing edge is cut where it
+// meets the plane, and from the point where the loop leaves the kept side to where it
+// comes back the loop runs along the great circle; the integral over the region the
+// cut loop bounds is the old one's over its kept part).
 struct Loop {
-    vec3 first;
-    vec3 prev;
+    vec3 first;     // first vertex kept (cosine space; unused when recording)
+    vec3 prev;      // last vertex kept
     float sum;
     bool above;
     int rec;
-    uint n;
+    uint n;         // vertices kept
+    vec4 clip;
+    vec3 in_first;  // the loop's own first vertex (world) and its last one
+    vec3 in_prev;
 };
 
-void loop_start(out Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w, int rec) {
-    lp.rec = rec;
-    lp.n = 1u;
-    lp.sum = 0.0;
-    if (rec >= 0) {
-        rec_w[uint(rec) * REC_LOOP_VERTS] = w;
-        lp.first = lp.prev = w;
-        lp.above = dot(w, ng) > 0.0;
-        return;
+// Vertex w (world) kept as the loop's next.
+void loop_keep(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
+    if (lp.rec >= 0) {
+        if (lp.n < REC_LOOP_VERTS) rec_w[uint(lp.rec) * REC_LOOP_VERTS + lp.n] = w;
+        lp.above = lp.above && dot(w, ng) > 0.0;
+    } else {
+        vec3 v = lobe_point(l, ns, ng, w);
+        if (lp.n == 0u) {
+            lp.first = v;
+        } else {
+            lp.sum += edge_z(lp.prev, v);
+        }
+        lp.prev = v;
+        lp.above = lp.above && v.z > 0.0;
     }
-    lp.first = lp.prev = lobe_point(l, ns, ng, w);
-    lp.above = lp.first.z > 0.0;
+    lp.n++;
+}
+
+// The clip of the loop's edge from its last vertex to w: the point where it crosses the
+// great circle, kept, if it does.
+void loop_cut(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
+    float da = dot(lp.in_prev, lp.clip.xyz), db = dot(w, lp.clip.xyz);
+    if ((da > 0.0) != (db > 0.0)) {
+        loop_keep(lp, ns, ng, l, mix(lp.in_prev, w, da / (da - db)));
+    }
+}
+
+void loop_start(out Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w, int rec, vec4 clip) {
+    lp.rec = rec;
+    lp.n = 0u;
+    lp.sum = 0.0;
+    lp.above = true;
+    lp.clip = clip;
+    lp.first = lp.prev = vec3(0.0);
+    lp.in_first = lp.in_prev = w;
+    if (!(clip.w > 0.0) || dot(w, clip.xyz) > 0.0) loop_keep(lp, ns, ng, l, w);
 }
 
 void loop_add(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
-    if (lp.rec >= 0) {
-        if (lp.n < REC_LOOP_VERTS) rec_w[uint(lp.rec) * REC_LOOP_VERTS + lp.n] = w;
-        lp.n++;
-        lp.above = lp.above && dot(w, ng) > 0.0;
-        return;
+    if (lp.clip.w > 0.0) {
+        loop_cut(lp, ns, ng, l, w);
+        lp.in_prev = w;
+        if (!(dot(w, lp.clip.xyz) > 0.0)) return;
     }
-    vec3 v = lobe_point(l, ns, ng, w);
-    lp.sum += edge_z(lp.prev, v);
-    lp.prev = v;
-    lp.above = lp.above && v.z > 0.0;
+    loop_keep(lp, ns, ng, l, w);
 }
 
 // The loop's last edge, back to its first vertex (a recorded loop closes when it is
 // summed: recorded_loop2).
-void loop_close(inout Loop lp) {
-    if (lp.rec < 0) lp.sum += edge_z(lp.prev, lp.first);
+void loop_close(inout Loop lp, vec3 ns, vec3 ng, Lobe l) {
+    if (lp.clip.w > 0.0) loop_cut(lp, ns, ng, l, lp.in_first);
+    if (lp.rec < 0 && lp.n > 0u) lp.sum += edge_z(lp.prev, lp.first);
+}
+
+// The table's clip of ring e seen from x (`PathParams::table`; the table is the plane
+// z = table.z, square): where the ring's plane crosses the table's plane within the
+// table and x lies above it, the ring's part below the table is hidden from x. Seen
+// from x, the line where the two planes meet is a great circle; the closed form and G
+// both take the ring on the upper side of it alone (directions w with dot(w, m) > 0,
+// returned as (m, 1); (0, 0, 0, 0): no clip). The ring's mid-plane is cut there exactly,
+// its tube (of radius r) to within about r / distance: that is the approximation, a
+// loss of variance reduction only (E[G] = A holds for any clip, as long as G and A take
+// the same one). No clip where the ring's plane is within 3 degrees of the table's,
+// where its centre circle stays above the table, or where the table's edge is nearer
+// than the hidden part (the crossings and the lowest point's shadow must lie on the
+// table).
+vec4 ring_table_clip(LightBlock e, vec3 x) {
+    vec4 t = prm.table;
+    vec3 c = e.pos.xyz, a = e.dir.xyz;
+    float big_r = e.pos.w;
+    float s = sqrt(max(1.0 - a.z * a.z, 0.0));
+    if (!(t.w > 0.0) || !(x.z > t.z) || s < 0.05 || !(c.z - big_r * s < t.z)) return vec4(0.0);
+    // Down the ring's plane (unit), and the line where it meets the table's plane.
+    vec3 dn = (vec3(0.0, 0.0, -1.0) + a * a.z) / s;
+    vec3 l0 = c + dn * ((c.z - t.z) / s);
+    vec3 ld = normalize(cross(a, vec3(0.0, 0.0, 1.0)));
+    float h2 = big_r * big_r - dot(l0 - c, l0 - c);
+    if (!(h2 > 0.0)) return vec4(0.0);
+    float h = sqrt(h2);
+    vec3 low = c + dn * big_r;
+    vec3 b = x + (low - x) * ((x.z - t.z) / (x.z - low.z));
+    vec2 p0 = l0.xy + ld.xy * h - t.xy, p1 = l0.xy - ld.xy * h - t.xy;
+    float edge = max(max(max(abs(p0.x), abs(p0.y)), max(abs(p1.x), abs(p1.y))),
+                     max(abs(b.x - t.x), abs(b.y - t.y)));
+    if (!(edge < t.w)) return vec4(0.0);
+    vec3 m = normalize(cross(ld, l0 - x));
+    // The kept side holds the ring's plane above the line (l0 - dn).
+    return vec4(dot(m, dn) > 0.0 ? -m : m, 1.0);
+}
+
+// Whether the control variate takes direction w (from x) for ring e: on the kept side
+// of the table's clip (ring_table_clip), or no clip.
+bool ring_clip_keeps(vec4 clip, vec3 w) {
+    return !(clip.w > 0.0) || dot(w, clip.xyz) > 0.0;
 }
 
 // One ring (a tessellated torus, as src/scene/camera.rs `ring_light` makes it) as the
@@ -256,7 +327,7 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
 // the walk found the boundary, its loops fit and lie above the geometric horizon ng; the
 // lobe and the shading horizon are not used).
 float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, int rec,
-                    out bool ok) {
+                    vec4 clip, out bool ok) {
     ok = false;
     uint n = uint(e.emit.z);
     Ring g;
@@ -299,8 +370,8 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
     hi.v = vec2(cos(th_hi), sin(th_hi));
     // (Rounding may leave the closed form a vertex off: the walk settles it.)
     if (!ring_side(lo, g, l, e1, true, false) || !ring_side(hi, g, l, e1, false, false)) return 0.0;
-    loop_start(lo.lp, ns, ng, l, ring_vertex(g, e1, lo.v), rec < 0 ? -1 : 2 * rec);
-    loop_start(hi.lp, ns, ng, l, ring_vertex(g, e1, hi.v), rec < 0 ? -1 : 2 * rec + 1);
+    loop_start(lo.lp, ns, ng, l, ring_vertex(g, e1, lo.v), rec < 0 ? -1 : 2 * rec, clip);
+    loop_start(hi.lp, ns, ng, l, ring_vertex(g, e1, hi.v), rec < 0 ? -1 : 2 * rec + 1, clip);
     vec2 phi = vec2(1.0, 0.0);   // cos, sin of section i's angle
     vec3 rad = e1;
     for (uint i = 0u; i < n; i++) {
@@ -329,13 +400,15 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
     // Back at section 0: along it to segment 0's run boundary, and closed.
     g.a = a0;
     if (!ring_side(lo, g, l, e1, true, true) || !ring_side(hi, g, l, e1, false, true)) return 0.0;
-    loop_close(lo.lp);
-    loop_close(hi.lp);
+    loop_close(lo.lp, ns, ng, l);
+    loop_close(hi.lp, ns, ng, l);
     if (rec >= 0) {
         // Recorded: its vertices, if they fit.
         rec_n[2 * rec] = lo.lp.n;
         rec_n[2 * rec + 1] = hi.lp.n;
-        ok = lo.lp.above && hi.lp.above && lo.lp.n <= REC_LOOP_VERTS && hi.lp.n <= REC_LOOP_VERTS;
+        // (A loop the table's clip emptied has no vertex: kept where the other has.)
+        ok = lo.lp.above && hi.lp.above && lo.lp.n <= REC_LOOP_VERTS && hi.lp.n <= REC_LOOP_VERTS
+            && lo.lp.n + hi.lp.n > 0u;
         return 0.0;
     }
     ok = lo.lp.above && hi.lp.above;
@@ -395,7 +468,7 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
         LightBlock e = EMITTERS[k];
         if (e.emit.z > 0.0 && ring_cv_valid(k, x)) {
             bool ok;
-            float integral = ring_integral(e, l, x, ns, ng, divisor, -1, ok);
+            float integral = ring_integral(e, l, x, ns, ng, divisor, -1, ring_table_clip(e, x), ok);
             if (ok) {
                 a += l.c * e.emit.x * integral;
                 mask |= 1u << k;
@@ -434,7 +507,7 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
         LightBlock e = EMITTERS[k];
         if (rec_rings < REC_RINGS && e.emit.z > 0.0 && ring_cv_valid(k, x)) {
             bool ok;
-            ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ok);
+            ring_integral(e, unused, x, ng, ng, divisor, int(rec_rings), ring_table_clip(e, x), ok);
             if (ok) {
                 rec_le[rec_rings] = e.emit.x;
                 rec_cone[rec_rings] = recorded_cone(rec_rings);
@@ -486,13 +559,14 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     uint base = i * REC_LOOP_VERTS;
     vec3 t10 = l0.t1 * (1.0 / l0.a1), t20 = l0.t2 * (1.0 / l0.a2);
     vec3 t11 = l1.t1 * (1.0 / l1.a1), t21 = l1.t2 * (1.0 / l1.a2);
-    vec3 w = rec_w[base];
+    uint n = rec_n[i];
+    // (A loop the table's clip emptied, n = 0: any unit vector, whose one edge is 0.)
+    vec3 w = n > 0u ? rec_w[base] : l0.r;
     vec3 first0 = recorded_point(w, t10, t20, l0.r);
     vec3 first1 = recorded_point(w, t11, t21, l1.r);
     vec3 prev0 = first0, prev1 = first1;
     float sum0 = 0.0, sum1 = 0.0;
-    bool ab0 = first0.z > 0.0, ab1 = first1.z > 0.0;
-    uint n = rec_n[i];
+    bool ab0 = n == 0u || first0.z > 0.0, ab1 = n == 0u || first1.z > 0.0;
     // To the subgroup's longest loop, so that j (and with it the private array's index)
     // is one value for all lanes: lavapipe then reads rec_w with one vector load instead
     // of a load per lane; a lane past its own loop keeps its sums.

@@ -112,6 +112,8 @@ pub struct GpuScene {
     /// The object's curved patches (slots after the regions').
     curved: Vec<CurvedPatch>,
     pub table_albedo: f32,
+    /// The table's square (`Stage::table`).
+    pub table: [f32; 4],
     /// Triangles of the stage (the view's light is numbered after them).
     pub triangle_count: u32,
 }
@@ -194,6 +196,7 @@ impl GpuScene {
             regions: stage.regions.clone(),
             curved: stage.curved.clone(),
             table_albedo: stage.table_albedo,
+            table: stage.table,
             triangle_count: stage.mesh.triangles.len() as u32,
         })
     }

@@ -536,6 +536,7 @@ fn path_params(
         shortcuts: s.light_shortcuts as u32,
         lights_lo,
         lights_hi,
+        table: scene.table,
         ..Default::default()
     }
 }

@@ -327,6 +327,8 @@ pub struct Stage {
     pub materials: Vec<u32>,
     /// Lambertian albedo of the table.
     pub table_albedo: f32,
+    /// The table's square: centre x, y, its height z (mm) and half its edge length.
+    pub table: [f32; 4],
     /// Frames of the object's inspected faces (where views aim and face maps are placed).
     pub face_frames: Vec<FaceFrame>,
     /// The object's planar regions (`scene::regions`, default tolerances), by id.
@@ -415,6 +417,7 @@ impl Stage {
             mesh,
             materials,
             table_albedo: table.albedo,
+            table: [ox, oy, oz, hs],
             face_frames,
             regions,
             region_of,
