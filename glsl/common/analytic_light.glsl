@@ -15,6 +15,8 @@
 //                 samples of the path tracer's next-event estimation, with the same MIS
 //                 weights (the BSDF sample counts where the light triangle it meets first,
 //                 occluders ignored, is the ring's),
+// both over the ring's part above the table where the table hides the rest
+// (ring_table_clip: a great circle cuts A's loops and G's samples alike),
 // so E[G] = A exactly whatever the lobe's fit, at every shading point where each ray
 // meets the ring at most once and no other light stands in front of it (ring_cv_valid;
 // elsewhere the ring is left to the sampled estimator alone): the estimate stays
@@ -157,7 +159,7 @@ void loop_keep(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
 // great circle, kept, if it does.
 void loop_cut(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
     float da = dot(lp.in_prev, lp.clip.xyz), db = dot(w, lp.clip.xyz);
-    if ((da > 0.0) != (db > 0.0)) {
+    [[dont_flatten]] if ((da > 0.0) != (db > 0.0)) {
         loop_keep(lp, ns, ng, l, mix(lp.in_prev, w, da / (da - db)));
     }
 }
@@ -173,13 +175,17 @@ void loop_start(out Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w, int rec, vec4 cli
     if (!(clip.w > 0.0) || dot(w, clip.xyz) > 0.0) loop_keep(lp, ns, ng, l, w);
 }
 
+// The clip's work sits behind real branches (`[[dont_flatten]]`): lavapipe skips a
+// branch no lane of the subgroup takes, where as selects (what the compiler makes of
+// small `if`s) every vertex of every loop would pay for a cut point's edge term.
 void loop_add(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
-    if (lp.clip.w > 0.0) {
+    bool keep = true;
+    [[dont_flatten]] if (lp.clip.w > 0.0) {
         loop_cut(lp, ns, ng, l, w);
         lp.in_prev = w;
-        if (!(dot(w, lp.clip.xyz) > 0.0)) return;
+        keep = dot(w, lp.clip.xyz) > 0.0;
     }
-    loop_keep(lp, ns, ng, l, w);
+    if (keep) loop_keep(lp, ns, ng, l, w);
 }
 
 // The loop's last edge, back to its first vertex (a recorded loop closes when it is
