@@ -136,6 +136,37 @@ fn pixel_variance(images: &[Vec<f64>]) -> f64 {
         / px as f64
 }
 
+/// The control variate's means over seeds (per area, `statistics`) equal the sampled
+/// estimator's within 4 standard errors, and its pixel variance is at least `gain`
+/// times lower.
+fn same_mean_less_variance(
+    name: &str,
+    (sampled, var_s): (&[Vec<f64>], f64),
+    (analytic, var_a): (&[Vec<f64>], f64),
+    gain: f64,
+) {
+    for (k, (s, a)) in sampled.iter().zip(analytic).enumerate() {
+        let ((ms, es), (ma, ea)) = (mean_se(s), mean_se(a));
+        let z = (ma - ms) / (es * es + ea * ea).sqrt();
+        eprintln!(
+            "{name}, area {k}: sampled {ms:.6} +- {es:.1e}, analytic {ma:.6} +- {ea:.1e}, z {z:+.2}"
+        );
+        assert!(ms > 0.0 && ma > 0.0, "{name}: a dark image tests nothing");
+        assert!(
+            z.abs() < 4.0,
+            "{name}, area {k}: the means differ by {z:.1} standard errors"
+        );
+    }
+    eprintln!(
+        "{name}: pixel variance sampled {var_s:.3e}, analytic {var_a:.3e} ({:.1}x)",
+        var_s / var_a
+    );
+    assert!(
+        var_a * gain <= var_s,
+        "{name}: the control variate must lower the variance ({var_s:.3e} -> {var_a:.3e})"
+    );
+}
+
 #[test]
 fn the_analytic_direct_light_is_unbiased_and_lowers_the_variance() {
     const SEEDS: u32 = 10;
@@ -171,26 +202,7 @@ fn the_analytic_direct_light_is_unbiased_and_lowers_the_variance() {
                 backend.name(),
                 panel_x.map_or(String::new(), |x| format!(", three lights, panel at x {x}"))
             );
-            for (k, (s, a)) in sampled.iter().zip(&analytic).enumerate() {
-                let ((ms, es), (ma, ea)) = (mean_se(s), mean_se(a));
-                let z = (ma - ms) / (es * es + ea * ea).sqrt();
-                eprintln!(
-                    "{name}, area {k}: sampled {ms:.6} +- {es:.1e}, analytic {ma:.6} +- {ea:.1e}, z {z:+.2}"
-                );
-                assert!(ms > 0.0 && ma > 0.0, "{name}: a dark image tests nothing");
-                assert!(
-                    z.abs() < 4.0,
-                    "{name}, area {k}: the means differ by {z:.1} standard errors"
-                );
-            }
-            eprintln!(
-                "{name}: pixel variance sampled {var_s:.3e}, analytic {var_a:.3e} ({:.1}x)",
-                var_s / var_a
-            );
-            assert!(
-                var_a * gain <= var_s,
-                "{name}: the control variate must lower the variance ({var_s:.3e} -> {var_a:.3e})"
-            );
+            same_mean_less_variance(&name, (&sampled, var_s), (&analytic, var_a), gain);
         }
     }
 }
@@ -496,25 +508,6 @@ fn the_tables_clip_keeps_the_mean_and_lowers_the_variance() {
         let (sampled, var_s) = statistics(&run(DirectLight::Sampled));
         let (analytic, var_a) = statistics(&run(DirectLight::Analytic));
         let name = format!("{}, table {table_mm} mm, {rays} rays", backend.name());
-        for (k, (s, a)) in sampled.iter().zip(&analytic).enumerate() {
-            let ((ms, es), (ma, ea)) = (mean_se(s), mean_se(a));
-            let z = (ma - ms) / (es * es + ea * ea).sqrt();
-            eprintln!(
-                "{name}, area {k}: sampled {ms:.6} +- {es:.1e}, analytic {ma:.6} +- {ea:.1e}, z {z:+.2}"
-            );
-            assert!(ms > 0.0 && ma > 0.0, "{name}: a dark image tests nothing");
-            assert!(
-                z.abs() < 4.0,
-                "{name}, area {k}: the means differ by {z:.1} standard errors"
-            );
-        }
-        eprintln!(
-            "{name}: pixel variance sampled {var_s:.3e}, analytic {var_a:.3e} ({:.1}x)",
-            var_s / var_a
-        );
-        assert!(
-            var_a * gain <= var_s,
-            "{name}: the control variate must lower the variance ({var_s:.3e} -> {var_a:.3e})"
-        );
+        same_mean_less_variance(&name, (&sampled, var_s), (&analytic, var_a), gain);
     }
 }
