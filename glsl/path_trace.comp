@@ -76,7 +76,10 @@ layout(std430, set = 0, binding = PT_ACCUM) buffer Accum { float accum[]; };
 // squared radiance (one float a pixel); NOISE_HALVES, the radiance of sample indices
 // [2^(L-1), 2^L) (level L >= 1; level 0: index 0) summed into float L & 1 of the pixel's
 // two, each cleared at its level's first sample, so they hold the last two levels;
-// NOISE_OFF: a placeholder of one float, never written.
+// NOISE_OFF: a placeholder of one float, never written. With `prm.cv_ray_sums` a tail
+// of two floats a pixel after those (at width x height x the estimate's floats): the sum
+// over the pixel's samples of each one's mean of its rays' closed forms
+// (cv_rays_of_sample), and of its square (`[render] analytic_rays_max`).
 layout(std430, set = 0, binding = PT_NOISE_SUMS) buffer NoiseSums { float noise_sums[]; };
 // Labels from the path tracer's own samples (pc.labels = n != 0): the per-triangle label
 // words (face | class << 8 | instance << 16, as annotate.comp reads them; declared for
@@ -683,6 +686,10 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
         / float(max(PRM_BSDF_SAMPLES, 1u));
 }
 
+// The last radiance_sample's mean of its camera rays' closed forms A' (the extra rays'
+// and its own; 0 without extra rays or without `prm.cv_ray_sums`).
+float cv_rays_of_sample = 0.0;
+
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
 // nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
 // label_of_ray; 0 without (no label read on samples that do not label). `label_only`:
@@ -690,6 +697,7 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
 float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, bool label_only,
                       out uint label_word) {
     label_word = 0u;
+    cv_rays_of_sample = 0.0;
     Sampler rng = sampler_init(PRM_SAMPLE_GEN, pixel, s, prm.seed);
     vec3 o, d;
     pixel_ray(px, py, rng, o, d);
@@ -959,7 +967,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             o = o0;
             d = d0;
             if (j > 0u) {
-                Sampler r = sampler_init(PRM_SAMPLE_GEN, pixel, s * extra + j - 1u, prm.seed ^ 0x5ca1ab1eu);
+                Sampler r = sampler_init(PRM_SAMPLE_GEN, pixel, s * extra + j - 1u, prm.cv_seed);
                 pixel_ray(px, py, r, o, d);
             }
             Lobe lobe;
@@ -983,6 +991,10 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             if (pair) sum_a += ok ? a.y : 0.0;
         }
         L += (sum_a - float(extra) * cv_a0) / float(extra + 1u);
+        // The rays' mean, whose variance from sample to sample is their share of the
+        // sample's (what more rays would average further), for `[render]
+        // analytic_rays_max`'s choice.
+        if (prm.cv_ray_sums != 0u) cv_rays_of_sample = (sum_a + cv_a0) / float(extra + 1u);
     }
     return L;
 }
@@ -1020,6 +1032,7 @@ void main() {
     bool plane = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u;
     if (plane || TRACE_TAKES_HINTS) pixel_plane_init(px, py, plane);
     uint words[LABEL_MAX_SAMPLES];
+    vec2 rays = vec2(0.0);
     seg_memo_clear();
     for (uint s = 0u; s < max(pc.sample_count, label_count); s++) {
         uint word;
@@ -1030,6 +1043,7 @@ void main() {
         if (label_only) continue;
         sum += r;
         sq += r * r;
+        rays += vec2(cv_rays_of_sample, cv_rays_of_sample * cv_rays_of_sample);
         if (PRM_NOISE_SUMS == NOISE_HALVES) {
             uint j = pc.sample_start + s;
             uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
@@ -1047,6 +1061,11 @@ void main() {
     } else if (PRM_NOISE_SUMS == NOISE_HALVES) {
         noise_sums[2u * i] = halves.x;
         noise_sums[2u * i + 1u] = halves.y;
+    }
+    if (prm.cv_ray_sums != 0u && PRM_NOISE_SUMS != NOISE_OFF) {
+        uint tail = prm.width * prm.height * (PRM_NOISE_SUMS == NOISE_HALVES ? 2u : 1u);
+        noise_sums[tail + 2u * i] += rays.x;
+        noise_sums[tail + 2u * i + 1u] += rays.y;
     }
     if (label_count > 0u) {
         label_ids[i] = label_majority(words, label_count);

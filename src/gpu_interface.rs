@@ -102,7 +102,7 @@ mod tests {
 
     #[test]
     fn layouts_match_what_the_shaders_were_written_for() {
-        assert_eq!(std::mem::size_of::<PathParams>(), 272);
+        assert_eq!(std::mem::size_of::<PathParams>(), 288);
         assert_eq!(std::mem::offset_of!(PathParams, table), 256);
         assert_eq!(std::mem::offset_of!(PathParams, cover_lo), 192);
         assert_eq!(std::mem::offset_of!(PathParams, cover_cell), 208);

@@ -1734,7 +1734,56 @@ fn job_camera_and_sensor_are_checked_like_a_scene_files() {
         .unwrap()
         .job;
     assert_eq!(job.render.noise_target_growth, Some(0.5));
+    let chosen = target.replace(
+        "min_spp = 16",
+        "min_spp = 16\nanalytic_rays = 16\nanalytic_rays_max = 64\nanalytic_ray_cost = 0.05",
+    );
+    let job = dataset::prepare_text(&chosen, "job", tmp.path())
+        .unwrap()
+        .job;
+    assert_eq!(job.render.analytic_rays_max, Some(64));
+    assert_eq!(job.render.analytic_ray_cost, Some(0.05));
     let cases: Vec<(String, &str)> = vec![
+        // `analytic_rays_max`: with a noise target, the analytic light, at least 2 rays
+        // to start from and at most 64; its cost with it, in (0, 10].
+        (
+            emva.replace(
+                "spp = 1",
+                "spp = 64\nanalytic_rays = 4\nanalytic_rays_max = 16",
+            ),
+            "render.analytic_rays_max",
+        ),
+        (
+            chosen.replace("analytic_rays = 16\n", "analytic_rays = 1\n"),
+            "render.analytic_rays",
+        ),
+        (
+            chosen.replace("analytic_rays = 16\n", ""),
+            "render.analytic_rays",
+        ),
+        (
+            chosen.replace("analytic_rays_max = 64", "analytic_rays_max = 8"),
+            "render.analytic_rays_max",
+        ),
+        (
+            chosen.replace("analytic_rays_max = 64", "analytic_rays_max = 65"),
+            "render.analytic_rays_max",
+        ),
+        (
+            chosen.replace(
+                "analytic_rays = 16\n",
+                "analytic_rays = 16\ndirect_light = \"sampled\"\n",
+            ),
+            "render.analytic_rays_max",
+        ),
+        (
+            chosen.replace("analytic_ray_cost = 0.05", "analytic_ray_cost = 0.0"),
+            "render.analytic_ray_cost",
+        ),
+        (
+            chosen.replace("analytic_rays_max = 64\n", ""),
+            "render.analytic_ray_cost",
+        ),
         (
             with("[sensor]\nexposure = 1.0\nbit_depth = 12"),
             "linear model",

@@ -6,7 +6,7 @@
 
 mod common;
 
-use synosis::render::noise::{CameraNoise, NoiseEstimator, NoiseStop};
+use synosis::render::noise::{CameraNoise, NoiseEstimator, NoiseStop, RAY_LADDER, RayChoice};
 use synosis::render::path_trace::{Frame, FrameOptions, RenderScene, load_object, render_frame};
 use synosis::render::sensor::{Responsivity, saturation_electrons};
 use synosis::render::settings::SamplerKind;
@@ -51,6 +51,7 @@ fn stop_with(
         estimator,
         adaptive_radius: None,
         growth: 0.0,
+        rays: None,
     }
 }
 
@@ -425,6 +426,95 @@ fn adaptive_pixels_each_stop_at_their_own_samples() {
         "measured rms error: adaptive {m_adaptive:.4} DN, image-wide {m_whole:.4} DN; object mean {shift:+.5} relative to the reference"
     );
     assert!(m_adaptive <= 1.3 * m_whole, "{m_adaptive} {m_whole}");
+    assert!(shift.abs() < 0.01, "{shift}");
+}
+
+/// `[render] analytic_rays_max`: the rays chosen at the first check follow what
+/// the first samples measured (the most where rays cost nothing, fewer the more they
+/// cost, fewer on a flat face, whose closed form varies less over a pixel, than on
+/// grooves), and the image stays unbiased (its object's mean as an independent
+/// reference's, its error no worse than the render that keeps its rays at equal samples).
+#[test]
+fn rays_chosen_at_the_first_check_follow_the_spread_and_keep_the_mean() {
+    let mut cfg = scene_config(7, SamplerKind::Sobol);
+    cfg.render.analytic_rays = 4;
+    let gpu = Gpu::new(&cfg);
+    let scene = &gpu.scene;
+    let with = |cost: f64, target: f64| NoiseStop {
+        rays: Some(RayChoice {
+            min: 1,
+            max: 64,
+            cost,
+        }),
+        ..stop(scene, target, 8)
+    };
+    // A target never met: the choice by the variance per unit of time.
+    let cheap = gpu.render(&cfg, 16, Some(&with(1e-6, 1e-9)));
+    let dear = gpu.render(&cfg, 16, Some(&with(100.0, 1e-9)));
+    let grooves = gpu.render(&cfg, 16, Some(&with(0.035, 1e-9)));
+    let mut flat_cfg = cfg.clone();
+    flat_cfg.texture.kind = "flat".into();
+    let flat_gpu = Gpu::new(&flat_cfg);
+    let flat = flat_gpu.render(
+        &flat_cfg,
+        16,
+        Some(&NoiseStop {
+            rays: Some(RayChoice {
+                min: 1,
+                max: 64,
+                cost: 0.035,
+            }),
+            ..stop(&flat_gpu.scene, 1e-9, 8)
+        }),
+    );
+    let chosen = |f: &Frame| f.analytic_rays_chosen.expect("a choice at the first check");
+    eprintln!(
+        "rays chosen: cost 1e-6 {}, cost 100 {}, grooves {}, flat {}",
+        chosen(&cheap),
+        chosen(&dear),
+        chosen(&grooves),
+        chosen(&flat)
+    );
+    assert_eq!(chosen(&cheap), 64);
+    assert!(RAY_LADDER.contains(&chosen(&grooves)));
+    assert!(
+        chosen(&dear) < chosen(&cheap) && chosen(&dear) <= chosen(&grooves),
+        "cost 100 {} against 1e-6 {} and 0.035 {}",
+        chosen(&dear),
+        chosen(&cheap),
+        chosen(&grooves)
+    );
+    assert!(
+        chosen(&flat) < chosen(&grooves),
+        "flat {} grooves {}",
+        chosen(&flat),
+        chosen(&grooves)
+    );
+    // Without the setting: no choice.
+    assert_eq!(
+        gpu.render(&cfg, 16, Some(&stop(scene, 1e-9, 8)))
+            .analytic_rays_chosen,
+        None
+    );
+    // Unbiased: 64 samples with the rays changed at 8 (the most, so that the change is
+    // large) against an independent 1024-sample reference, beside the same samples with
+    // 4 rays throughout.
+    let changed = gpu.render(&cfg, 64, Some(&with(1e-6, 1e-9)));
+    let kept = gpu.render(&cfg, 64, Some(&stop(scene, 1e-9, 8)));
+    assert_eq!(changed.spp, 64);
+    let reference = gpu.render(&scene_config(1234, SamplerKind::Sobol), 1024, None);
+    let r = &reference.radiance.data;
+    let est = kept.noise.expect("estimate");
+    let m_changed = measured_rms_dn(&with(1e-6, 1e-9), &changed, r, est.exposure_s);
+    let m_kept = measured_rms_dn(&with(1e-6, 1e-9), &kept, r, est.exposure_s);
+    let face = &kept.annotation.as_ref().unwrap().face;
+    let object: Vec<usize> = (0..r.len()).filter(|&i| face[i] != 0).collect();
+    let mean = |v: &[f32]| object.iter().map(|&i| v[i] as f64).sum::<f64>() / object.len() as f64;
+    let shift = mean(&changed.radiance.data) / mean(r) - 1.0;
+    eprintln!(
+        "measured rms error at 64 spp: rays changed to 64 at 8 {m_changed:.4} DN, 4 rays throughout {m_kept:.4} DN; object mean {shift:+.5} relative to the reference"
+    );
+    assert!(m_changed <= 1.1 * m_kept, "{m_changed} {m_kept}");
     assert!(shift.abs() < 0.01, "{shift}");
 }
 

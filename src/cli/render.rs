@@ -149,6 +149,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             estimator: cfg.render.noise_estimate.unwrap_or_default(),
             adaptive_radius: cfg.render.adaptive_radius,
             growth: cfg.render.noise_target_growth.unwrap_or(0.0) as f64,
+            rays: None,
         }),
         _ => None,
     };

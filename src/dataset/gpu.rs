@@ -39,6 +39,8 @@ pub struct GpuRenderer {
     profile: Option<Profiler>,
     /// Samples and noise estimate of the last image.
     samples: Option<(u32, Vec<NoiseEstimate>)>,
+    /// The rays the last render chose (`Frame::analytic_rays_chosen`).
+    rays: Option<u32>,
 }
 
 impl GpuRenderer {
@@ -66,6 +68,7 @@ impl GpuRenderer {
             stages: Vec::new(),
             profile: None,
             samples: None,
+            rays: None,
         })
     }
 
@@ -286,6 +289,10 @@ impl ImageRenderer for GpuRenderer {
         self.samples.clone()
     }
 
+    fn last_rays(&self) -> Option<u32> {
+        self.rays
+    }
+
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
         // The scene defaults with the job's camera (intrinsics and lens).
         let mut base = self.base.clone();
@@ -315,6 +322,7 @@ impl ImageRenderer for GpuRenderer {
         let pose = cfg.camera.pose().map_err(|e| e.to_string())?;
         self.profile = None;
         self.samples = None;
+        self.rays = None;
         let profiler = Profiler::new();
         let tracer = &self.tracer;
         let scene = scene_for(&mut self.cached, tracer, &self.base, req, &profiler)?;
@@ -367,6 +375,7 @@ impl ImageRenderer for GpuRenderer {
         }
         self.profile = Some(profiler);
         self.samples = Some((frame.spp, frame.noise_checks.clone()));
+        self.rays = frame.analytic_rays_chosen;
         self.ctx.check_validation().map_err(|e| e.to_string())?;
         let ann = frame
             .annotation

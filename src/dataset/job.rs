@@ -257,6 +257,18 @@ pub struct RenderSettings {
     /// files' `[render] analytic_rays`); default 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analytic_rays: Option<i64>,
+    /// With `noise_target` and the analytic direct light: at the first noise check each
+    /// image chooses its camera rays per sample for the closed form for the samples
+    /// after it, between 1 and this, [analytic_rays, 64], from the variances its first
+    /// samples measured (`render::noise::RayChoice`; docs/dataset.md, "The extra rays
+    /// chosen per image"); `analytic_rays` (at least 2) is then the first samples'
+    /// count. None: `analytic_rays` throughout.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analytic_rays_max: Option<i64>,
+    /// With `analytic_rays_max`: one extra ray's cost over the rest of a sample's, the
+    /// choice's k, (0, 10]; default [`DEFAULT_ANALYTIC_RAY_COST`] (measured on lavapipe).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analytic_ray_cost: Option<f64>,
     /// Light samples at the camera ray's first hit, [1, 64] (scene files' `[render]
     /// light_samples`); default 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -274,6 +286,8 @@ pub struct RenderSettings {
 
 /// `[render] min_spp` when not given (`render::noise::DEFAULT_MIN_SPP`).
 pub const DEFAULT_MIN_SPP: i64 = crate::render::noise::DEFAULT_MIN_SPP as i64;
+/// `[render] analytic_ray_cost` when not given (`render::noise::DEFAULT_ANALYTIC_RAY_COST`).
+pub const DEFAULT_ANALYTIC_RAY_COST: f64 = crate::render::noise::DEFAULT_ANALYTIC_RAY_COST;
 
 impl RenderSettings {
     /// Samples before the first noise check: `min_spp`, default [`DEFAULT_MIN_SPP`],
@@ -976,6 +990,43 @@ impl Job {
         }
         if let Some(n) = r.analytic_rays {
             self.int("render.analytic_rays", n, 1, 64)?;
+        }
+        if let Some(m) = r.analytic_rays_max {
+            if r.noise_target.is_none() {
+                return Err(self.field(
+                    "render.analytic_rays_max",
+                    m,
+                    "is chosen at the first check of `render.noise_target`: give that too, or remove it",
+                ));
+            }
+            if r.direct_light == Some(crate::scene::config::DirectLight::Sampled) {
+                return Err(self.field(
+                    "render.analytic_rays_max",
+                    m,
+                    "takes the analytic direct light: remove it or `render.direct_light = \"sampled\"`",
+                ));
+            }
+            let first = r.analytic_rays.unwrap_or(1);
+            if first < 2 {
+                return Err(self.field(
+                    "render.analytic_rays",
+                    first,
+                    "must be in [2, 64] with `render.analytic_rays_max` (the first samples' rays measure their spread)",
+                ));
+            }
+            self.int("render.analytic_rays_max", m, first, 64)?;
+        }
+        if let Some(k) = r.analytic_ray_cost {
+            if r.analytic_rays_max.is_none() {
+                return Err(self.field(
+                    "render.analytic_ray_cost",
+                    k,
+                    "is what `render.analytic_rays_max`'s choice takes: give that too, or remove it",
+                ));
+            }
+            if !(k > 0.0 && k <= 10.0) {
+                return Err(self.field("render.analytic_ray_cost", k, "must be in (0, 10]"));
+            }
         }
         if let Some(n) = r.light_samples {
             self.int("render.light_samples", n, 1, 64)?;

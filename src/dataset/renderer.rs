@@ -225,6 +225,11 @@ pub trait ImageRenderer {
     fn last_samples(&self) -> Option<(u32, Vec<crate::render::noise::NoiseEstimate>)> {
         None
     }
+    /// `[render] analytic_rays_max`: the camera rays per sample the last `render` call
+    /// chose at its first check for the samples after it; None: no choice made.
+    fn last_rays(&self) -> Option<u32> {
+        None
+    }
     /// How a run's preparing thread can make this renderer's scene of an object instance
     /// ahead of its views ([`ImageRequest::scene`]); None (the default): the renderer
     /// makes what it needs itself.

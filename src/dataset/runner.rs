@@ -331,6 +331,11 @@ pub struct ManifestEntry {
     /// most any pixel took).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mean_spp: Option<f64>,
+    /// With `[render] analytic_rays_max`: the camera rays per sample of the analytic
+    /// direct light's closed form the image chose at its first noise check for the
+    /// samples after it (absent where it stopped at that check).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub analytic_rays: Option<u32>,
     pub noise_sigma: Option<f64>,
     /// The camera's intrinsics and lens at the image's resolution (OpenCV camera matrix
     /// and distortion; the pose is `viewpoint` / `pose`).
@@ -1202,6 +1207,8 @@ struct RenderedItem<'p> {
     noise_checks: Vec<(u32, f64)>,
     /// Mean samples per pixel (with `[render] adaptive_radius`).
     mean_spp: Option<f64>,
+    /// The rays chosen (`[render] analytic_rays_max`).
+    analytic_rays: Option<u32>,
 }
 
 /// State kept between images by the stage that makes their inputs: the current
@@ -1535,6 +1542,7 @@ fn render_stage<'p>(
             (true, Some(e)) => Some(e.mean_spp),
             _ => None,
         },
+        analytic_rays: renderer.last_rays(),
     })
 }
 
@@ -1558,6 +1566,7 @@ fn write_stage(
         spp,
         noise_checks,
         mean_spp,
+        analytic_rays,
     } = rendered;
     let job = &prep.job;
     let inst: &InstancePlan = &prep.plan.instances[item.instance];
@@ -1621,6 +1630,7 @@ fn write_stage(
         noise_ratio: noise_checks.last().map(|c| c.1),
         noise_checks,
         mean_spp,
+        analytic_rays,
         noise_sigma,
         camera: Some(camera.clone()),
         exposure_ev: exposed.exposure_ev,

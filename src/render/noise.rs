@@ -72,6 +72,140 @@ pub struct NoiseStop {
     /// give it and ends noisier; a quiet one stops at `min_spp` either way.
     /// docs/dataset.md, "Samples chosen from a noise target".
     pub growth: f64,
+    /// `[render] analytic_rays_max`: at the first check, where it does not stop the
+    /// image, the camera rays per sample of the analytic direct light's closed form are
+    /// chosen for the rest of it ([`RayChoice`]); None: `analytic_rays` throughout.
+    pub rays: Option<RayChoice>,
+}
+
+/// The choice of `[render] analytic_rays_max`: the camera rays m per sample whose closed
+/// form the analytic direct light averages (the sample's own and m - 1 extra), for the
+/// samples after the first noise check where that does not stop the image, from what
+/// the samples before it measured.
+///
+/// A sample's variance is V_R + C m0 / m: C the variance from sample to sample of its
+/// mean of the closed form A' over its m0 camera rays (the texture and glints under the
+/// pixel, which more rays average further; its sums per pixel,
+/// `View::read_ray_sums`), V_R the rest (the paths, the light and BSDF samples: the
+/// estimate's variance per sample less C); a sample's cost is a (1 + k m), k = `cost`
+/// (one extra ray's time over the rest of a sample's). For each count m the
+/// image's noise after n samples is predicted ((done V0 + (n - done) V(m)) / n^2, the
+/// variances summed over the pixels the criterion counts, weighted as it weighs them),
+/// and with it the first check that would meet the target ([`RayCheck`]: one a batch);
+/// m is the count that gets there in the least time, (n - done) (1 + k m). The checks'
+/// grid matters: more rays only pay where they make an image stop a check earlier,
+/// fewer where it still stops at the same one.
+///
+/// **Approximations:** C falls as 1 / m, as for independent rays (the rays' points are
+/// stratified, their own Sobol sequence: more rays may leave less than that); every pixel is taken to sample on
+/// (with `adaptive_radius` the noisy ones sample longer than the rest); the prediction
+/// must meet the target with the variance [`RAY_CHOICE_HEADROOM`] times higher (an
+/// estimate made from few samples); k is one constant measured on one device
+/// (`[render] analytic_ray_cost`; docs/benchmarks/dataset.md, "The extra rays chosen
+/// per image"), not each image's own. m is the best of [`RAY_LADDER`] within [`min`,
+/// `max`] (a pipeline each where the path tracer is specialized), taken only where it
+/// beats m0's predicted time by [`RAY_CHOICE_MARGIN`]. Each sample stays unbiased
+/// whatever its m.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayChoice {
+    /// Fewest and most rays per sample the choice may take (the sample's own included).
+    pub min: u32,
+    pub max: u32,
+    /// k: one extra ray's cost over the rest of a sample's (`[render] analytic_ray_cost`).
+    pub cost: f64,
+}
+
+/// What [`RayChoice::choose`] knows at its check: the variances as sums over the pixels
+/// the criterion counts (each weighted as [`CameraNoise::estimate`] weighs it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayCheck {
+    /// Samples so far (every pixel's: the first check comes before any pixel stops).
+    pub done: u32,
+    /// A sample's variance (V0, at the rays so far).
+    pub variance: f64,
+    /// C, the part of it that is the variance of the sample's mean of its rays' closed
+    /// forms (at the rays so far).
+    pub rays: f64,
+    /// The mean's variance the target allows (its ratio squared times the camera's).
+    pub target: f64,
+    /// The next noise check (the first the image may stop at after this one), the
+    /// samples between the later ones (the batch), and the most samples (`spp`).
+    pub first_stop: u32,
+    pub step: u32,
+    pub most: u32,
+}
+
+/// The ray counts [`RayChoice`] picks from.
+pub const RAY_LADDER: [u32; 12] = [1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64];
+
+/// [`RayChoice::cost`] when not given (`[render] analytic_ray_cost`): one extra ray's
+/// time over the rest of a sample's on lavapipe, measured on the paper job's crops
+/// (docs/benchmarks/dataset.md, "The extra rays chosen per image").
+pub const DEFAULT_ANALYTIC_RAY_COST: f64 = 0.035;
+
+/// [`RayChoice`] changes the rays only where the new count's predicted time to the
+/// target is below this fraction of the current count's.
+pub const RAY_CHOICE_MARGIN: f64 = 0.95;
+
+/// [`RayChoice`] takes a check as met where its predicted variance times this is at most
+/// the target's.
+pub const RAY_CHOICE_HEADROOM: f64 = 1.25;
+
+impl RayChoice {
+    /// The rays for the rest of an image made with `m0` rays so far; `m0` itself where
+    /// the variances are unknown or no count is clearly faster.
+    pub fn choose(&self, m0: u32, at: &RayCheck) -> u32 {
+        let m0 = m0.max(1);
+        let known = |v: f64| v.is_finite() && v >= 0.0;
+        if !(known(at.variance) && known(at.rays) && known(at.target)) || at.variance <= 0.0 {
+            return m0;
+        }
+        let done = at.done as f64;
+        let rest = (at.variance - at.rays).max(0.0);
+        // (whether the target is met by `most`, the time to the check that meets it, or
+        // without one the time per unit of variance: V(m) (1 + k m)).
+        let time = |m: u32| {
+            let v = rest + at.rays * m0 as f64 / m as f64;
+            let per_sample = 1.0 + self.cost * m as f64;
+            let mut n = at.first_stop.max(at.done + 1).min(at.most.max(at.done + 1));
+            loop {
+                let nf = n as f64;
+                let predicted = (done * at.variance + (nf - done) * v) / (nf * nf);
+                if predicted * RAY_CHOICE_HEADROOM <= at.target {
+                    return (true, (nf - done) * per_sample);
+                }
+                if n >= at.most {
+                    return (false, v * per_sample);
+                }
+                n = n.saturating_add(at.step.max(1)).min(at.most);
+            }
+        };
+        // Counts that meet the target before those that do not; then the least time.
+        let key = |m: u32| {
+            let (met, t) = time(m);
+            (!met, t)
+        };
+        let best = RAY_LADDER
+            .iter()
+            .copied()
+            .filter(|&m| m >= self.min && m <= self.max)
+            .min_by(|&a, &b| {
+                key(a)
+                    .partial_cmp(&key(b))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            });
+        match best {
+            Some(m) => {
+                let ((met, t), (met0, t0)) = (time(m), time(m0));
+                if (met && !met0) || (met == met0 && t < RAY_CHOICE_MARGIN * t0) {
+                    m
+                } else {
+                    m0
+                }
+            }
+            None => m0,
+        }
+    }
 }
 
 /// Samples per pixel so far: the same for every pixel, or each pixel's own (`[render]
@@ -346,6 +480,49 @@ impl CameraNoise {
             pixels,
             exposure_s: t,
         })
+    }
+
+    /// [`RayChoice::choose`]'s two sums after `n` samples (each pixel's own): a
+    /// sample's variance (the estimate's variance of the mean times the samples) and C,
+    /// the variance from sample to sample of its mean of its rays' closed forms (from
+    /// `ray_sums`: per pixel the sums of that mean and of its square, at 2 i and 2 i + 1),
+    /// each pixel weighted as [`CameraNoise::estimate`] weighs its render variance at the
+    /// exposure `exposure_s` of that estimate, over the pixels it counts (the object's,
+    /// below saturation; every pixel where `object_mask` selects none).
+    #[allow(clippy::too_many_arguments)]
+    pub fn ray_variances<'a>(
+        &self,
+        estimator: NoiseEstimator,
+        sum: &[f32],
+        noise: &[f32],
+        ray_sums: &[f32],
+        n: impl Into<PixelSamples<'a>>,
+        exposure_s: f64,
+        object_mask: &[bool],
+    ) -> (f64, f64) {
+        let n = n.into();
+        let mean = mean_scratch(sum, n);
+        let all = !object_mask.iter().any(|&m| m);
+        let k = self.sensor.gain_dn_per_electron;
+        let full = saturation_electrons(&self.sensor);
+        let (mut total, mut rays) = (0.0f64, 0.0f64);
+        for i in 0..sum.len() {
+            if !(all || object_mask[i]) {
+                continue;
+            }
+            let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
+            let mu = mean[i].max(0.0) as f64 * e_per_l;
+            let ni = n.of(i);
+            let var = pixel_variance(estimator, sum, noise, ni, i);
+            let c = mean_variance(ray_sums[2 * i] as f64, ray_sums[2 * i + 1] as f64, ni);
+            if mu >= full || !var.is_finite() || !c.is_finite() {
+                continue;
+            }
+            let w = (k * e_per_l).powi(2);
+            total += w * var * ni as f64;
+            rays += w * c * ni as f64;
+        }
+        (total, rays)
     }
 
     /// `[render] adaptive_radius`: the samples each pixel should end with so that the
@@ -871,6 +1048,7 @@ mod tests {
             estimator: NoiseEstimator::Samples,
             adaptive_radius: None,
             growth,
+            rays: None,
         }
     }
 
@@ -1432,6 +1610,7 @@ mod tests {
             estimator: NoiseEstimator::Samples,
             adaptive_radius: None,
             growth: 0.0,
+            rays: None,
         };
         assert_eq!(stop.first_check(1000), 16);
         assert_eq!(stop.first_check(8), 8);
@@ -1461,5 +1640,52 @@ mod tests {
             1040,
             "the smallest step stays"
         );
+    }
+
+    #[test]
+    fn the_rays_chosen_reach_the_target_in_the_least_time() {
+        let c = RayChoice {
+            min: 1,
+            max: 64,
+            cost: 0.035,
+        };
+        // V_A: the closed form's variance over a pixel's rays, C = V_A / m0.
+        let at = |m0: u32, variance: f64, v_a: f64, target: f64| RayCheck {
+            done: 2,
+            variance,
+            rays: v_a / m0 as f64,
+            target,
+            first_stop: 4,
+            step: 4,
+            most: 256,
+        };
+        // No spread, the target met at the first check whatever the count: one ray.
+        assert_eq!(c.choose(16, &at(16, 1.0, 0.0, 0.4)), 1);
+        // A spread that keeps 16 rays from the first check: the fewest rays that reach
+        // it. m = 24: V = 0.1 + 16 / 24, (2 x 1.1 + 2 V) / 16 x 1.25 = 0.29 <= 0.3; 16
+        // rays: 0.34 (the check at 8 instead).
+        assert_eq!(c.choose(16, &at(16, 1.1, 16.0, 0.3)), 24);
+        // Within the bounds given: at most 16, the check at 8 is the earliest; 8 rays
+        // get there (0.289 with the headroom) and 4 only at 16 (15.96 against 7.68).
+        let narrow = RayChoice {
+            min: 4,
+            max: 16,
+            ..c
+        };
+        assert_eq!(narrow.choose(16, &at(16, 1.1, 16.0, 0.3)), 8);
+        assert_eq!(narrow.choose(16, &at(16, 1.0, 0.0, 0.4)), 4);
+        // A target no count reaches within `most`: the least variance per unit of time,
+        // V(m) (1 + k m), least at sqrt(V_A / (k V_R)) = 48 here.
+        let spread = 48.0 * 48.0 * 0.035;
+        assert_eq!(c.choose(16, &at(16, 1.0 + spread / 16.0, spread, 1e-9)), 48);
+        // The spread alone: the most.
+        assert_eq!(c.choose(16, &at(16, 10.0 / 16.0, 10.0, 1e-9)), 64);
+        // Nothing known: kept.
+        assert_eq!(c.choose(16, &at(16, 0.0, 0.0, 1.0)), 16);
+        assert_eq!(c.choose(16, &at(16, f64::NAN, 1.0, 1.0)), 16);
+        assert_eq!(c.choose(16, &at(16, f64::INFINITY, 1.0, 1.0)), 16);
+        // Near the current count's time (within the margin): kept.
+        let spread = 18.0 * 18.0 * 0.035;
+        assert_eq!(c.choose(16, &at(16, 1.0 + spread / 16.0, spread, 1e-9)), 16);
     }
 }

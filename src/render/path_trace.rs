@@ -9,7 +9,7 @@ use super::cpu::{Scratch, on_render_pool};
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
 use super::noise::{
-    NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, next_power_of_two_above,
+    NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, RayCheck, next_power_of_two_above,
 };
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
@@ -75,6 +75,11 @@ pub struct Frame {
     /// The annotation came from the path tracer's own first n x n samples (`[render]
     /// labels`), not from the annotation pass; false without an annotation.
     pub labels_from_samples: bool,
+    /// `[render] analytic_rays_max`: the camera rays per sample of the analytic direct
+    /// light's closed form chosen at the first noise check for the samples after it (the
+    /// same count where none was clearly faster); None where no choice was made (no such
+    /// setting, no extra rays, or the image stopped there).
+    pub analytic_rays_chosen: Option<u32>,
 }
 
 impl Frame {
@@ -114,8 +119,10 @@ pub fn render_frame(
         settings,
         opts.annotate_grid,
         opts.noise.map(|n| n.estimator),
+        opts.noise.is_some_and(|n| n.rays.is_some()),
         opts.profiler,
     )?;
+    let mut rays_chosen = None;
     let (spp, batch) = (settings.spp, settings.batch_spp.max(1));
     let (width, height) = (setup.camera.width, setup.camera.height);
     let mut done = 0u32;
@@ -163,6 +170,18 @@ pub fn render_frame(
                 break;
             }
             next_check = Some(stop.next_check(done, est.ratio));
+            if let Some(choice) = stop.rays
+                && checks.len() == 1
+                && let Some(ray_sums) = view.read_ray_sums()?
+            {
+                // `[render] analytic_rays_max`: the rays for the rest of the image.
+                let at = crate::vk::timed(opts.profiler, "rays chosen", || {
+                    ray_check(stop, &est, &sums, &ray_sums, samples, batch, spp, &masks)
+                });
+                let m = choice.choose(view.extra_rays() + 1, &at);
+                view.set_extra_rays(tracer, m - 1)?;
+                rays_chosen = Some(m);
+            }
             if let Some(radius) = adaptive {
                 let (sum, noise) = sums;
                 let object = &masks.as_ref().expect("filled by the estimate").1;
@@ -223,6 +242,7 @@ pub fn render_frame(
         noise: checks.last().copied(),
         noise_checks: checks,
         labels_from_samples: view.labels_from_samples(),
+        analytic_rays_chosen: rays_chosen,
     })
 }
 
@@ -289,6 +309,42 @@ fn noise_estimate(
         .camera
         .estimate(stop.estimator, &sum, &noise, done, exposure, object)?;
     Ok((est, (sum, noise)))
+}
+
+/// What `[render] analytic_rays_max`'s choice knows at the first noise check (`est`,
+/// from `sums` after `done` samples, every pixel's; later checks a `batch` apart, at
+/// most `spp`; `masks` as the estimate took them): [`RayCheck`].
+#[allow(clippy::too_many_arguments)]
+fn ray_check(
+    stop: &NoiseStop,
+    est: &NoiseEstimate,
+    sums: &Sums,
+    ray_sums: &[f32],
+    done: PixelSamples<'_>,
+    batch: u32,
+    spp: u32,
+    masks: &Option<(Vec<bool>, Vec<bool>)>,
+) -> RayCheck {
+    let object = &masks.as_ref().expect("filled by the estimate").1;
+    let (variance, rays) = stop.camera.ray_variances(
+        stop.estimator,
+        &sums.0,
+        &sums.1,
+        ray_sums,
+        done,
+        est.exposure_s,
+        object,
+    );
+    let allowed = stop.target_at(est.mean_spp) * est.camera_rms_dn;
+    RayCheck {
+        done: done.most(),
+        variance,
+        rays,
+        target: allowed * allowed * est.pixels as f64,
+        first_stop: done.most() + batch,
+        step: batch,
+        most: spp,
+    }
 }
 
 /// Renders a whole assembled scene once: builds the path tracer and the GPU scene for

@@ -12,7 +12,7 @@ use super::annotate::{Annotation, AnnotationTargets, record_annotate};
 use super::cpu::{Scratch, on_render_pool};
 use super::gpu_scene::GpuScene;
 use super::noise::{NoiseEstimator, PixelSamples, mean_image, noise_floats_per_pixel};
-use super::settings::RenderSettings;
+use super::settings::{DirectLight, RenderSettings};
 use super::tracer::PathTracer;
 use crate::gpu_interface::{
     LIGHT_FACING, LIGHT_SPOT, LIGHT_UNIFORM, LightBlock, LightTri, NOISE_HALVES, NOISE_OFF,
@@ -110,6 +110,8 @@ pub struct View<'s> {
     light_weights: Buffer,
     emitters: Buffer,
     params: Buffer,
+    /// What `params` holds ([`View::set_extra_rays`] changes it between batches).
+    params_block: PathParams,
     /// The path-tracing pipeline for these parameters (`PathTracer::path_pipeline`:
     /// specialized for them where `[render] specialize`).
     path: Arc<ComputePipeline>,
@@ -117,7 +119,11 @@ pub struct View<'s> {
     /// The per-pixel sums of the noise estimate when the view estimates its noise
     /// (`variance`), else one float the shader never writes.
     noise_sums: Buffer,
-    variance: bool,
+    /// The noise estimate's floats a pixel (None: the view keeps no noise sums); with
+    /// `params_block.cv_ray_sums` the buffer holds two more a pixel after them.
+    variance: Option<usize>,
+    /// Whether `path` is specialized for `params_block` (`[render] specialize`).
+    specialize: bool,
     annotation: Option<(AnnotationTargets, u32)>,
     /// The path tracer's first batch labels the pixels from its own samples
     /// (`[render] labels`, [`LabelSource::from_samples`]) instead of the annotation pass.
@@ -155,13 +161,18 @@ impl<'s> View<'s> {
             settings,
             annotate_grid,
             None,
+            false,
             profiler,
         )
     }
 
     /// [`View::new`]; with `variance` the path tracer also keeps that estimator's
     /// per-pixel sums ([`View::read_sums`]), the noise estimate of `[render]
-    /// noise_target` (src/render/noise.rs). Without it, nothing changes.
+    /// noise_target` (src/render/noise.rs); with `extra_ray_stats` as well, and the
+    /// analytic direct light with extra camera rays, also the spread of their closed
+    /// forms' mean ([`View::read_ray_sums`], `[render] analytic_rays_max`). Without them,
+    /// nothing changes.
+    #[allow(clippy::too_many_arguments)]
     pub fn with_variance(
         tracer: &PathTracer,
         scene: &'s GpuScene,
@@ -169,6 +180,7 @@ impl<'s> View<'s> {
         settings: &RenderSettings,
         annotate_grid: Option<u32>,
         variance: Option<NoiseEstimator>,
+        extra_ray_stats: bool,
         profiler: Option<&Profiler>,
     ) -> Result<View<'s>, RenderError> {
         let ctx = &tracer.ctx;
@@ -249,6 +261,12 @@ impl<'s> View<'s> {
             (B::LightWeights, &light_weights),
         ]);
         let addresses = Buffer::from_slice(ctx, "path tracer addresses", &table, storage)?;
+        // `[render] analytic_rays_max`: the rays' mean's sums, in two more floats a pixel.
+        let ray_sums = variance.is_some()
+            && extra_ray_stats
+            && params.direct_light == DirectLight::Analytic as u32
+            && params.cv_extra_rays > 0;
+        params.cv_ray_sums = ray_sums as u32;
         let path = tracer.path_pipeline(&params, settings.specialize)?;
         Ok(View {
             scene,
@@ -258,18 +276,23 @@ impl<'s> View<'s> {
             emitters,
             addresses,
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
+            params_block: params,
+            specialize: settings.specialize,
             path,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
             noise_sums: {
                 // Without `variance` one float: a binding may not be empty, and the shader
                 // never writes it (NOISE_OFF).
                 let (name, bytes) = match variance {
-                    Some(e) => ("noise sums", n * 4 * noise_floats_per_pixel(e) as u64),
+                    Some(e) => (
+                        "noise sums",
+                        n * 4 * (noise_floats_per_pixel(e) + 2 * ray_sums as usize) as u64,
+                    ),
                     None => ("noise sums (unused)", 4),
                 };
                 Buffer::new(ctx, name, bytes, usage, MemoryKind::Readback)?
             },
-            variance: variance.is_some(),
+            variance: variance.map(noise_floats_per_pixel),
             annotation,
             labels_from_samples,
             label_placeholders,
@@ -348,7 +371,7 @@ impl<'s> View<'s> {
         let mut targets = None;
         if start == 0 {
             g.fill("clear radiance", &mut acc, 0);
-            if self.variance {
+            if self.variance.is_some() {
                 g.fill("clear noise sums", &mut noise, 0);
             }
             if let Some((t, grid)) = &self.annotation {
@@ -435,14 +458,63 @@ impl<'s> View<'s> {
     pub fn read_sums(&self) -> Result<(Scratch<f32>, Option<Scratch<f32>>), RenderError> {
         let mut sum = Scratch::empty();
         self.accum.read_into(&mut sum)?;
-        let sq = if self.variance {
-            let mut sq = Scratch::empty();
-            self.noise_sums.read_into(&mut sq)?;
-            Some(sq)
-        } else {
-            None
+        let sq = match self.variance {
+            Some(floats) => {
+                let mut sq = Scratch::empty();
+                self.noise_sums.read_into(&mut sq)?;
+                sq.truncate(floats * sum.len());
+                Some(sq)
+            }
+            None => None,
         };
         Ok((sum, sq))
+    }
+
+    /// The extra camera rays a sample takes for the control variate's closed form
+    /// (`[render] analytic_rays` - 1; 0 without the analytic direct light).
+    pub fn extra_rays(&self) -> u32 {
+        if self.params_block.direct_light == DirectLight::Analytic as u32 {
+            self.params_block.cv_extra_rays
+        } else {
+            0
+        }
+    }
+
+    /// Per pixel, the sums over its samples so far of each sample's mean of its camera
+    /// rays' closed forms and of its square (pixel i's at 2 i and 2 i + 1), where the
+    /// view keeps them (made `with_variance` and `extra_ray_stats`, the analytic direct
+    /// light with extra rays, and no [`View::set_extra_rays`] since); else None.
+    pub fn read_ray_sums(&self) -> Result<Option<Vec<f32>>, RenderError> {
+        match self.variance {
+            Some(floats) if self.params_block.cv_ray_sums != 0 => {
+                let all: Vec<f32> = self.noise_sums.read()?;
+                let n = self.camera.width as usize * self.camera.height as usize;
+                Ok(Some(all[floats * n..(floats + 2) * n].to_vec()))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// From the next batch on, each sample takes `extra` extra camera rays (`[render]
+    /// analytic_rays_max`'s choice), from a sequence of their own (another seed: the
+    /// points the rays before took are not taken again), and the rays' sums are no
+    /// longer kept. Samples stay unbiased whatever their count; with `[render]
+    /// specialize` the pipeline is the one made for the new count.
+    pub fn set_extra_rays(&mut self, tracer: &PathTracer, extra: u32) -> Result<(), RenderError> {
+        let mut p = self.params_block;
+        if p.cv_extra_rays == extra {
+            return Ok(());
+        }
+        p.cv_extra_rays = extra;
+        p.cv_seed = extra_ray_seed(p.seed, Some(extra));
+        p.cv_ray_sums = 0;
+        let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        self.params = Buffer::from_slice(&tracer.ctx, "path params", &[p], storage)?;
+        if self.specialize {
+            self.path = tracer.path_pipeline(&p, true)?;
+        }
+        self.params_block = p;
+        Ok(())
     }
 
     /// The annotation so far (complete after the first batch); None if not asked for.
@@ -537,7 +609,19 @@ fn path_params(
         lights_lo,
         lights_hi,
         table: scene.table,
+        cv_seed: extra_ray_seed(s.seed, None),
         ..Default::default()
+    }
+}
+
+/// The seed of the extra camera rays' sequence (`PathParams::cv_seed`): the render's
+/// seed with a fixed pattern, and after [`View::set_extra_rays`] (`changed`: the new
+/// count) another one for each count.
+fn extra_ray_seed(seed: u32, changed: Option<u32>) -> u32 {
+    let base = seed ^ 0x5ca1_ab1e;
+    match changed {
+        None => base,
+        Some(extra) => base ^ (extra + 1).wrapping_mul(0x9e37_79b9),
     }
 }
 
