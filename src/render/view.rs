@@ -499,14 +499,18 @@ impl<'s> View<'s> {
     /// analytic_rays_max`'s choice), from a sequence of their own (another seed: the
     /// points the rays before took are not taken again), and the rays' sums are no
     /// longer kept. Samples stay unbiased whatever their count; with `[render]
-    /// specialize` the pipeline is the one made for the new count.
+    /// specialize` the pipeline is the one made for the new count. The count the view
+    /// has keeps its rays' sequence (the samples those rays would take anyway) and only
+    /// stops keeping the sums.
     pub fn set_extra_rays(&mut self, tracer: &PathTracer, extra: u32) -> Result<(), RenderError> {
         let mut p = self.params_block;
-        if p.cv_extra_rays == extra {
+        if p.cv_extra_rays == extra && p.cv_ray_sums == 0 {
             return Ok(());
         }
-        p.cv_extra_rays = extra;
-        p.cv_seed = extra_ray_seed(p.seed, Some(extra));
+        if p.cv_extra_rays != extra {
+            p.cv_extra_rays = extra;
+            p.cv_seed = extra_ray_seed(p.seed, Some(extra));
+        }
         p.cv_ray_sums = 0;
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         self.params = Buffer::from_slice(&tracer.ctx, "path params", &[p], storage)?;
