@@ -58,6 +58,44 @@ fn lavapipe_runs_at_the_chosen_lane_width() {
     }
 }
 
+// vk::lanes' own choice where the environment leaves the width to it: 512 bits on an
+// Intel CPU with AVX-512F, the driver's default elsewhere. tools/test runs the suite at
+// the driver's 256 bits (LP_NATIVE_VECTOR_WIDTH=256: half the cold compiles' time), so
+// this test is what checks the choice there: a process without the variable (no
+// pipeline compiled).
+#[test]
+fn lavapipe_runs_at_the_lane_width_chosen_for_this_cpu() {
+    if !common::gpu().info.is_cpu {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = synosis()
+        .args(["info", "--json"])
+        .env_remove(lanes::WIDTH_VAR)
+        .env(lanes::CACHE_VAR, dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let name = info["name"].as_str().unwrap();
+    let wide = lanes::preferred_here();
+    assert_eq!(
+        info["cpu_lanes"],
+        if wide { "wide" } else { "driver" },
+        "{info}"
+    );
+    assert_eq!(name.contains(", 512 bits)"), wide, "{name}");
+    if wide {
+        assert_eq!(
+            info["cpu_shader_cache"]
+                .as_str()
+                .map(std::path::PathBuf::from),
+            Some(dir.path().join("lavapipe-lanes-512")),
+            "{info}"
+        );
+    }
+}
+
 #[test]
 fn backends_give_the_same_raycast_image() {
     let ctx = common::gpu();

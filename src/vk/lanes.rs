@@ -69,6 +69,13 @@ pub fn wide_preferred(vendor: &str, avx512f: bool) -> bool {
     vendor == "GenuineIntel" && avx512f
 }
 
+/// Whether [`choose`] asks for 512-bit lanes on this CPU where the environment leaves
+/// the width to it ([`wide_preferred`] of this CPU's vendor and AVX-512F).
+pub fn preferred_here() -> bool {
+    let (vendor, avx512f) = host_cpu();
+    wide_preferred(&vendor, avx512f)
+}
+
 /// This CPU's vendor string and whether it has AVX-512F (none and false off x86-64).
 fn host_cpu() -> (String, bool) {
     #[cfg(target_arch = "x86_64")]
@@ -143,17 +150,14 @@ pub fn choose() -> LaneWidth {
         .get_or_init(|| {
             let width = if let Some(v) = std::env::var_os(WIDTH_VAR) {
                 LaneWidth::User(v.to_string_lossy().into_owned())
+            } else if preferred_here() {
+                // SAFETY: set once, before this process loads any Vulkan driver (the
+                // first `Context::new`, under its lifecycle lock), so no driver thread
+                // reads the environment yet; Rust's own readers take std's lock.
+                unsafe { std::env::set_var(WIDTH_VAR, "512") };
+                LaneWidth::Wide
             } else {
-                let (vendor, avx512f) = host_cpu();
-                if wide_preferred(&vendor, avx512f) {
-                    // SAFETY: set once, before this process loads any Vulkan driver (the
-                    // first `Context::new`, under its lifecycle lock), so no driver thread
-                    // reads the environment yet; Rust's own readers take std's lock.
-                    unsafe { std::env::set_var(WIDTH_VAR, "512") };
-                    LaneWidth::Wide
-                } else {
-                    LaneWidth::Driver
-                }
+                LaneWidth::Driver
             };
             let bits = match &width {
                 LaneWidth::User(v) => Some(v.as_str()),
