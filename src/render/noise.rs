@@ -86,7 +86,7 @@ pub struct NoiseStop {
 /// A sample's variance is V_R + C m0 / m: C the variance from sample to sample of its
 /// mean of the closed form A' over its m0 camera rays (the texture and glints under the
 /// pixel, which more rays average further; its sums per pixel,
-/// `View::read_ray_sums`), V_R the rest (the paths, the light and BSDF samples: the
+/// `View::read_sums`), V_R the rest (the paths, the light and BSDF samples: the
 /// estimate's variance per sample less C); a sample's cost is a (1 + k m), k = `cost`
 /// (one extra ray's time over the rest of a sample's). For each count m the
 /// image's noise after n samples is predicted ((done V0 + (n - done) V(m)) / n^2, the
@@ -426,7 +426,6 @@ impl CameraNoise {
         let t = exposure_time_s(&self.resp, &mean, Some(exposure_mask), &self.sensor)?
             * self.exposure_factor;
         let all = !object_mask.iter().any(|&m| m);
-        let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
         // Each pixel's terms on all cores (into arrays kept between checks), summed in
         // pixel order (the same sums as one loop over the pixels).
@@ -443,15 +442,12 @@ impl CameraNoise {
                 if !(all || object_mask[i]) {
                     return;
                 }
-                let e_per_l = self.resp.electrons_per_s[i] * t;
-                let l = mean[i].max(0.0) as f64;
-                let mu = l * e_per_l;
-                if mu >= full {
+                let Some((w, mu)) = self.pixel_weight(i, mean[i] as f64, t, full) else {
                     return;
-                }
+                };
                 let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
                 *c = true;
-                *r = (k * e_per_l).powi(2) * var_l;
+                *r = w * var_l;
                 *cam = camera_variance_dn(&self.sensor, mu);
             });
         let (mut render, mut camera, mut pixels) = (0.0f64, 0.0f64, 0usize);
@@ -482,6 +478,18 @@ impl CameraNoise {
         })
     }
 
+    /// The criterion's weight of pixel `i` with mean radiance `mean` at the exposure
+    /// `exposure_s`, (K e)^2 (K the gain in codes per electron, e the pixel's electrons
+    /// per unit radiance), and its mean signal in electrons; None at or above
+    /// saturation (`full` electrons), where the criterion does not count it. One rule for
+    /// [`CameraNoise::estimate`], [`CameraNoise::ray_variances`] and
+    /// [`CameraNoise::pixel_samples_wanted`].
+    fn pixel_weight(&self, i: usize, mean: f64, exposure_s: f64, full: f64) -> Option<(f64, f64)> {
+        let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
+        let mu = mean.max(0.0) * e_per_l;
+        (mu < full).then(|| ((self.sensor.gain_dn_per_electron * e_per_l).powi(2), mu))
+    }
+
     /// [`RayChoice::choose`]'s two sums after `n` samples (each pixel's own): a
     /// sample's variance (the estimate's variance of the mean times the samples) and C,
     /// the variance from sample to sample of its mean of its rays' closed forms (from
@@ -503,22 +511,21 @@ impl CameraNoise {
         let n = n.into();
         let mean = mean_scratch(sum, n);
         let all = !object_mask.iter().any(|&m| m);
-        let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
         let (mut total, mut rays) = (0.0f64, 0.0f64);
         for i in 0..sum.len() {
             if !(all || object_mask[i]) {
                 continue;
             }
-            let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
-            let mu = mean[i].max(0.0) as f64 * e_per_l;
             let ni = n.of(i);
             let var = pixel_variance(estimator, sum, noise, ni, i);
             let c = mean_variance(ray_sums[2 * i] as f64, ray_sums[2 * i + 1] as f64, ni);
-            if mu >= full || !var.is_finite() || !c.is_finite() {
+            let Some((w, _)) = self.pixel_weight(i, mean[i] as f64, exposure_s, full) else {
+                continue;
+            };
+            if !var.is_finite() || !c.is_finite() {
                 continue;
             }
-            let w = (k * e_per_l).powi(2);
             total += w * var * ni as f64;
             rays += w * c * ni as f64;
         }
@@ -591,19 +598,13 @@ impl CameraNoise {
         let n = n.into();
         let px = sum.len();
         let all = !object_mask.iter().any(|&m| m);
-        let k = self.sensor.gain_dn_per_electron;
         let full = saturation_electrons(&self.sensor);
         // A pixel's variance per sample in codes and its mean signal in electrons; None
         // at or above saturation.
         let variance = |i: usize| -> Option<(f64, f64)> {
-            let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
-            let mu = pixel_mean(sum[i], n.of(i)).max(0.0) as f64 * e_per_l;
-            if mu >= full {
-                return None;
-            }
-            let v = (k * e_per_l).powi(2)
-                * pixel_variance(estimator, sum, noise, n.of(i), i)
-                * n.of(i) as f64;
+            let (w, mu) =
+                self.pixel_weight(i, pixel_mean(sum[i], n.of(i)) as f64, exposure_s, full)?;
+            let v = w * pixel_variance(estimator, sum, noise, n.of(i), i) * n.of(i) as f64;
             Some((v, mu))
         };
         // One pass on all cores: the variance per sample (0 when unknown or saturated),

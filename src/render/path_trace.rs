@@ -162,7 +162,7 @@ pub fn render_frame(
         {
             let counts = pixel_counts(&stopped, done);
             let samples = PixelSamples::new(counts.as_deref().map(Vec::as_slice), done);
-            let (est, sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
+            let (est, sums, ray_sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
                 on_render_pool(|| noise_estimate(&view, stop, samples, &mut masks))
             })?;
             checks.push(est);
@@ -172,7 +172,7 @@ pub fn render_frame(
             next_check = Some(stop.next_check(done, est.ratio));
             if let Some(choice) = stop.rays
                 && checks.len() == 1
-                && let Some(ray_sums) = view.read_ray_sums()?
+                && let Some(ray_sums) = ray_sums
             {
                 // `[render] analytic_rays_max`: the rays for the rest of the image.
                 let at = crate::vk::timed(opts.profiler, "rays chosen", || {
@@ -284,7 +284,8 @@ fn pixel_counts(stopped: &[u32], done: u32) -> Option<Scratch<u32>> {
 /// Per-pixel sums as [`View::read_sums`] reads them: radiance, and the noise estimate's.
 type Sums = (Scratch<f32>, Scratch<f32>);
 
-/// The noise criterion after `done` samples, and the sums it was made from; `masks`
+/// The noise criterion after `done` samples, the sums it was made from, and the rays'
+/// sums where the view keeps them ([`View::read_sums`]); `masks`
 /// (auto exposure's pixels: the inspected faces 1..=3; the rms's: the object,
 /// face != 0) from the view's annotation, read once (every pixel without an annotation).
 fn noise_estimate(
@@ -292,8 +293,8 @@ fn noise_estimate(
     stop: &NoiseStop,
     done: PixelSamples<'_>,
     masks: &mut Option<(Vec<bool>, Vec<bool>)>,
-) -> Result<(NoiseEstimate, Sums), RenderError> {
-    let (sum, noise) = view.read_sums()?;
+) -> Result<(NoiseEstimate, Sums, Option<Vec<f32>>), RenderError> {
+    let (sum, noise, ray_sums) = view.read_sums()?;
     let noise = noise.expect("a view with a noise target keeps noise sums");
     if masks.is_none() {
         *masks = Some(match view.read_annotation()? {
@@ -308,7 +309,7 @@ fn noise_estimate(
     let est = stop
         .camera
         .estimate(stop.estimator, &sum, &noise, done, exposure, object)?;
-    Ok((est, (sum, noise)))
+    Ok((est, (sum, noise), ray_sums))
 }
 
 /// What `[render] analytic_rays_max`'s choice knows at the first noise check (`est`,

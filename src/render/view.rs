@@ -101,6 +101,9 @@ pub fn camera_block(cam: &Camera) -> crate::gpu_interface::CameraBlock {
     }
 }
 
+/// What [`View::read_sums`] reads: the radiance sums, the noise estimate's, the rays'.
+pub type ViewSums = (Scratch<f32>, Option<Scratch<f32>>, Option<Vec<f32>>);
+
 /// A view being rendered.
 pub struct View<'s> {
     scene: &'s GpuScene,
@@ -170,7 +173,7 @@ impl<'s> View<'s> {
     /// per-pixel sums ([`View::read_sums`]), the noise estimate of `[render]
     /// noise_target` (src/render/noise.rs); with `extra_ray_stats` as well, and the
     /// analytic direct light with extra camera rays, also the spread of their closed
-    /// forms' mean ([`View::read_ray_sums`], `[render] analytic_rays_max`). Without them,
+    /// forms' mean ([`View::read_sums`]' third part, `[render] analytic_rays_max`). Without them,
     /// nothing changes.
     #[allow(clippy::too_many_arguments)]
     pub fn with_variance(
@@ -453,21 +456,25 @@ impl<'s> View<'s> {
         }
     }
 
-    /// The per-pixel sums so far: radiance, and the noise estimate's when the view was
-    /// made `with_variance` (else None).
-    pub fn read_sums(&self) -> Result<(Scratch<f32>, Option<Scratch<f32>>), RenderError> {
+    /// The per-pixel sums so far: radiance; the noise estimate's when the view was made
+    /// `with_variance` (else None); and, split off the same read, the rays' sums where
+    /// the view keeps them (made `with_variance` and `extra_ray_stats`, the analytic
+    /// direct light with extra rays, and no [`View::set_extra_rays`] since; else None):
+    /// per pixel the sums over its samples of each sample's mean of its camera rays'
+    /// closed forms and of its square, pixel i's at 2 i and 2 i + 1.
+    pub fn read_sums(&self) -> Result<ViewSums, RenderError> {
         let mut sum = Scratch::empty();
         self.accum.read_into(&mut sum)?;
-        let sq = match self.variance {
-            Some(floats) => {
-                let mut sq = Scratch::empty();
-                self.noise_sums.read_into(&mut sq)?;
-                sq.truncate(floats * sum.len());
-                Some(sq)
-            }
-            None => None,
+        let Some(floats) = self.variance else {
+            return Ok((sum, None, None));
         };
-        Ok((sum, sq))
+        let mut sq = Scratch::empty();
+        self.noise_sums.read_into(&mut sq)?;
+        let n = sum.len();
+        let rays =
+            (self.params_block.cv_ray_sums != 0).then(|| sq[floats * n..(floats + 2) * n].to_vec());
+        sq.truncate(floats * n);
+        Ok((sum, Some(sq), rays))
     }
 
     /// The extra camera rays a sample takes for the control variate's closed form
@@ -477,21 +484,6 @@ impl<'s> View<'s> {
             self.params_block.cv_extra_rays
         } else {
             0
-        }
-    }
-
-    /// Per pixel, the sums over its samples so far of each sample's mean of its camera
-    /// rays' closed forms and of its square (pixel i's at 2 i and 2 i + 1), where the
-    /// view keeps them (made `with_variance` and `extra_ray_stats`, the analytic direct
-    /// light with extra rays, and no [`View::set_extra_rays`] since); else None.
-    pub fn read_ray_sums(&self) -> Result<Option<Vec<f32>>, RenderError> {
-        match self.variance {
-            Some(floats) if self.params_block.cv_ray_sums != 0 => {
-                let all: Vec<f32> = self.noise_sums.read()?;
-                let n = self.camera.width as usize * self.camera.height as usize;
-                Ok(Some(all[floats * n..(floats + 2) * n].to_vec()))
-            }
-            _ => Ok(None),
         }
     }
 
