@@ -314,6 +314,23 @@ fn render_with_calibration_lens_and_sensor() {
         &synosis(&["render", "s.toml", "--out", "out2", "--png16"], dp),
         &["--png16", "bit_depth"],
     );
+    // A scene file's noise target with `analytic_rays_max`: the render chooses its rays at
+    // the first check (a target it cannot meet, so that it samples on to `spp`).
+    std::fs::write(
+        dp.join("t.toml"),
+        "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0\n[light]\nradiance = 50.0\n[render]\nspp = 6\nbatch_spp = 2\nnoise_target = 0.01\nmin_spp = 2\nanalytic_rays = 2\nanalytic_rays_max = 8\n[sensor]\n",
+    )
+    .unwrap();
+    let o = synosis(&["render", "t.toml", "--out", "out3"], dp);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("noise check: 2 spp")
+            && err.contains("analytic rays: ")
+            && err.contains("chosen in [1, 8]")
+            && err.contains("stopped at 6 spp"),
+        "{err}"
+    );
 }
 
 #[test]

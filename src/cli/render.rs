@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
-use synosis::render::noise::{CameraNoise, NoiseStop};
+use synosis::render::noise::{CameraNoise, DEFAULT_ANALYTIC_RAY_COST, NoiseStop, RayChoice};
 use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene_on};
 use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
@@ -149,7 +149,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             estimator: cfg.render.noise_estimate.unwrap_or_default(),
             adaptive_radius: cfg.render.adaptive_radius,
             growth: cfg.render.noise_target_growth.unwrap_or(0.0) as f64,
-            rays: None,
+            // `[render] analytic_rays_max`: the rays chosen at the first check.
+            rays: cfg.render.analytic_rays_max.map(|max| RayChoice {
+                min: 1,
+                max,
+                cost: cfg
+                    .render
+                    .analytic_ray_cost
+                    .map_or(DEFAULT_ANALYTIC_RAY_COST, f64::from),
+            }),
         }),
         _ => None,
     };
@@ -167,6 +175,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         eprintln!(
             "noise check: {} spp (mean {:.1}), render noise / camera noise {:.3}",
             e.spp, e.mean_spp, e.ratio
+        );
+    }
+    if let Some(m) = frame.analytic_rays_chosen {
+        eprintln!(
+            "analytic rays: {m} per sample after the first check (chosen in [1, {}])",
+            cfg.render.analytic_rays_max.unwrap_or(m)
         );
     }
     if let Some(e) = &frame.noise {

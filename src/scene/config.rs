@@ -886,6 +886,16 @@ pub struct RenderConfig {
     /// no further), [1, 64]; more of them average the sub-pixel texture's variation of the
     /// direct light (docs/rendering.md, "Analytic direct light").
     pub analytic_rays: u32,
+    /// With `noise_target` and "analytic": at the first noise check the render chooses
+    /// its camera rays per sample for the closed form for the samples after it, between 1
+    /// and this, [analytic_rays, 64], from the variances its first samples measured
+    /// (`render::noise::RayChoice`; docs/dataset.md, "The extra rays chosen per image");
+    /// `analytic_rays` (at least 2) is then the first samples' count. None:
+    /// `analytic_rays` throughout (as a dataset job's `[render] analytic_rays_max`).
+    pub analytic_rays_max: Option<u32>,
+    /// With `analytic_rays_max`: one extra ray's cost over the rest of a sample's, the
+    /// choice's k, (0, 10]; default `render::noise::DEFAULT_ANALYTIC_RAY_COST`.
+    pub analytic_ray_cost: Option<f32>,
     /// Light samples (each with its shadow ray) at the camera ray's first hit, [1, 64];
     /// deeper vertices take one. More of them lower the noise of shadows and of the
     /// light's sampled part where a pixel sees a partly shadowed light (docs/rendering.md,
@@ -1036,6 +1046,8 @@ impl Default for RenderConfig {
             labels: LabelSource::Auto,
             direct_light: DirectLight::Analytic,
             analytic_rays: DEFAULT_ANALYTIC_RAYS,
+            analytic_rays_max: None,
+            analytic_ray_cost: None,
             light_samples: DEFAULT_LIGHT_SAMPLES,
             bsdf_samples: DEFAULT_LIGHT_SAMPLES,
             light_shortcuts: true,
@@ -1483,6 +1495,43 @@ impl SceneConfig {
             }
         }
         range_u("render.analytic_rays", r.analytic_rays, 1, 64, "[1, 64]")?;
+        if let Some(m) = r.analytic_rays_max {
+            if r.noise_target.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "render.analytic_rays_max",
+                    message: "is chosen at the first check of render.noise_target: give that too, or remove it".into(),
+                });
+            }
+            if r.direct_light == DirectLight::Sampled {
+                return Err(ConfigError::Invalid {
+                    field: "render.analytic_rays_max",
+                    message: "takes the analytic direct light: remove it or render.direct_light = \"sampled\"".into(),
+                });
+            }
+            if r.analytic_rays < 2 {
+                return Err(ConfigError::Range {
+                    field: "render.analytic_rays",
+                    value: r.analytic_rays.to_string(),
+                    range: "[2, 64] with render.analytic_rays_max (the first samples' rays measure their spread)",
+                });
+            }
+            range_u(
+                "render.analytic_rays_max",
+                m,
+                r.analytic_rays,
+                64,
+                "[render.analytic_rays, 64]",
+            )?;
+        }
+        if let Some(k) = r.analytic_ray_cost {
+            if r.analytic_rays_max.is_none() {
+                return Err(ConfigError::Invalid {
+                    field: "render.analytic_ray_cost",
+                    message: "is what render.analytic_rays_max's choice takes: give that too, or remove it".into(),
+                });
+            }
+            range_f("render.analytic_ray_cost", k, 0.0, 10.0, true, "(0, 10]")?;
+        }
         range_u("render.light_samples", r.light_samples, 1, 64, "[1, 64]")?;
         range_u("render.bsdf_samples", r.bsdf_samples, 1, 64, "[1, 64]")?;
         if let Some(m) = r.min_spp {
@@ -1668,6 +1717,69 @@ mod tests {
         for (g, t) in [(1.5, target), (-0.1, target), (0.5, "")] {
             let e = growth(g, t).unwrap_err().to_string();
             assert!(e.contains("render.noise_target_growth"), "{e}");
+        }
+    }
+
+    #[test]
+    fn analytic_rays_max_needs_a_target_the_analytic_light_and_two_first_rays() {
+        let parse = |render: &str| {
+            SceneConfig::parse(&format!(
+                "[render]\n{render}[camera]\nf_number = 8.0\n[sensor]\n"
+            ))
+        };
+        let ok = "noise_target = 9.0\nanalytic_rays = 32\nanalytic_rays_max = 64\n";
+        let c = parse(ok).expect("the recommended setting");
+        assert_eq!(
+            (c.render.analytic_rays_max, c.render.analytic_ray_cost),
+            (Some(64), None)
+        );
+        let c = parse(&format!("{ok}analytic_ray_cost = 0.05\n")).expect("a cost");
+        assert_eq!(c.render.analytic_ray_cost, Some(0.05));
+        // Each bad setting names its field (and the allowed range where one is meant).
+        for (render, field, says) in [
+            (
+                "analytic_rays = 32\nanalytic_rays_max = 64\n",
+                "render.analytic_rays_max",
+                "noise_target",
+            ),
+            (
+                "noise_target = 9.0\nanalytic_rays = 32\nanalytic_rays_max = 64\ndirect_light = \"sampled\"\n",
+                "render.analytic_rays_max",
+                "analytic direct light",
+            ),
+            (
+                "noise_target = 9.0\nanalytic_rays_max = 64\n",
+                "render.analytic_rays",
+                "[2, 64]",
+            ),
+            (
+                "noise_target = 9.0\nanalytic_rays = 32\nanalytic_rays_max = 16\n",
+                "render.analytic_rays_max",
+                "[render.analytic_rays, 64]",
+            ),
+            (
+                "noise_target = 9.0\nanalytic_rays = 32\nanalytic_rays_max = 65\n",
+                "render.analytic_rays_max",
+                "[render.analytic_rays, 64]",
+            ),
+            (
+                "noise_target = 9.0\nanalytic_ray_cost = 0.05\n",
+                "render.analytic_ray_cost",
+                "analytic_rays_max",
+            ),
+            (
+                &format!("{ok}analytic_ray_cost = 0.0\n"),
+                "render.analytic_ray_cost",
+                "(0, 10]",
+            ),
+            (
+                &format!("{ok}analytic_ray_cost = 11.0\n"),
+                "render.analytic_ray_cost",
+                "(0, 10]",
+            ),
+        ] {
+            let e = parse(render).unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains(says), "{render}: {e}");
         }
     }
 
