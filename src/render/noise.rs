@@ -31,9 +31,11 @@
 //! `noise_target` bounds.
 
 use super::cpu::Scratch;
-use super::sensor::{Responsivity, SensorError, exposure_time_s, saturation_electrons};
+use super::sensor::{
+    Responsivity, SensorError, bloom_vertical, exposure_time_s, saturation_electrons,
+};
 pub use crate::scene::config::NoiseEstimator;
-use crate::scene::config::SensorConfig;
+use crate::scene::config::{Blooming, SensorConfig};
 use rayon::prelude::*;
 
 /// The camera the noise is measured against: its responsivity, its sensor and the factor
@@ -427,6 +429,8 @@ impl CameraNoise {
             * self.exposure_factor;
         let all = !object_mask.iter().any(|&m| m);
         let full = saturation_electrons(&self.sensor);
+        let bloomed_full = self.bloomed_full(&mean, t);
+        let bloomed = bloomed_full.as_deref().map(Vec::as_slice);
         // Each pixel's terms on all cores (into arrays kept between checks), summed in
         // pixel order (the same sums as one loop over the pixels).
         let mut counted = Scratch::stale(px, false);
@@ -442,7 +446,7 @@ impl CameraNoise {
                 if !(all || object_mask[i]) {
                     return;
                 }
-                let Some((w, mu)) = self.pixel_weight(i, mean[i] as f64, t, full) else {
+                let Some((w, mu)) = self.pixel_weight(i, mean[i] as f64, t, full, bloomed) else {
                     return;
                 };
                 let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
@@ -484,10 +488,55 @@ impl CameraNoise {
     /// saturation (`full` electrons), where the criterion does not count it. One rule for
     /// [`CameraNoise::estimate`], [`CameraNoise::ray_variances`] and
     /// [`CameraNoise::pixel_samples_wanted`].
-    fn pixel_weight(&self, i: usize, mean: f64, exposure_s: f64, full: f64) -> Option<(f64, f64)> {
+    fn pixel_weight(
+        &self,
+        i: usize,
+        mean: f64,
+        exposure_s: f64,
+        full: f64,
+        bloomed: Option<&[bool]>,
+    ) -> Option<(f64, f64)> {
+        if bloomed.is_some_and(|b| b[i]) {
+            return None;
+        }
         let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
         let mu = mean.max(0.0) * e_per_l;
         (mu < full).then(|| ((self.sensor.gain_dn_per_electron * e_per_l).powi(2), mu))
+    }
+
+    /// With `blooming = "vertical"`: the pixels the capture leaves at saturation where its
+    /// column's excess charge fills them, for the mean image `mean` (each pixel's mean
+    /// radiance) exposed for `exposure_s`: its noise-free signal bloomed as
+    /// [`super::sensor::capture`] blooms the charge ([`bloom_vertical`]), a pixel counted
+    /// as full where it ends within 1e-9 of [`saturation_electrons`]. Such a pixel's code
+    /// is clipped like a saturated one's, so its render noise never reaches the image and
+    /// [`CameraNoise::pixel_weight`] does not count it. Before 2026-11-30 the criterion
+    /// counted it: on the paper job, whose auto exposure brings the brightest 5 % of the
+    /// inspected faces' pixels to saturation, the milled frames of the 20-degree views
+    /// spent up to 88 % of their samples on pixels that bloom fills (frame 4877: 16 of
+    /// its 19.5 spp; docs/benchmarks/dataset.md, "Pixels that blooming fills").
+    ///
+    /// **Approximation:** the bloom of the noise-free signal of the mean so far, not of
+    /// the capture's noisy electrons (shot noise moves a column's excess by a few
+    /// electrons) nor of the mean the image will end with. None without blooming (a
+    /// pixel's own mean decides).
+    fn bloomed_full(&self, mean: &[f32], exposure_s: f64) -> Option<Scratch<bool>> {
+        if self.sensor.blooming != Blooming::Vertical {
+            return None;
+        }
+        let (w, h) = (self.resp.width as usize, self.resp.height as usize);
+        let mut e = Scratch::stale(mean.len(), 0.0f64);
+        e.par_iter_mut().enumerate().for_each(|(i, e)| {
+            *e = (mean[i] as f64).max(0.0) * self.resp.electrons_per_s[i] * exposure_s;
+        });
+        bloom_vertical(&mut e, w, h, self.sensor.saturation_electrons);
+        let full = saturation_electrons(&self.sensor) * (1.0 - 1e-9);
+        let mut bloomed = Scratch::stale(mean.len(), false);
+        bloomed
+            .par_iter_mut()
+            .zip(&e[..])
+            .for_each(|(b, &e)| *b = e >= full);
+        Some(bloomed)
     }
 
     /// [`RayChoice::choose`]'s two sums after `n` samples (each pixel's own): a
@@ -512,6 +561,8 @@ impl CameraNoise {
         let mean = mean_scratch(sum, n);
         let all = !object_mask.iter().any(|&m| m);
         let full = saturation_electrons(&self.sensor);
+        let bloomed_full = self.bloomed_full(&mean, exposure_s);
+        let bloomed = bloomed_full.as_deref().map(Vec::as_slice);
         let (mut total, mut rays) = (0.0f64, 0.0f64);
         for i in 0..sum.len() {
             if !(all || object_mask[i]) {
@@ -520,7 +571,8 @@ impl CameraNoise {
             let ni = n.of(i);
             let var = pixel_variance(estimator, sum, noise, ni, i);
             let c = mean_variance(ray_sums[2 * i] as f64, ray_sums[2 * i + 1] as f64, ni);
-            let Some((w, _)) = self.pixel_weight(i, mean[i] as f64, exposure_s, full) else {
+            let Some((w, _)) = self.pixel_weight(i, mean[i] as f64, exposure_s, full, bloomed)
+            else {
                 continue;
             };
             if !var.is_finite() || !c.is_finite() {
@@ -599,11 +651,13 @@ impl CameraNoise {
         let px = sum.len();
         let all = !object_mask.iter().any(|&m| m);
         let full = saturation_electrons(&self.sensor);
+        let mean = mean_scratch(sum, n);
+        let bloomed_full = self.bloomed_full(&mean, exposure_s);
+        let bloomed = bloomed_full.as_deref().map(Vec::as_slice);
         // A pixel's variance per sample in codes and its mean signal in electrons; None
-        // at or above saturation.
+        // at or above saturation (its own, or where blooming fills it).
         let variance = |i: usize| -> Option<(f64, f64)> {
-            let (w, mu) =
-                self.pixel_weight(i, pixel_mean(sum[i], n.of(i)) as f64, exposure_s, full)?;
+            let (w, mu) = self.pixel_weight(i, mean[i] as f64, exposure_s, full, bloomed)?;
             let v = w * pixel_variance(estimator, sum, noise, n.of(i), i) * n.of(i) as f64;
             Some((v, mu))
         };
@@ -1493,6 +1547,64 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn pixels_that_blooming_fills_are_not_counted() {
+        // One column of five pixels, 0.2 e- per unit radiance at the fixed 2 ms, full
+        // well 1000 e-: pixel 0 at 2000 e- spills 1000 e- down its column (the half that
+        // goes up finds no pixel and goes down too), filling pixels 1 and 2 (500 e- each
+        // to fill); pixels 3 and 4 keep their 500 e-. Every pixel has a spread.
+        let x = [10_000.0f32, 2500.0, 2500.0, 2500.0, 2500.0];
+        let d = [5.0f32, 40.0, 30.0, 20.0, 10.0];
+        let sum: Vec<f32> = x.iter().map(|x| 2.0 * x).collect();
+        let sq: Vec<f32> = x
+            .iter()
+            .zip(&d)
+            .map(|(x, d)| 2.0 * (x * x + d * d))
+            .collect();
+        // The closed forms' sums: a spread of d / 2 a pixel.
+        let rays: Vec<f32> = x
+            .iter()
+            .zip(&d)
+            .flat_map(|(x, d)| [2.0 * x, 2.0 * (x * x + d * d / 4.0)])
+            .collect();
+        let cam = |blooming: Blooming| CameraNoise {
+            resp: Responsivity::uniform(1, 5, 100.0),
+            sensor: SensorConfig {
+                blooming,
+                ..sensor()
+            },
+            exposure_factor: 1.0,
+        };
+        let (all, last_two) = ([true; 5], [false, false, false, true, true]);
+        let samples = NoiseEstimator::Samples;
+        let bloom = cam(Blooming::Vertical);
+        let est = bloom.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
+        assert_eq!(est.pixels, 2, "pixels 1 and 2 end full: not counted");
+        // The same as counting pixels 3 and 4 alone without blooming.
+        let plain = cam(Blooming::None);
+        let own = plain.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
+        assert_eq!(own.pixels, 4, "without blooming only pixel 0 is full");
+        let two = plain
+            .estimate(samples, &sum, &sq, 2, &all, &last_two)
+            .unwrap();
+        assert_eq!(
+            (est.render_rms_dn, est.camera_rms_dn, est.ratio),
+            (two.render_rms_dn, two.camera_rms_dn, two.ratio)
+        );
+        assert!(own.ratio > est.ratio, "the noisier filled pixels counted");
+        let t = est.exposure_s;
+        assert_eq!(
+            bloom.ray_variances(samples, &sum, &sq, &rays, 2, t, &all),
+            plain.ray_variances(samples, &sum, &sq, &rays, 2, t, &last_two)
+        );
+        // Their share of the samples: none (as a saturated pixel's); the others sample on.
+        let want = bloom.pixel_samples_wanted(samples, &sum, &sq, 2, t, &all, 1, 0.01, None, 0);
+        assert_eq!((want[0], want[1], want[2]), (0.0, 0.0, 0.0), "{want:?}");
+        assert!(want[3] > 2.0 && want[4] > 2.0, "{want:?}");
+        let want = plain.pixel_samples_wanted(samples, &sum, &sq, 2, t, &all, 1, 0.01, None, 0);
+        assert!(want[1] > 2.0 && want[2] > 2.0, "{want:?}");
     }
 
     #[test]
