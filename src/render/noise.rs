@@ -1549,6 +1549,18 @@ mod tests {
         }
     }
 
+    /// The "samples" sums of pixels of 2 samples x - d and x + d each: their sum and
+    /// their sum of squares (the mean x, the mean's variance d^2).
+    fn two_samples(x: &[f32], d: &[f32]) -> (Vec<f32>, Vec<f32>) {
+        let sum = x.iter().map(|x| 2.0 * x).collect();
+        let sq = x
+            .iter()
+            .zip(d)
+            .map(|(x, d)| 2.0 * (x * x + d * d))
+            .collect();
+        (sum, sq)
+    }
+
     #[test]
     fn pixels_that_blooming_fills_are_not_counted() {
         // One column of five pixels, 0.2 e- per unit radiance at the fixed 2 ms, full
@@ -1557,12 +1569,7 @@ mod tests {
         // to fill); pixels 3 and 4 keep their 500 e-. Every pixel has a spread.
         let x = [10_000.0f32, 2500.0, 2500.0, 2500.0, 2500.0];
         let d = [5.0f32, 40.0, 30.0, 20.0, 10.0];
-        let sum: Vec<f32> = x.iter().map(|x| 2.0 * x).collect();
-        let sq: Vec<f32> = x
-            .iter()
-            .zip(&d)
-            .map(|(x, d)| 2.0 * (x * x + d * d))
-            .collect();
+        let (sum, sq) = two_samples(&x, &d);
         // The closed forms' sums: a spread of d / 2 a pixel.
         let rays: Vec<f32> = x
             .iter()
@@ -1619,12 +1626,7 @@ mod tests {
         };
         let x = [3.0f32, 3.0, 3.0, 3.0, 1e5];
         let d = [0.0f32, 1.0, 2.0, 4.0, 1.0];
-        let sum: Vec<f32> = x.iter().map(|x| 2.0 * x).collect();
-        let sq: Vec<f32> = x
-            .iter()
-            .zip(&d)
-            .map(|(x, d)| 2.0 * (x * x + d * d))
-            .collect();
+        let (sum, sq) = two_samples(&x, &d);
         let all = [true; 5];
         let samples = NoiseEstimator::Samples;
         let est = cam.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
