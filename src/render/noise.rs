@@ -485,7 +485,8 @@ impl CameraNoise {
     /// The criterion's weight of pixel `i` with mean radiance `mean` at the exposure
     /// `exposure_s`, (K e)^2 (K the gain in codes per electron, e the pixel's electrons
     /// per unit radiance), and its mean signal in electrons; None at or above
-    /// saturation (`full` electrons), where the criterion does not count it. One rule for
+    /// saturation (`full` electrons) or where `bloomed` marks it (the pixels blooming
+    /// fills, [`CameraNoise::bloomed_full`]), where the criterion does not count it. One rule for
     /// [`CameraNoise::estimate`], [`CameraNoise::ray_variances`] and
     /// [`CameraNoise::pixel_samples_wanted`].
     fn pixel_weight(
@@ -508,7 +509,7 @@ impl CameraNoise {
     /// column's excess charge fills them, for the mean image `mean` (each pixel's mean
     /// radiance) exposed for `exposure_s`: its noise-free signal bloomed as
     /// [`super::sensor::capture`] blooms the charge ([`bloom_vertical`]), a pixel counted
-    /// as full where it ends within 1e-9 of [`saturation_electrons`]. Such a pixel's code
+    /// as full where it ends within a relative 1e-9 of [`saturation_electrons`]. Such a pixel's code
     /// is clipped like a saturated one's, so its render noise never reaches the image and
     /// [`CameraNoise::pixel_weight`] does not count it. Before 2026-11-30 the criterion
     /// counted it: on the paper job, whose auto exposure brings the brightest 5 % of the
