@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
-use synosis::render::noise::{CameraNoise, DEFAULT_ANALYTIC_RAY_COST, NoiseStop, RayChoice};
+use synosis::render::noise::{CameraNoise, NoiseStop, RayChoice};
 use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene_on};
 use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
@@ -150,14 +150,10 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             adaptive_radius: cfg.render.adaptive_radius,
             growth: cfg.render.noise_target_growth.unwrap_or(0.0) as f64,
             // `[render] analytic_rays_max`: the rays chosen at the first check.
-            rays: cfg.render.analytic_rays_max.map(|max| RayChoice {
-                min: 1,
-                max,
-                cost: cfg
-                    .render
-                    .analytic_ray_cost
-                    .map_or(DEFAULT_ANALYTIC_RAY_COST, f64::from),
-            }),
+            rays: cfg
+                .render
+                .analytic_rays_max
+                .map(|max| RayChoice::up_to(max, cfg.render.analytic_ray_cost.map(f64::from))),
         }),
         _ => None,
     };

@@ -250,16 +250,8 @@ pub fn noise_stop(
         estimator: job.render.noise_estimate.unwrap_or_default(),
         adaptive_radius: job.render.adaptive_radius.map(|r| r as u32),
         growth: job.render.noise_target_growth.unwrap_or(0.0),
-        rays: job
-            .render
-            .analytic_rays_max
-            .map(|max| crate::render::noise::RayChoice {
-                min: 1,
-                max: max as u32,
-                cost: job
-                    .render
-                    .analytic_ray_cost
-                    .unwrap_or(crate::render::noise::DEFAULT_ANALYTIC_RAY_COST),
-            }),
+        rays: job.render.analytic_rays_max.map(|max| {
+            crate::render::noise::RayChoice::up_to(max as u32, job.render.analytic_ray_cost)
+        }),
     }))
 }

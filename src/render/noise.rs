@@ -154,6 +154,16 @@ pub const RAY_CHOICE_MARGIN: f64 = 0.95;
 pub const RAY_CHOICE_HEADROOM: f64 = 1.25;
 
 impl RayChoice {
+    /// `[render] analytic_rays_max = max`'s choice, from 1 ray up, with `[render]
+    /// analytic_ray_cost` (None: [`DEFAULT_ANALYTIC_RAY_COST`]); scene files and jobs alike.
+    pub fn up_to(max: u32, cost: Option<f64>) -> RayChoice {
+        RayChoice {
+            min: 1,
+            max,
+            cost: cost.unwrap_or(DEFAULT_ANALYTIC_RAY_COST),
+        }
+    }
+
     /// The rays for the rest of an image made with `m0` rays so far; `m0` itself where
     /// the variances are unknown or no count is clearly faster.
     pub fn choose(&self, m0: u32, at: &RayCheck) -> u32 {
