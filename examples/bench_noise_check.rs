@@ -120,22 +120,14 @@ fn main() {
         let (mut t_est, mut t_want, mut t_list, mut kept) = (0.0, 0.0, 0.0, 0);
         for _ in 0..repeat {
             let t = Instant::now();
-            let e = on_render_pool(|| camera.estimate(est, sum, noise, n, &exposure, &object))
-                .expect("the estimate");
+            let (_, image) =
+                on_render_pool(|| camera.estimate(est, sum, noise, n, &exposure, &object))
+                    .expect("the estimate");
             t_est += t.elapsed().as_secs_f64();
             let t = Instant::now();
             let want = on_render_pool(|| {
                 camera.pixel_samples_wanted(
-                    est,
-                    sum,
-                    noise,
-                    n,
-                    e.exposure_s,
-                    &object,
-                    W,
-                    target,
-                    None,
-                    radius,
+                    est, sum, noise, n, &image, &object, W, target, None, radius,
                 )
             });
             t_want += t.elapsed().as_secs_f64();

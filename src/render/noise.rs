@@ -315,6 +315,18 @@ pub struct NoiseEstimate {
     pub exposure_s: f64,
 }
 
+/// The mean image a noise check's [`CameraNoise::estimate`] was made from, at that
+/// estimate's exposure, with the pixels vertical blooming fills in it
+/// ([`CameraNoise::bloomed_full`]): what [`CameraNoise::ray_variances`] and
+/// [`CameraNoise::pixel_samples_wanted`] of the same check weigh each pixel by, so that
+/// the three count the same pixels. (Before 2026-11-30 each made the mean image, and
+/// bloomed it, itself: three times a check.)
+pub struct CheckedImage {
+    mean: Scratch<f32>,
+    bloomed: Option<Scratch<bool>>,
+    exposure_s: f64,
+}
+
 /// The camera's temporal noise variance in codes (DN^2) at a mean signal of
 /// `mean_electrons`: K^2 (mu_e + sigma_d^2) + 1/12 (shot noise, dark noise, uniform
 /// quantisation of a unit step).
@@ -408,7 +420,9 @@ impl CameraNoise {
     /// [`noise_floats_per_pixel`] a pixel); `exposure_mask`: the pixels auto exposure
     /// looks at (the inspected faces, as the sensor step); `object_mask`: the pixels the
     /// rms is taken over (all when it selects none). The mean image is the one
-    /// [`super::View::read`] would return at `n`.
+    /// [`super::View::read`] would return at `n`; it comes back with the estimate, at
+    /// the estimate's exposure, for [`CameraNoise::ray_variances`] and
+    /// [`CameraNoise::pixel_samples_wanted`] of the same check.
     pub fn estimate<'a>(
         &self,
         estimator: NoiseEstimator,
@@ -417,7 +431,7 @@ impl CameraNoise {
         n: impl Into<PixelSamples<'a>>,
         exposure_mask: &[bool],
         object_mask: &[bool],
-    ) -> Result<NoiseEstimate, SensorError> {
+    ) -> Result<(NoiseEstimate, CheckedImage), SensorError> {
         let n = n.into();
         let px = self.resp.electrons_per_s.len();
         if sum.len() != px
@@ -437,10 +451,13 @@ impl CameraNoise {
         let mean = mean_scratch(sum, n);
         let t = exposure_time_s(&self.resp, &mean, Some(exposure_mask), &self.sensor)?
             * self.exposure_factor;
+        let image = CheckedImage {
+            bloomed: self.bloomed_full(&mean, t),
+            mean,
+            exposure_s: t,
+        };
         let all = !object_mask.iter().any(|&m| m);
         let full = saturation_electrons(&self.sensor);
-        let bloomed_full = self.bloomed_full(&mean, t);
-        let bloomed = bloomed_full.as_deref().map(Vec::as_slice);
         // Each pixel's terms on all cores (into arrays kept between checks), summed in
         // pixel order (the same sums as one loop over the pixels).
         let mut counted = Scratch::stale(px, false);
@@ -456,7 +473,7 @@ impl CameraNoise {
                 if !(all || object_mask[i]) {
                     return;
                 }
-                let Some((w, mu)) = self.pixel_weight(i, mean[i] as f64, t, full, bloomed) else {
+                let Some((w, mu)) = self.pixel_weight(i, &image, full) else {
                     return;
                 };
                 let var_l = pixel_variance(estimator, sum, noise, n.of(i), i);
@@ -481,7 +498,7 @@ impl CameraNoise {
             );
             (r, c, r / c)
         };
-        Ok(NoiseEstimate {
+        let est = NoiseEstimate {
             spp: n.most(),
             mean_spp: n.mean(),
             ratio,
@@ -489,29 +506,24 @@ impl CameraNoise {
             camera_rms_dn,
             pixels,
             exposure_s: t,
-        })
+        };
+        Ok((est, image))
     }
 
-    /// The criterion's weight of pixel `i` with mean radiance `mean` at the exposure
-    /// `exposure_s`, (K e)^2 (K the gain in codes per electron, e the pixel's electrons
-    /// per unit radiance), and its mean signal in electrons; None at or above
-    /// saturation (`full` electrons) or where `bloomed` marks it (the pixels blooming
-    /// fills, [`CameraNoise::bloomed_full`]), where the criterion does not count it. One rule for
+    /// The criterion's weight of pixel `i` of the check's mean image `image` (its mean
+    /// radiance, at the image's exposure), (K e)^2 (K the gain in codes per electron, e
+    /// the pixel's electrons per unit radiance), and its mean signal in electrons; None
+    /// at or above saturation (`full` electrons) or where the image's bloomed mask marks
+    /// it (the pixels blooming fills, [`CameraNoise::bloomed_full`]), where the
+    /// criterion does not count it. One rule for
     /// [`CameraNoise::estimate`], [`CameraNoise::ray_variances`] and
     /// [`CameraNoise::pixel_samples_wanted`].
-    fn pixel_weight(
-        &self,
-        i: usize,
-        mean: f64,
-        exposure_s: f64,
-        full: f64,
-        bloomed: Option<&[bool]>,
-    ) -> Option<(f64, f64)> {
-        if bloomed.is_some_and(|b| b[i]) {
+    fn pixel_weight(&self, i: usize, image: &CheckedImage, full: f64) -> Option<(f64, f64)> {
+        if image.bloomed.as_ref().is_some_and(|b| b[i]) {
             return None;
         }
-        let e_per_l = self.resp.electrons_per_s[i] * exposure_s;
-        let mu = mean.max(0.0) * e_per_l;
+        let e_per_l = self.resp.electrons_per_s[i] * image.exposure_s;
+        let mu = (image.mean[i] as f64).max(0.0) * e_per_l;
         (mu < full).then(|| ((self.sensor.gain_dn_per_electron * e_per_l).powi(2), mu))
     }
 
@@ -554,9 +566,9 @@ impl CameraNoise {
     /// sample's variance (the estimate's variance of the mean times the samples) and C,
     /// the variance from sample to sample of its mean of its rays' closed forms (from
     /// `ray_sums`: per pixel the sums of that mean and of its square, at 2 i and 2 i + 1),
-    /// each pixel weighted as [`CameraNoise::estimate`] weighs its render variance at the
-    /// exposure `exposure_s` of that estimate, over the pixels it counts (the object's,
-    /// below saturation; every pixel where `object_mask` selects none).
+    /// each pixel weighted as [`CameraNoise::estimate`] weighs its render variance, over
+    /// the pixels it counts (the object's, below saturation; every pixel where
+    /// `object_mask` selects none), `image` the mean image that estimate returned.
     #[allow(clippy::too_many_arguments)]
     pub fn ray_variances<'a>(
         &self,
@@ -565,15 +577,12 @@ impl CameraNoise {
         noise: &[f32],
         ray_sums: &[f32],
         n: impl Into<PixelSamples<'a>>,
-        exposure_s: f64,
+        image: &CheckedImage,
         object_mask: &[bool],
     ) -> (f64, f64) {
         let n = n.into();
-        let mean = mean_scratch(sum, n);
         let all = !object_mask.iter().any(|&m| m);
         let full = saturation_electrons(&self.sensor);
-        let bloomed_full = self.bloomed_full(&mean, exposure_s);
-        let bloomed = bloomed_full.as_deref().map(Vec::as_slice);
         let (mut total, mut rays) = (0.0f64, 0.0f64);
         for i in 0..sum.len() {
             if !(all || object_mask[i]) {
@@ -582,8 +591,7 @@ impl CameraNoise {
             let ni = n.of(i);
             let var = pixel_variance(estimator, sum, noise, ni, i);
             let c = mean_variance(ray_sums[2 * i] as f64, ray_sums[2 * i + 1] as f64, ni);
-            let Some((w, _)) = self.pixel_weight(i, mean[i] as f64, exposure_s, full, bloomed)
-            else {
+            let Some((w, _)) = self.pixel_weight(i, image, full) else {
                 continue;
             };
             if !var.is_finite() || !c.is_finite() {
@@ -597,7 +605,7 @@ impl CameraNoise {
 
     /// `[render] adaptive_radius`: the samples each pixel should end with so that the
     /// criterion meets `target` at the fewest samples in all, from the sums after `n`
-    /// (each pixel's own) at the exposure `exposure_s` of that check's estimate.
+    /// (each pixel's own), `image` the mean image that check's estimate returned.
     ///
     /// With s_i a pixel's variance per sample in codes (its mean's variance times its
     /// samples, as the estimate weighs it; 0 where the mean is at or above saturation),
@@ -651,7 +659,7 @@ impl CameraNoise {
         sum: &[f32],
         noise: &[f32],
         n: impl Into<PixelSamples<'a>>,
-        exposure_s: f64,
+        image: &CheckedImage,
         object_mask: &[bool],
         width: usize,
         target: f64,
@@ -662,13 +670,10 @@ impl CameraNoise {
         let px = sum.len();
         let all = !object_mask.iter().any(|&m| m);
         let full = saturation_electrons(&self.sensor);
-        let mean = mean_scratch(sum, n);
-        let bloomed_full = self.bloomed_full(&mean, exposure_s);
-        let bloomed = bloomed_full.as_deref().map(Vec::as_slice);
         // A pixel's variance per sample in codes and its mean signal in electrons; None
         // at or above saturation (its own, or where blooming fills it).
         let variance = |i: usize| -> Option<(f64, f64)> {
-            let (w, mu) = self.pixel_weight(i, mean[i] as f64, exposure_s, full, bloomed)?;
+            let (w, mu) = self.pixel_weight(i, image, full)?;
             let v = w * pixel_variance(estimator, sum, noise, n.of(i), i) * n.of(i) as f64;
             Some((v, mu))
         };
@@ -1175,7 +1180,8 @@ mod tests {
         let object = [true, true, false];
         let est = cam
             .estimate(NoiseEstimator::Samples, &sum, &sum_sq, n, &object, &object)
-            .unwrap();
+            .unwrap()
+            .0;
         assert!((est.exposure_s - 3e-3).abs() < 1e-15);
         // Render: (K * 300)^2 * [14/12, 0]; camera: K^2 (900 + 9) + 1/12 and
         // K^2 (150 + 9) + 1/12 (pixel 0's 900 e- is below the 1000 e- full well).
@@ -1200,7 +1206,8 @@ mod tests {
         };
         let est = auto
             .estimate(NoiseEstimator::Samples, &sum, &sum_sq, n, &object, &object)
-            .unwrap();
+            .unwrap()
+            .0;
         let t = 0.9 * 1000.0 / 3.0e5 * 1.5;
         assert!((est.exposure_s / t - 1.0).abs() < 1e-12, "{est:?}");
         // Pixel 0 is now at 1.5 x 900 e- (above the full well): only pixel 1 counts,
@@ -1217,7 +1224,8 @@ mod tests {
                 &object,
                 &[false; 3],
             )
-            .unwrap();
+            .unwrap()
+            .0;
         assert_eq!(est.pixels, 2, "the background pixel's mean is saturated");
         assert!(
             cam.estimate(NoiseEstimator::Samples, &sum, &sum_sq, n, &object, &[true])
@@ -1229,7 +1237,8 @@ mod tests {
         let levels = [9.0f32, 2.0, 1.0, 1.0, 0.0, 0.0];
         let est = cam
             .estimate(NoiseEstimator::Halves, &sum, &levels, n, &object, &object)
-            .unwrap();
+            .unwrap()
+            .0;
         let render = (0.5f64 * 300.0).powi(2) * 2.25 / 2.0;
         assert!((est.render_rms_dn - render.sqrt()).abs() < 1e-9, "{est:?}");
         assert!(
@@ -1499,7 +1508,7 @@ mod tests {
                 sq[i] = n * (x * x + d * d);
             }
             let each = PixelSamples::Each(&counts);
-            let est = cam
+            let (est, image) = cam
                 .estimate(samples, &sum, &sq, each, &object, &object)
                 .unwrap();
             // The shares for a target t (and a growing one, `grown`).
@@ -1509,7 +1518,7 @@ mod tests {
                     &sum,
                     &sq,
                     each,
-                    est.exposure_s,
+                    &image,
                     &object,
                     w,
                     t,
@@ -1598,13 +1607,13 @@ mod tests {
         let (all, last_two) = ([true; 5], [false, false, false, true, true]);
         let samples = NoiseEstimator::Samples;
         let bloom = cam(Blooming::Vertical);
-        let est = bloom.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
+        let (est, image) = bloom.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
         assert_eq!(est.pixels, 2, "pixels 1 and 2 end full: not counted");
         // The same as counting pixels 3 and 4 alone without blooming.
         let plain = cam(Blooming::None);
-        let own = plain.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
+        let (own, plain_image) = plain.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
         assert_eq!(own.pixels, 4, "without blooming only pixel 0 is full");
-        let two = plain
+        let (two, two_image) = plain
             .estimate(samples, &sum, &sq, 2, &all, &last_two)
             .unwrap();
         assert_eq!(
@@ -1612,16 +1621,17 @@ mod tests {
             (two.render_rms_dn, two.camera_rms_dn, two.ratio)
         );
         assert!(own.ratio > est.ratio, "the noisier filled pixels counted");
-        let t = est.exposure_s;
         assert_eq!(
-            bloom.ray_variances(samples, &sum, &sq, &rays, 2, t, &all),
-            plain.ray_variances(samples, &sum, &sq, &rays, 2, t, &last_two)
+            bloom.ray_variances(samples, &sum, &sq, &rays, 2, &image, &all),
+            plain.ray_variances(samples, &sum, &sq, &rays, 2, &two_image, &last_two)
         );
         // Their share of the samples: none (as a saturated pixel's); the others sample on.
-        let want = bloom.pixel_samples_wanted(samples, &sum, &sq, 2, t, &all, 1, 0.01, None, 0);
+        let want =
+            bloom.pixel_samples_wanted(samples, &sum, &sq, 2, &image, &all, 1, 0.01, None, 0);
         assert_eq!((want[0], want[1], want[2]), (0.0, 0.0, 0.0), "{want:?}");
         assert!(want[3] > 2.0 && want[4] > 2.0, "{want:?}");
-        let want = plain.pixel_samples_wanted(samples, &sum, &sq, 2, t, &all, 1, 0.01, None, 0);
+        let want =
+            plain.pixel_samples_wanted(samples, &sum, &sq, 2, &plain_image, &all, 1, 0.01, None, 0);
         assert!(want[1] > 2.0 && want[2] > 2.0, "{want:?}");
     }
 
@@ -1640,7 +1650,7 @@ mod tests {
         let (sum, sq) = two_samples(&x, &d);
         let all = [true; 5];
         let samples = NoiseEstimator::Samples;
-        let est = cam.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
+        let (est, image) = cam.estimate(samples, &sum, &sq, 2, &all, &all).unwrap();
         assert_eq!(est.pixels, 4, "the saturated pixel is not counted");
         let k_e = sensor.gain_dn_per_electron * 100.0 * est.exposure_s;
         let camera: f64 = (0..4)
@@ -1648,18 +1658,7 @@ mod tests {
             .sum();
         let per_sample = |i: usize| k_e * k_e * 2.0 * (d[i] as f64).powi(2);
         let wanted = |target: f64, radius: u32| {
-            cam.pixel_samples_wanted(
-                samples,
-                &sum,
-                &sq,
-                2,
-                est.exposure_s,
-                &all,
-                5,
-                target,
-                None,
-                radius,
-            )
+            cam.pixel_samples_wanted(samples, &sum, &sq, 2, &image, &all, 5, target, None, radius)
         };
         // The render variance with those samples (a pixel keeps the 2 it has).
         let render = |want: &[f64]| {
@@ -1697,7 +1696,7 @@ mod tests {
         sq8[1] *= 4.0;
         let counts = [2, 8, 2, 2, 2];
         let each = PixelSamples::Each(&counts);
-        let est8 = cam
+        let (est8, image8) = cam
             .estimate(samples, &sum8, &sq8, each, &all, &all)
             .unwrap();
         assert_eq!((est8.spp, est8.mean_spp), (8, 16.0 / 5.0));
@@ -1707,16 +1706,7 @@ mod tests {
         // alone, which wants more than its 8.)
         let target8 = (render(&[2.0; 5]) * (20.05 / 21.0) / camera).sqrt();
         let want8 = cam.pixel_samples_wanted(
-            samples,
-            &sum8,
-            &sq8,
-            each,
-            est8.exposure_s,
-            &all,
-            5,
-            target8,
-            None,
-            0,
+            samples, &sum8, &sq8, each, &image8, &all, 5, target8, None, 0,
         );
         assert!(want8[1] > 8.0 && want8[1].is_finite(), "{want8:?}");
         let ratio = (8.0f64 / 7.0).sqrt() / (2.0 * 2.0f64.sqrt());

@@ -9,7 +9,8 @@ use super::cpu::{Scratch, on_render_pool};
 use super::energy::EnergyTables;
 use super::gpu_scene::GpuScene;
 use super::noise::{
-    NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, RayCheck, next_power_of_two_above,
+    CheckedImage, NoiseEstimate, NoiseEstimator, NoiseStop, PixelSamples, RayCheck,
+    next_power_of_two_above,
 };
 use super::settings::RenderSettings;
 use super::tracer::PathTracer;
@@ -162,9 +163,10 @@ pub fn render_frame(
         {
             let counts = pixel_counts(&stopped, done);
             let samples = PixelSamples::new(counts.as_deref().map(Vec::as_slice), done);
-            let (est, sums, ray_sums) = crate::vk::timed(opts.profiler, "noise estimate", || {
-                on_render_pool(|| noise_estimate(&view, stop, samples, &mut masks))
-            })?;
+            let (est, image, sums, ray_sums) =
+                crate::vk::timed(opts.profiler, "noise estimate", || {
+                    on_render_pool(|| noise_estimate(&view, stop, samples, &mut masks))
+                })?;
             checks.push(est);
             if est.ratio <= stop.target_at(est.mean_spp) {
                 break;
@@ -176,7 +178,9 @@ pub fn render_frame(
             {
                 // `[render] analytic_rays_max`: the rays for the rest of the image.
                 let at = crate::vk::timed(opts.profiler, "rays chosen", || {
-                    ray_check(stop, &est, &sums, &ray_sums, samples, batch, spp, &masks)
+                    ray_check(
+                        stop, &est, &image, &sums, &ray_sums, samples, batch, spp, &masks,
+                    )
                 });
                 let m = choice.choose(view.extra_rays() + 1, &at);
                 view.set_extra_rays(tracer, m - 1)?;
@@ -193,7 +197,7 @@ pub fn render_frame(
                             &sum,
                             &noise,
                             samples,
-                            est.exposure_s,
+                            &image,
                             object,
                             width as usize,
                             stop.target_at(est.mean_spp),
@@ -284,8 +288,12 @@ fn pixel_counts(stopped: &[u32], done: u32) -> Option<Scratch<u32>> {
 /// Per-pixel sums as [`View::read_sums`] reads them: radiance, and the noise estimate's.
 type Sums = (Scratch<f32>, Scratch<f32>);
 
-/// The noise criterion after `done` samples, the sums it was made from, and the rays'
-/// sums where the view keeps them ([`View::read_sums`]); `masks`
+/// What one noise check made: the estimate, its mean image, the sums it was made from,
+/// and the rays' sums where the view keeps them ([`noise_estimate`]).
+type Check = (NoiseEstimate, CheckedImage, Sums, Option<Vec<f32>>);
+
+/// The noise criterion after `done` samples, its mean image, the sums it was made
+/// from, and the rays' sums where the view keeps them ([`View::read_sums`]); `masks`
 /// (auto exposure's pixels: the inspected faces 1..=3; the rms's: the object,
 /// face != 0) from the view's annotation, read once (every pixel without an annotation).
 fn noise_estimate(
@@ -293,7 +301,7 @@ fn noise_estimate(
     stop: &NoiseStop,
     done: PixelSamples<'_>,
     masks: &mut Option<(Vec<bool>, Vec<bool>)>,
-) -> Result<(NoiseEstimate, Sums, Option<Vec<f32>>), RenderError> {
+) -> Result<Check, RenderError> {
     let (sum, noise, ray_sums) = view.read_sums()?;
     let noise = noise.expect("a view with a noise target keeps noise sums");
     if masks.is_none() {
@@ -306,19 +314,20 @@ fn noise_estimate(
         });
     }
     let (exposure, object) = masks.as_ref().expect("just filled");
-    let est = stop
-        .camera
-        .estimate(stop.estimator, &sum, &noise, done, exposure, object)?;
-    Ok((est, (sum, noise), ray_sums))
+    let (est, image) =
+        stop.camera
+            .estimate(stop.estimator, &sum, &noise, done, exposure, object)?;
+    Ok((est, image, (sum, noise), ray_sums))
 }
 
-/// What `[render] analytic_rays_max`'s choice knows at the first noise check (`est`,
-/// from `sums` after `done` samples, every pixel's; later checks a `batch` apart, at
+/// What `[render] analytic_rays_max`'s choice knows at the first noise check (`est` and
+/// its mean image `image`, from `sums` after `done` samples, every pixel's; later checks a `batch` apart, at
 /// most `spp`; `masks` as the estimate took them): [`RayCheck`].
 #[allow(clippy::too_many_arguments)]
 fn ray_check(
     stop: &NoiseStop,
     est: &NoiseEstimate,
+    image: &CheckedImage,
     sums: &Sums,
     ray_sums: &[f32],
     done: PixelSamples<'_>,
@@ -333,7 +342,7 @@ fn ray_check(
         &sums.1,
         ray_sums,
         done,
-        est.exposure_s,
+        image,
         object,
     );
     let allowed = stop.target_at(est.mean_spp) * est.camera_rms_dn;
