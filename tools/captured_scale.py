@@ -10,6 +10,18 @@ without the sensor's shot noise, so that only the renderer's noise is measured.
 import numpy as np
 
 
+def _pour(c, rows, amount):
+    """Fills the pixels of column `c` at `rows`, in order, up to 255 each, from `amount`;
+    returns what is left."""
+    for yy in rows:
+        if amount <= 0:
+            break
+        put = min(max(255.0 - c[yy], 0.0), amount)
+        c[yy] += put
+        amount -= put
+    return amount
+
+
 def captured(g):
     """`g`: a 2-D array of grey levels (radiance times the exposure's scale)."""
     e = np.maximum(np.asarray(g, dtype=np.float64), 0.0)
@@ -21,24 +33,9 @@ def captured(g):
             if excess <= 0.0:
                 continue
             c[y] = 255.0
-            up, down = excess / 2, excess / 2
-            yy = y + 1
-            while down > 0 and yy < h:
-                put = min(max(255.0 - c[yy], 0.0), down)
-                c[yy] += put
-                down -= put
-                yy += 1
-            up += down
-            yy = y
-            while up > 0 and yy > 0:
-                yy -= 1
-                put = min(max(255.0 - c[yy], 0.0), up)
-                c[yy] += put
-                up -= put
-            yy = y + 1
-            while up > 0 and yy < h:
-                put = min(max(255.0 - c[yy], 0.0), up)
-                c[yy] += put
-                up -= put
-                yy += 1
+            # Half down, then what found no room below goes up with the other half;
+            # what finds no room above goes down again.
+            down = _pour(c, range(y + 1, h), excess / 2)
+            up = _pour(c, range(y - 1, -1, -1), excess / 2 + down)
+            _pour(c, range(y + 1, h), up)
     return np.minimum(e, 255.0)
