@@ -513,8 +513,8 @@ impl CameraNoise {
     /// [`CameraNoise::pixel_samples_wanted`].
     ///
     /// With `blooming = "vertical"` a pixel below saturation that its column's excess
-    /// fills in the capture is still counted as one of its own: from 2026-11-30 to the
-    /// next session the criterion left such pixels out, which cut the paper job's
+    /// fills in the capture is still counted as one of its own: for one session on
+    /// 2026-11-30 (the twenty-eighth) the criterion left such pixels out, which cut the paper job's
     /// samples (frame 4877: 19.5 -> 2.18 spp) but left the glints whose 2-sample means
     /// fell below full in their neighbours' bloom at 2 samples, and their spills'
     /// lengths raised the captured images' error 10 % above the 256-spp image's on the

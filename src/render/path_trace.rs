@@ -321,8 +321,8 @@ fn noise_estimate(
 }
 
 /// What `[render] analytic_rays_max`'s choice knows at the first noise check (`est` and
-/// its mean image `image`, from `sums` after `done` samples, every pixel's; later checks a `batch` apart, at
-/// most `spp`; `masks` as the estimate took them): [`RayCheck`].
+/// its mean image `image`, from `sums` after `done` samples, every pixel's; later checks
+/// a `batch` apart, at most `spp`; `masks` as the estimate took them): [`RayCheck`].
 #[allow(clippy::too_many_arguments)]
 fn ray_check(
     stop: &NoiseStop,
