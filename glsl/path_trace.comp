@@ -17,6 +17,7 @@
 #include "common/camera.glsl"
 #include "common/sampler.glsl"
 #include "common/offset_ray.glsl"
+#include "common/convert.glsl"
 #include "common/labels.glsl"
 
 layout(local_size_x = TILE, local_size_y = TILE) in;
@@ -206,8 +207,8 @@ vec2 slopes_at(MapHeader m, vec2 q) {
         fx -= wh.x * floor(fx / wh.x);
         fy -= wh.y * floor(fy / wh.y);
         if (!(fx >= 0.0 && fy >= 0.0)) return vec2(0.0); // NaN (degenerate header)
-        x0 = min(uint(fx), m.dims.x - 1u);
-        y0 = min(uint(fy), m.dims.y - 1u);
+        x0 = min(f2u(fx), m.dims.x - 1u);
+        y0 = min(f2u(fy), m.dims.y - 1u);
         x1 = x0 + 1u == m.dims.x ? 0u : x0 + 1u;
         y1 = y0 + 1u == m.dims.y ? 0u : y0 + 1u;
         tx = fx - float(x0);
@@ -216,8 +217,8 @@ vec2 slopes_at(MapHeader m, vec2 q) {
         if (!(x >= 0.0 && y >= 0.0 && x <= wh.x && y <= wh.y)) return vec2(0.0);
         float fx = clamp(x - 0.5, 0.0, wh.x - 1.0);
         float fy = clamp(y - 0.5, 0.0, wh.y - 1.0);
-        x0 = uint(fx);
-        y0 = uint(fy);
+        x0 = f2u(fx);
+        y0 = f2u(fy);
         x1 = min(x0 + 1u, m.dims.x - 1u);
         y1 = min(y0 + 1u, m.dims.y - 1u);
         tx = fx - float(x0);
@@ -238,7 +239,7 @@ vec2 map_slopes(uint slot, vec3 p) {
 
 // Octahedral normal of Tri's w (scene::curved::encode_normal / decode_normal).
 vec3 oct_decode(float code) {
-    uint k = uint(code);
+    uint k = f2u(code);
     vec2 e = vec2(float(k / OCT_LEVELS), float(k % OCT_LEVELS)) / float(OCT_STEPS) * 2.0 - 1.0;
     float z = 1.0 - abs(e.x) - abs(e.y);
     if (z < 0.0) {
@@ -358,8 +359,8 @@ bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
         fx -= wh.x * floor(fx / wh.x);
         fy -= wh.y * floor(fy / wh.y);
         if (!(fx >= 0.0 && fy >= 0.0)) return false;
-        x0 = min(uint(fx), w - 1u);
-        y0 = min(uint(fy), ht - 1u);
+        x0 = min(f2u(fx), w - 1u);
+        y0 = min(f2u(fy), ht - 1u);
         x1 = x0 + 1u == w ? 0u : x0 + 1u;
         y1 = y0 + 1u == ht ? 0u : y0 + 1u;
         tx = fx - float(x0);
@@ -368,8 +369,8 @@ bool lean_level(uint slot, vec3 p, uint k, out vec2 mean, out float var) {
         if (!(x >= 0.0 && y >= 0.0 && x <= float(m.dims.x) * s && y <= float(m.dims.y) * s)) return false;
         float fx = clamp(x - 0.5, 0.0, wh.x - 1.0);
         float fy = clamp(y - 0.5, 0.0, wh.y - 1.0);
-        x0 = uint(fx);
-        y0 = uint(fy);
+        x0 = f2u(fx);
+        y0 = f2u(fy);
         x1 = min(x0 + 1u, w - 1u);
         y1 = min(y0 + 1u, ht - 1u);
         tx = fx - float(x0);
@@ -406,7 +407,7 @@ vec2 lean_slopes(uint slot, vec3 p, float lambda, out float var) {
     uint top = lean_top(m);
     if (!(lambda > 0.0) || top == 0u) return m0;
     float l = min(lambda, float(top));
-    uint k = uint(floor(l));
+    uint k = f2u(floor(l));
     float f = l - float(k);
     // Levels k (level 0: m0) and, unless f = 0, k + 1 (clamped), by one call of
     // lean_level in a loop: the shader compiles one copy of it.

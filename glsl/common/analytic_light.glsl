@@ -335,7 +335,7 @@ bool ring_side(inout Side s, Ring g, Lobe l, vec3 rad, bool lo, bool add) {
 float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, int rec,
                     vec4 clip, out bool ok) {
     ok = false;
-    uint n = uint(e.emit.z);
+    uint n = f2u(e.emit.z);
     Ring g;
     g.ns = ns;
     g.ng = ng;

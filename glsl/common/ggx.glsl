@@ -82,13 +82,13 @@ float energy_at(uint i) { return FloatRef(PT_ADDR(PT_ENERGY)).v[i]; }
 
 void energy_alpha_coord(float alpha, out uint j0, out float f) {
     float x = min(clamp(alpha, 0.0, 1.0) * float(ENERGY_N - 1), float(ENERGY_N - 1));
-    j0 = min(uint(floor(x)), uint(ENERGY_N - 2));
+    j0 = min(f2u(floor(x)), uint(ENERGY_N - 2));
     f = x - float(j0);
 }
 
 float energy_e(float mu, float alpha) {
     float x = clamp(clamp(mu, 0.0, 1.0) * float(ENERGY_N) - 0.5, 0.0, float(ENERGY_N - 1));
-    uint i0 = min(uint(floor(x)), uint(ENERGY_N - 2));
+    uint i0 = min(f2u(floor(x)), uint(ENERGY_N - 2));
     float fx = x - float(i0);
     uint j0; float fy;
     energy_alpha_coord(alpha, j0, fy);

@@ -111,7 +111,7 @@ bool light_unhidden(uint li, vec3 x) {
     vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
     float side = float(LIGHT_COVER_SIDE);
     if (!all(greaterThanEqual(c, vec3(0.0))) || !all(lessThan(c, vec3(side)))) return false;
-    uvec3 ci = uvec3(c);
+    uvec3 ci = f2u(c);
     uint bit = ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
     return ((LIGHT_TRI_WEIGHTS[li - prm.light_first].cover.x >> bit) & 1u) != 0u;
 }
@@ -130,7 +130,7 @@ float tri_radiance(uint tri) { return emitter_block(emitter_of(tri)).emit.x; }
 uint pick_area_tri(LightBlock e, float u) {
     uint lo = e.shape.x, hi = e.shape.x + e.shape.y - 1u;
     if (e.shape.y > 0u) {
-        uvec2 range = LIGHT_TRI_WORDS[e.shape.x + min(uint(u * float(e.shape.y)), e.shape.y - 1u)].zw;
+        uvec2 range = LIGHT_TRI_WORDS[e.shape.x + min(f2u(u * float(e.shape.y)), e.shape.y - 1u)].zw;
         lo = e.shape.x + range.x;
         hi = e.shape.x + range.y;
     }
@@ -220,7 +220,7 @@ uint choose_light(LightBlock e, float u, vec3 x, vec3 n) {
     uint segments = e.shape.w;
     uint segment_tris = e.shape.y / segments;
     float fs = u * float(segments);
-    uint seg = min(uint(fs), segments - 1u);
+    uint seg = min(f2u(fs), segments - 1u);
     uint base = prm.light_first + e.shape.x + seg * segment_tris;
     float target = clamp(fs - float(seg), 0.0, 1.0) * segment_weight(base, segment_tris, x, n);
     float acc = 0.0;
@@ -248,7 +248,7 @@ uint choose_light_pdf(LightBlock e, float u, vec3 x, vec3 n, float sel, out floa
         return tri;
     }
     float fs = u * float(segments);
-    uint seg = min(uint(fs), segments - 1u);
+    uint seg = min(f2u(fs), segments - 1u);
     uint base = prm.light_first + e.shape.x + seg * segment_tris;
     float w[FACING_TABLE];
     float wsum = 0.0;

@@ -4,12 +4,13 @@
 // the origin), and by a small absolute distance near the origin where ulps are tiny.
 #ifndef OFFSET_RAY_GLSL
 #define OFFSET_RAY_GLSL
+#include "convert.glsl"
 const float OFFSET_ORIGIN = 1.0 / 32.0;
 const float OFFSET_FLOAT_SCALE = 1.0 / 65536.0;
 const float OFFSET_INT_SCALE = 256.0;
 
 vec3 offset_ray(vec3 p, vec3 n) {
-    ivec3 of_i = ivec3(OFFSET_INT_SCALE * n);
+    ivec3 of_i = f2i(OFFSET_INT_SCALE * n);   // ivec3(), vectorized (convert.glsl)
     vec3 p_i = vec3(
         intBitsToFloat(floatBitsToInt(p.x) + ((p.x < 0.0) ? -of_i.x : of_i.x)),
         intBitsToFloat(floatBitsToInt(p.y) + ((p.y < 0.0) ? -of_i.y : of_i.y)),

@@ -358,8 +358,9 @@ bool trace_shadow_box(vec3 bmin, vec3 bmax) {
         vec3 c = k == 0u ? bmax + e - o0 : o1 - bmin + e;
         [[unroll]] for (uint i = 0u; i < 3u; i++) {
             float q = c[i] / a[i];
-            hi = a[i] > 0.0 ? min(hi, q) : hi;
-            lo = a[i] < 0.0 ? max(lo, q) : lo;
+            // min and max as selects (see trace_box): the same bounds.
+            hi = a[i] > 0.0 && q < hi ? q : hi;
+            lo = a[i] < 0.0 && q > lo ? q : lo;
             ok = ok && (a[i] != 0.0 || c[i] >= 0.0);
         }
     }

@@ -52,7 +52,16 @@ void trace_tri_test(vec3 v0, vec3 v1, vec3 v2, uint prim, uint level, TraceRay r
     precise float u = cx * by - cy * bx;
     precise float v = ax * cy - ay * cx;
     precise float w = bx * ay - by * ax;
-    bool inside = !((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0));
+    // inside = !((u < 0 || v < 0 || w < 0) && (u > 0 || v > 0 || w > 0)), tested on the
+    // bits: a float below 0 has bits above 0x80000000 unsigned (-0 excluded), one above 0
+    // bits above 0 signed. NIR folds float compares joined by `||` into fmin / fmax,
+    // which lavapipe compiles at 512-bit lanes as two 256-bit halves and a NaN fix-up
+    // (docs/benchmarks/rendering.md, "What lavapipe compiles lane by lane"). A NaN
+    // in u, v or w makes det and t NaN, and the hit is not taken either way.
+    uvec3 ubits = floatBitsToUint(vec3(u, v, w));
+    bool neg = any(greaterThan(ubits, uvec3(0x80000000u)));
+    bool pos = any(greaterThan(ivec3(ubits), ivec3(0)));
+    bool inside = !(neg && pos);
     precise float det = u + v + w;
     precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
     precise float t = tt / det;
