@@ -1,5 +1,6 @@
 //! glsl/common/convert.glsl's float-to-integer conversions give what GLSL's own give on
-//! this device (lavapipe: saturating, NaN to 0) over their callers' ranges, so the path
+//! this device (lavapipe: saturating, NaN to 0) over their callers' ranges (f2u below
+//! 2^24, the octahedral normals' codes included; f2i below 2^22 in magnitude), so the path
 //! tracer's images did not change when it took them (docs/benchmarks/rendering.md, "What
 //! lavapipe compiles lane by lane").
 
@@ -10,7 +11,7 @@ use synosis::graph::Graph;
 use synosis::vk::{BindingKind, Buffer, ComputePipeline, MemoryKind};
 
 /// Floats at the edges (zeros, halves, the ranges' ends, NaN, subnormals) and random ones
-/// over both ranges, as bits.
+/// over the ranges, as bits.
 fn inputs() -> Vec<f32> {
     let mut xs = vec![
         0.0,
@@ -36,6 +37,12 @@ fn inputs() -> Vec<f32> {
         -4_194_303.0,
         8_388_606.5,
         8_388_607.0,
+        8_388_607.5,
+        8_388_608.0,
+        8_388_609.0,
+        12_345_679.0,
+        16_777_214.0,
+        16_777_215.0,
         -8_388_607.0,
         -3.0e38,
         f32::NAN,
@@ -54,11 +61,11 @@ fn inputs() -> Vec<f32> {
         let x = match r % 4 {
             // uniform over both ranges
             0 => (r >> 8) as f32 / (1u64 << 56) as f32 * 2.0 * 4_194_303.0 - 4_194_303.0,
-            1 => (r >> 8) as f32 / (1u64 << 56) as f32 * 8_388_607.0,
-            // any float bits, kept where below 2^22 in magnitude (small ones, fractions)
+            1 => (r >> 8) as f32 / (1u64 << 56) as f32 * 16_777_215.0,
+            // any float bits, kept where below 2^24 in magnitude (small ones, fractions)
             _ => f32::from_bits((r >> 16) as u32),
         };
-        if x.is_nan() || x.abs() < 4_194_303.0 {
+        if x.is_nan() || x.abs() < 16_777_215.0 {
             xs.push(x);
         }
     }
@@ -101,8 +108,9 @@ fn float_to_integer_conversions_match_glsls_own() {
     let out: Vec<[u32; 4]> = output.read::<[u32; 4]>().unwrap();
     let mut checked = [0usize; 2];
     for (x, [f2u, uint, f2i, int]) in xs.iter().zip(out) {
-        // f2u: every x below 2^23 (negatives and NaN included).
-        if x.is_nan() || *x < 8_388_607.5 {
+        // f2u: every x below 2^24 (negatives and NaN included): the octahedral normals'
+        // codes reach 2^24 - 1.
+        if x.is_nan() || *x < 16_777_215.5 {
             assert_eq!(f2u, uint, "f2u({x:e}) = {f2u}, uint() = {uint}");
             // lavapipe's uint(x) saturates (Rust's `as` does the same).
             assert_eq!(uint, *x as u32, "uint({x:e}) = {uint}");

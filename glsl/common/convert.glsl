@@ -1,19 +1,24 @@
 // Float to integer conversions. lavapipe (Mesa 25.0, LLVM 15) compiles GLSL's uint(x)
 // and int(x) of a float as saturating conversions one lane at a time (a scalar convert,
 // compares and conditional moves a lane: sixteen of each a vector at 512-bit lanes; 4 %
-// of a sample with Mitsuba's sampling on an Intel Xeon). f2u takes the float's bits
-// instead: x clamped to [0, 2^23 - 1] (NaN to 0) with selects, floored, and added to 2^23,
-// where a float's low mantissa bits are the integer: all of it vector instructions. The
-// same value as uint(x) for every x below 2^23 (0 for NaN and for negatives, as uint(x)
-// saturates there); every caller's x is a texel coordinate, an index or a count far below
-// it (docs/benchmarks/rendering.md, "What lavapipe compiles lane by lane").
+// of a sample with Mitsuba's sampling on an Intel Xeon). f2u and f2i take the float's
+// bits instead, all of it vector instructions: x clamped with selects (NaN to 0); below
+// 2^23 floored and added to 2^23, where a float's low mantissa bits are the integer; from
+// 2^23 to 2^24 (floats that are integers) the mantissa with its implicit bit. f2u gives
+// what that uint(x) gives for every x below 2^24 (0 for NaN and for negatives, as uint(x)
+// saturates there), f2i what int(x) gives for |x| below 2^22; every caller's x is a texel
+// coordinate, an index, a count or an octahedral normal's code (below 2^24) within them
+// (docs/benchmarks/rendering.md, "What lavapipe compiles lane by lane"; test
+// `float_to_integer_conversions_match_glsls_own`).
 #ifndef CONVERT_GLSL
 #define CONVERT_GLSL
-const float F2U_MAX = 8388607.0;   // 2^23 - 1
+const float F2U_MAX = 16777215.0;   // 2^24 - 1
 uint f2u(float x) {
     float c = x > 0.0 ? x : 0.0;
     c = c < F2U_MAX ? c : F2U_MAX;
-    return floatBitsToUint(floor(c) + 8388608.0) - 0x4B000000u;
+    uint low = floatBitsToUint(floor(c) + 8388608.0) - 0x4B000000u;   // c below 2^23
+    uint high = (floatBitsToUint(c) & 0x7FFFFFu) | 0x800000u;          // c in [2^23, 2^24)
+    return c < 8388608.0 ? low : high;
 }
 uvec3 f2u(vec3 x) {
     return uvec3(f2u(x.x), f2u(x.y), f2u(x.z));
