@@ -18,6 +18,7 @@
 #include "common/sampler.glsl"
 #include "common/offset_ray.glsl"
 #include "common/convert.glsl"
+#include "common/octahedral.glsl"
 #include "common/labels.glsl"
 
 layout(local_size_x = TILE, local_size_y = TILE) in;
@@ -235,18 +236,6 @@ vec2 map_slopes(uint slot, vec3 p) {
     MapHeader m = map_header(slot);
     if ((m.dims.w & MAP_BUFFER_MASK) == 0u) return vec2(0.0);
     return slopes_at(m, map_plane(slot, m, p));
-}
-
-// Octahedral normal of Tri's w (scene::curved::encode_normal / decode_normal).
-vec3 oct_decode(float code) {
-    uint k = f2u(code);
-    vec2 e = vec2(float(k / OCT_LEVELS), float(k % OCT_LEVELS)) / float(OCT_STEPS) * 2.0 - 1.0;
-    float z = 1.0 - abs(e.x) - abs(e.y);
-    if (z < 0.0) {
-        e = vec2((1.0 - abs(e.y)) * (e.x >= 0.0 ? 1.0 : -1.0),
-                 (1.0 - abs(e.x)) * (e.y >= 0.0 ? 1.0 : -1.0));
-    }
-    return normalize(vec3(e, z));
 }
 
 // The smooth normal of an object triangle of a triplanar patch at barycentrics bary.

@@ -2,7 +2,8 @@
 //! this device (lavapipe: saturating, NaN to 0) over their callers' ranges (f2u below
 //! 2^24, the octahedral normals' codes included; f2i below 2^22 in magnitude), so the path
 //! tracer's images did not change when it took them (docs/benchmarks/rendering.md, "What
-//! lavapipe compiles lane by lane").
+//! lavapipe compiles lane by lane"); and the shader's octahedral normals
+//! (glsl/common/octahedral.glsl) are their CPU mirror's (`scene::curved::decode_normal`).
 
 mod common;
 
@@ -72,8 +73,9 @@ fn inputs() -> Vec<f32> {
     xs
 }
 
-#[test]
-fn float_to_integer_conversions_match_glsls_own() {
+/// Runs glsl/convert_check.comp over `xs`: per float its conversions (f2u, uint(), the
+/// bits of f2i and int()) and its octahedral decode.
+fn run_checks(xs: &[f32]) -> (Vec<[u32; 4]>, Vec<[f32; 4]>) {
     let ctx = common::gpu();
     let spirv = synosis::shaders::spirv("convert_check").expect("build.rs compiles convert_check");
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
@@ -81,31 +83,46 @@ fn float_to_integer_conversions_match_glsls_own() {
         &ctx,
         "convert_check",
         &spirv,
-        &[BindingKind::StorageBuffer; 2],
+        &[BindingKind::StorageBuffer; 3],
         0,
         [64, 1, 1],
         &[],
     )
     .unwrap();
-    let xs = inputs();
-    let input = Buffer::from_slice(&ctx, "floats", &xs, storage).unwrap();
-    let output = Buffer::new(
-        &ctx,
-        "conversions",
-        xs.len() as u64 * 16,
-        storage,
-        MemoryKind::Readback,
-    )
-    .unwrap();
+    let input = Buffer::from_slice(&ctx, "floats", xs, storage).unwrap();
+    let readback = |name: &str| {
+        Buffer::new(
+            &ctx,
+            name,
+            xs.len() as u64 * 16,
+            storage,
+            MemoryKind::Readback,
+        )
+        .unwrap()
+    };
+    let (output, normals) = (readback("conversions"), readback("normals"));
     let mut g = Graph::new(&ctx, "conversions");
     let i = g.import(&input);
     let mut o = g.import(&output);
+    let mut n = g.import(&normals);
     g.dispatch("convert", &pipe, [(xs.len() as u32).div_ceil(64), 1, 1])
         .read(0, &i)
         .write(1, &mut o)
+        .write(2, &mut n)
         .submit();
     g.execute(None).unwrap();
-    let out: Vec<[u32; 4]> = output.read::<[u32; 4]>().unwrap();
+    let out = (
+        output.read::<[u32; 4]>().unwrap(),
+        normals.read::<[f32; 4]>().unwrap(),
+    );
+    common::assert_clean(&ctx);
+    out
+}
+
+#[test]
+fn float_to_integer_conversions_match_glsls_own() {
+    let xs = inputs();
+    let (out, _) = run_checks(&xs);
     let mut checked = [0usize; 2];
     for (x, [f2u, uint, f2i, int]) in xs.iter().zip(out) {
         // f2u: every x below 2^24 (negatives and NaN included): the octahedral normals'
@@ -128,5 +145,34 @@ fn float_to_integer_conversions_match_glsls_own() {
         }
     }
     assert!(checked[0] > 10_000 && checked[1] > 10_000, "{checked:?}");
-    common::assert_clean(&ctx);
+}
+
+#[test]
+fn octahedral_normals_decode_as_their_cpu_mirror() {
+    use synosis::gpu_interface::OCT_LEVELS;
+    use synosis::scene::curved::{decode_normal, encode_normal};
+    // Codes at both coordinates' ends and middles (u * OCT_LEVELS + v, up to 2^24 - 1),
+    // and those of normals all round the sphere.
+    let edges = [0u32, 1, 2046, 2047, 2048, 2049, 4094, 4095];
+    let mut codes: Vec<f32> = edges
+        .iter()
+        .flat_map(|&u| edges.iter().map(move |&v| (u * OCT_LEVELS + v) as f32))
+        .collect();
+    for i in 0..2000 {
+        let (t, p) = (
+            (i as f32 * 0.618_034).fract() * std::f32::consts::PI,
+            i as f32 * 0.37,
+        );
+        let n = glam::Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos());
+        codes.push(encode_normal(n));
+    }
+    let (_, normals) = run_checks(&codes);
+    for (code, n) in codes.iter().zip(normals) {
+        let want = decode_normal(*code);
+        let err = (n[0] - want.x)
+            .abs()
+            .max((n[1] - want.y).abs())
+            .max((n[2] - want.z).abs());
+        assert!(err < 1e-5, "code {code}: shader {n:?}, CPU {want:?}");
+    }
 }
