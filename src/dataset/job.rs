@@ -1003,7 +1003,7 @@ impl Job {
                 return Err(self.field(
                     "render.analytic_rays_max",
                     m,
-                    "takes the analytic direct light: remove it or `render.direct_light = \"sampled\"`",
+                    "takes the analytic direct light, which `render.direct_light = \"sampled\"` turns off: remove one of the two",
                 ));
             }
             let first = r.analytic_rays.unwrap_or(1);

@@ -1505,7 +1505,7 @@ impl SceneConfig {
             if r.direct_light == DirectLight::Sampled {
                 return Err(ConfigError::Invalid {
                     field: "render.analytic_rays_max",
-                    message: "takes the analytic direct light: remove it or render.direct_light = \"sampled\"".into(),
+                    message: "takes the analytic direct light, which render.direct_light = \"sampled\" turns off: remove one of the two".into(),
                 });
             }
             if r.analytic_rays < 2 {
