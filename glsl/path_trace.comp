@@ -684,39 +684,71 @@ float cv_rays_of_sample = 0.0;
 // nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
 // label_of_ray; 0 without (no label read on samples that do not label). `label_only`:
 // the sample is traced for its label alone (its camera ray's first hit, then 0 returned).
+// A path's last trace put off (radiance_sample with `defer`): its ray left the object
+// at a bounce (TQ_CLOSEST_ESCAPE), so all that is left of the path is the light the ray
+// meets (the lights' closest hit, TQ_LIGHTS) and that light's term, added last. `slot`:
+// the sample's place in main's window.
+struct PathLookup { vec3 o; float T; vec3 d; float prev_pdf; vec3 prev_n; float prev_nb; uint slot; };
+// Set by radiance_sample: whether its path was put off, and what is left of it.
+bool path_put_off = false;
+PathLookup path_left;
+
+// Lights' lookups of paths put off (`main`) can be gathered from several samples: a
+// sample whose last term is the light a bounce's ray meets after leaving the object.
+// Not where the analytic direct light's extra camera rays add their term after the path.
+#define PATH_DEFER (!(PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u))
+// Samples a window of main holds (their lookups, the lanes' put-off paths' lights, are
+// made together at its end).
+#define PATH_WINDOW 8u
+
+// One sample's radiance, or with `lookup` the last term of a path put off (`path_left`:
+// its ray's light; no sample is drawn). With `defer` (PATH_DEFER), a path whose
+// bounce's ray leaves the object ends here with that term left out and put off
+// (`path_put_off`, `path_left`): the caller adds it later, with the lookups of other
+// samples, so that lanes trace the lights together (see `main`).
 float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, bool label_only,
-                      out uint label_word) {
+                      bool defer, bool lookup, out uint label_word) {
     label_word = 0u;
     cv_rays_of_sample = 0.0;
+    path_put_off = false;
     Sampler rng = sampler_init(PRM_SAMPLE_GEN, pixel, s, prm.seed);
-    vec3 o, d;
-    pixel_ray(px, py, rng, o, d);
+    vec3 o = path_left.o, d = path_left.d;
+    [[dont_flatten]] if (!lookup) pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
     // This sample's camera ray, kept for its A' (the extra camera rays' term below).
     uint extra = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC ? PRM_CV_EXTRA_RAYS : 0u;
     vec3 o0 = o, d0 = d;
 
     float L = 0.0;
-    float T = 1.0;
+    float T = lookup ? path_left.T : 1.0;
     // The control variate (primary hit): its rings (analytic_rings) and its BSDF-sample
     // term c D / pdf, awaiting the light the next trace meets (cv_bsdf_weight).
     uint cv_mask = 0u;
     float cv_pending = 0.0;
-    float prev_pdf = 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
-    vec3 prev_n = vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
-    float prev_nb = 1.0;     // BSDF samples taken at the ray's origin for its direct light
+    float prev_pdf = lookup ? path_left.prev_pdf : 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
+    vec3 prev_n = lookup ? path_left.prev_n : vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
+    float prev_nb = lookup ? path_left.prev_nb : 1.0;     // BSDF samples taken at the ray's origin for its direct light
     // The path stopped with a control-variate term pending: one more trip through the
     // loop's trace, for the light alone (every trace of the path is that one call: the
     // shader compiles one traversal for it).
     bool stop = false;
-    for (uint depth = 0u; depth <= PRM_MAX_BOUNCES || stop; depth++) {
+    for (uint depth = lookup ? 1u : 0u; depth <= PRM_MAX_BOUNCES || stop; depth++) {
         // The ray's closest hit; with a control-variate term pending also the first light
-        // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped.
-        uint kind = stop ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
+        // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped
+        // or looked up.
+        uint kind = stop || lookup ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
         // A ray that can meet no light: the object alone (the same hit, no light).
-        if (!stop && misses_lights(o, d)) kind = TQ_OBJECT;
+        if (!stop && !lookup && misses_lights(o, d)) kind = TQ_OBJECT;
+        // A bounce's ray whose path can be put off: the lights only where it meets the
+        // object (where it does not, the lights' hit is the lookup's).
+        if (defer && kind == TQ_CLOSEST && depth > 0u) kind = TQ_CLOSEST_ESCAPE;
         TraceResult tq = trace_query_hinted(kind, o, d, 0.0, 3.0e38, 0.0,
                                             depth == 0u ? pix_hint : trace_no_hint());
+        if (kind == TQ_CLOSEST_ESCAPE && tq.blocked) {
+            path_put_off = true;
+            path_left = PathLookup(o, T, d, prev_pdf, prev_n, prev_nb, 0u);
+            return L;
+        }
         Hit h = tq.h;
         if (cv_pending != 0.0) {
             L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, tq.light, cv_mask) * cv_pending;
@@ -1024,26 +1056,77 @@ void main() {
     uint words[LABEL_MAX_SAMPLES];
     vec2 rays = vec2(0.0);
     seg_memo_clear();
-    for (uint s = 0u; s < max(pc.sample_count, label_count); s++) {
-        uint word;
-        bool label = s < label_count;
-        bool label_only = s >= pc.sample_count;
-        float r = radiance_sample(i, px, py, pc.sample_start + s, label, label_only, word);
-        if (label) words[s] = word;
-        if (label_only) continue;
-        sum += r;
-        sq += r * r;
-        rays += vec2(cv_rays_of_sample, cv_rays_of_sample * cv_rays_of_sample);
-        if (PRM_NOISE_SUMS == NOISE_HALVES) {
-            uint j = pc.sample_start + s;
-            uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
-            bool level_starts = (j & (j - 1u)) == 0u;   // j = 0 or a power of two
-            if ((level & 1u) == 0u) {
-                halves.x = (level_starts ? 0.0 : halves.x) + r;
-            } else {
-                halves.y = (level_starts ? 0.0 : halves.y) + r;
-            }
+    // The samples go in windows of PATH_WINDOW. A path whose bounce's ray leaves the
+    // object is put off with its last term, the light that ray meets (radiance_sample's
+    // `defer`); at the window's end the lanes look their put-off paths' lights up
+    // together (`lookup`), a lane its first, then its second, ..., so that one traversal
+    // of the lights serves the lookups of many lanes where each sample's bounces ran one
+    // for the few lanes whose rays came near a light (lanes run a traversal together, to
+    // the longest). Then the window's samples are added to the pixel's sums in sample
+    // order: the same sums, bit for bit (the term put off is a path's last).
+    float window_r[PATH_WINDOW];
+    float window_rays[PATH_WINDOW];
+    PathLookup put_off[PATH_WINDOW];
+    uint window_n = 0u;     // samples in the window (the same in every lane)
+    uint put_off_n = 0u;    // this lane's paths put off in the window
+    uint looked_up = 0u;    // lookups done at the window's end (the same in every lane)
+    bool looking = false;   // at the window's end (the same in every lane)
+    uint s = 0u;
+    while (true) {
+        if (!looking && window_n > 0u && (window_n == PATH_WINDOW || s >= pc.sample_count)) {
+            looking = true;
+            looked_up = 0u;
         }
+        if (looking && looked_up >= subgroupMax(put_off_n)) {
+            uint first = pc.sample_start + s - window_n;
+            for (uint k = 0u; k < window_n; k++) {
+                float r = window_r[k];
+                sum += r;
+                sq += r * r;
+                rays += vec2(window_rays[k], window_rays[k] * window_rays[k]);
+                if (PRM_NOISE_SUMS == NOISE_HALVES) {
+                    uint j = first + k;
+                    uint level = j == 0u ? 0u : uint(findMSB(j)) + 1u;
+                    bool level_starts = (j & (j - 1u)) == 0u;   // j = 0 or a power of two
+                    if ((level & 1u) == 0u) {
+                        halves.x = (level_starts ? 0.0 : halves.x) + r;
+                    } else {
+                        halves.y = (level_starts ? 0.0 : halves.y) + r;
+                    }
+                }
+            }
+            looking = false;
+            window_n = 0u;
+            put_off_n = 0u;
+            continue;
+        }
+        if (!looking && s >= max(pc.sample_count, label_count)) break;
+        uint word;
+        bool label = !looking && s < label_count;
+        bool label_only = !looking && s >= pc.sample_count;
+        bool run = !looking || looked_up < put_off_n;
+        if (looking && run) path_left = put_off[looked_up];
+        float r = 0.0;
+        if (run) {
+            r = radiance_sample(i, px, py, pc.sample_start + s, label, label_only,
+                                PATH_DEFER && !label_only, looking, word);
+        }
+        if (looking) {
+            if (run) window_r[path_left.slot] += r;
+            looked_up++;
+            continue;
+        }
+        if (label) words[s] = word;
+        s++;
+        if (label_only) continue;
+        window_r[window_n] = r;
+        window_rays[window_n] = cv_rays_of_sample;
+        if (path_put_off) {
+            path_left.slot = window_n;
+            put_off[put_off_n] = path_left;
+            put_off_n++;
+        }
+        window_n++;
     }
     accum[i] = sum;
     if (PRM_NOISE_SUMS == NOISE_SQUARES) {

@@ -88,7 +88,16 @@ bool light_missed(LightBlock b, vec3 o, vec3 d, float dd) {
     vec3 r1 = q1 - dot(q1, a) * a;
     vec3 r2 = q2 - dot(q2, a) * a;
     float h2 = b.reach.z * b.reach.z;
-    return dot(r1, r1) < h2 && dot(r2, r2) < h2;   // through the hole only
+    if (dot(r1, r1) < h2 && dot(r2, r2) < h2) return true;   // through the hole only
+    // Around the ring only: the slab crossed outside the cylinder of the sphere's radius
+    // (no point of the light is farther from the axis than from the centre), where the
+    // crossing's nearest approach to the axis (its projection on the plane, a segment)
+    // stays outside it.
+    vec3 e = r2 - r1;
+    float ee = dot(e, e);
+    float tc = ee > 0.0 ? clamp(-dot(r1, e) / ee, 0.0, 1.0) : 0.0;
+    vec3 rc = r1 + tc * e;
+    return dot(rc, rc) > r * r;
 }
 
 bool misses_lights(vec3 o, vec3 d) {

@@ -54,6 +54,13 @@ const uint TQ_BLOCKED = 5u;        // blocked: anything, object or light, within
 const uint TQ_OBJECT = 6u;         // h: the closest hit on the object alone, where the
                                    // caller knows the ray meets no light (as TQ_CLOSEST
                                    // then; lights.glsl misses_lights); light: none
+const uint TQ_CLOSEST_ESCAPE = 7u; // as TQ_CLOSEST where the ray meets the object; where
+                                   // it does not, the software traversal leaves the
+                                   // lights untraversed and says so in `blocked`: the
+                                   // caller's TQ_LIGHTS query of the same ray later finds
+                                   // the hit TQ_CLOSEST would have (the lights' closest,
+                                   // from the same bounds). The ray query answers as
+                                   // TQ_CLOSEST.
 
 struct TraceResult {
     Hit h;
@@ -125,7 +132,8 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     TraceResult res;
     res.blocked = false;
     res.light = hit_none(3.0e38);
-    bool one = kind == TQ_CLOSEST || kind == TQ_BLOCKED || kind == TQ_OBJECT;
+    bool one = kind == TQ_CLOSEST || kind == TQ_CLOSEST_ESCAPE || kind == TQ_BLOCKED
+        || kind == TQ_OBJECT;
     uint mask = kind == TQ_OBJECT ? 0x01u : one ? 0xffu : 0x02u;
     bool any = kind == TQ_BLOCKED;
     float bound = tmax;
@@ -501,14 +509,15 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     TraceResult res;
     res.blocked = false;
     res.light = hit_none(3.0e38);
-    uint level = kind == TQ_CLOSEST || kind == TQ_BLOCKED || kind == TQ_OBJECT ? 0u : 1u;
+    bool closest = kind == TQ_CLOSEST || kind == TQ_CLOSEST_ESCAPE;
+    uint level = closest || kind == TQ_BLOCKED || kind == TQ_OBJECT ? 0u : 1u;
     bool any = kind == TQ_BLOCKED;
     Hit h = hit_none(tmax);
     // A camera ray of the bundle's pixel (the hint's): its closest hit on the object
     // among the bundle's triangles, taken without the object's traversal where it lies
     // no deeper than the bundle reaches.
     bool skip_first = false;   // the first level's traversal answered without it
-    if ((kind == TQ_CLOSEST || kind == TQ_OBJECT) && hint.prim != NO_HIT) {
+    if ((closest || kind == TQ_OBJECT) && hint.prim != NO_HIT) {
         if (trace_bundle_size() > 0u) {
             trace_list_test(TRACE_LIST_CAMERA, tr, tmin, h);
             float depth = dot(trace_bundle_axis.xyz, o) + trace_bundle_axis.w
@@ -539,7 +548,12 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
             trace_bvh(level, o, inv_d, tr, tmin, h, any);
         }
         if (step == 1u || kind == TQ_OBJECT) break;
-        if (kind == TQ_CLOSEST) {
+        if (closest) {
+            // No object hit: the lights' part left to the caller (TQ_CLOSEST_ESCAPE).
+            if (kind == TQ_CLOSEST_ESCAPE && h.prim == NO_HIT) {
+                res.blocked = true;
+                break;
+            }
             level = 1u;
         } else if (kind == TQ_BLOCKED) {
             if (h.prim != NO_HIT) break;
