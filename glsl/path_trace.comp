@@ -695,8 +695,10 @@ PathLookup path_left;
 
 // Lights' lookups of paths put off (`main`) can be gathered from several samples: a
 // sample whose last term is the light a bounce's ray meets after leaving the object.
-// Not where the analytic direct light's extra camera rays add their term after the path.
-#define PATH_DEFER (!(PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u))
+// Not where the analytic direct light's extra camera rays add their term after the path,
+// nor with `[render] light_shortcuts = false` (every ray traced as it comes: the
+// comparison that tests/lights.rs `light_shortcuts_change_no_pixel` makes).
+#define PATH_DEFER (PRM_SHORTCUTS != 0u && !(PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u))
 // Samples a window of main holds (their lookups, the lanes' put-off paths' lights, are
 // made together at its end).
 #define PATH_WINDOW 8u

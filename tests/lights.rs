@@ -155,15 +155,19 @@ fn each_kind_matches_the_irradiance_integral() {
 /// `[render] light_shortcuts` (the default) shadow rays test a light triangle alone
 /// where the view's light cover says nothing can hide it (src/scene/light_cover.rs) and
 /// rays that can meet no light skip the lights (glsl/common/lights.glsl
-/// `misses_lights`); the images are the very bytes of `light_shortcuts = false`, which
-/// traverses the lights for every ray, on every backend. Two light samples and four
+/// `misses_lights`), and a path whose bounce's ray leaves the plate is put off and its
+/// light looked up with other samples' at the end of a window of 8 (glsl/path_trace.comp
+/// `main`, software backends); the images are the very bytes of `light_shortcuts =
+/// false`, which traverses the lights for every ray as it comes, on every backend. Two light samples and four
 /// BSDF directions at the first hit take every kind of trace. The cover marks some
 /// cells of some triangles and not others, so both ways are taken.
 #[test]
 fn light_shortcuts_change_no_pixel() {
     let ring = "light_samples = 2\nbsdf_samples = 4\n[[light]]\nkind = \"ring\"\nposition_mm = [0, 0, 34]\ndirection = [0, 0, -1]\nmajor_radius_mm = 22\nminor_radius_mm = 16\nsegments_major = 48\nsegments_minor = 16\nsampling = \"uniform\"\n";
-    let cfg = plate_cfg(ring, 32, 24, 16);
-    let off = plate_cfg(&format!("light_shortcuts = false\n{ring}"), 32, 24, 16);
+    // 13 samples: main's windows of 8 (paths put off, their lights looked up together at
+    // a window's end) and a last one of 5.
+    let cfg = plate_cfg(ring, 32, 24, 13);
+    let off = plate_cfg(&format!("light_shortcuts = false\n{ring}"), 32, 24, 13);
     let s = RenderScene::assemble(&common::face_a_plate(), &cfg).expect("scene");
     let (lo, hi) = s.stage.mesh.bounds();
     let cover = light_cover(&s.view.light.tris, seen_box(&s.view.camera, [lo, hi]));
