@@ -895,6 +895,33 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                             light_j.a = lt.a.xyz; light_j.b = lt.b.xyz; light_j.c = lt.c.xyz;
                             light_j.prim = li;
                         }
+#if defined(TRACE_SOFTWARE)
+                        // Else, from the grid, only the triangle's hiders can stand in front
+                        // of it (LightTri::cover.yz, src/scene/light_cover.rs): it and they
+                        // tested alone give the lights' closest hit up to it, as their
+                        // traversal would (the same test, ray and bounds); nearer than
+                        // t_light a light hides the sample, else that hit stands for the
+                        // lights' traversal as the triangle's own does above.
+                        uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
+                        if (light_j.prim == NO_HIT && lcover.z > 0u && light_in_cover(origin)) {
+                            TraceRay lr = trace_setup(origin, wi_w);
+                            Hit hl = hit_none(shadow_max);
+                            trace_tri_test(lt.a.xyz, lt.b.xyz, lt.c.xyz, li, 1u, lr, 0.0, hl);
+                            for (uint m = 0u; m < lcover.z; m++) {
+                                uint k = prm.light_first
+                                    + UintRef(PT_ADDR(PT_LIGHT_WEIGHTS)).v[lcover.y + m];
+                                Tri tk = fetch_tri(k);
+                                trace_tri_test(tk.a.xyz, tk.b.xyz, tk.c.xyz, k, 1u, lr, 0.0, hl);
+                            }
+                            if (hl.prim != NO_HIT && hl.t < shadow_light) {
+                                test = false;   // hidden by another light triangle
+                            } else if (hl.prim != NO_HIT) {
+                                Tri th = fetch_tri(hl.prim);
+                                light_j.a = th.a.xyz; light_j.b = th.b.xyz; light_j.c = th.c.xyz;
+                                light_j.prim = hl.prim;
+                            }
+                        }
+#endif
                         add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
                     }
                 }

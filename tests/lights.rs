@@ -160,33 +160,47 @@ fn each_kind_matches_the_irradiance_integral() {
 /// `main`, software backends); the images are the very bytes of `light_shortcuts =
 /// false`, which traverses the lights for every ray as it comes, on every backend. Two light samples and four
 /// BSDF directions at the first hit take every kind of trace. The cover marks some
-/// cells of some triangles and not others, so both ways are taken.
+/// cells of some triangles and not others, so both ways are taken; with the thinner
+/// ring it lists the few triangles that can hide some (`LightCover::hiders`), which
+/// shadow rays from an unmarked cell then test in place of the lights' traversal.
 #[test]
 fn light_shortcuts_change_no_pixel() {
-    let ring = "light_samples = 2\nbsdf_samples = 4\n[[light]]\nkind = \"ring\"\nposition_mm = [0, 0, 34]\ndirection = [0, 0, -1]\nmajor_radius_mm = 22\nminor_radius_mm = 16\nsegments_major = 48\nsegments_minor = 16\nsampling = \"uniform\"\n";
-    // 13 samples: main's windows of 8 (paths put off, their lights looked up together at
-    // a window's end) and a last one of 5.
-    let cfg = plate_cfg(ring, 32, 24, 13);
-    let off = plate_cfg(&format!("light_shortcuts = false\n{ring}"), 32, 24, 13);
-    let s = RenderScene::assemble(&common::face_a_plate(), &cfg).expect("scene");
-    let (lo, hi) = s.stage.mesh.bounds();
-    let cover = light_cover(&s.view.light.tris, seen_box(&s.view.camera, [lo, hi]));
-    let full = cover.masks.iter().filter(|&&m| m == ALL_CELLS).count();
-    let partial = cover.masks.len() - full;
-    assert!(
-        full > 0 && partial > 0,
-        "cover: {full} clear from every cell, {partial} not"
-    );
-    for backend in common::BACKENDS {
-        let a = render_plate(&cfg, backend).1;
-        let b = render_plate(&off, backend).1;
-        let differing = a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count();
-        println!(
-            "{}: mean {:.5}, {differing} pixels differ",
-            backend.name(),
-            mean(&a.data)
+    // The fat ring: most partly hidden triangles have more would-be hiders than a list
+    // holds; the thin one (the demo's proportions) lists them for many.
+    let fat =
+        "major_radius_mm = 22\nminor_radius_mm = 16\nsegments_major = 48\nsegments_minor = 16\n";
+    let thin =
+        "major_radius_mm = 22\nminor_radius_mm = 4\nsegments_major = 48\nsegments_minor = 12\n";
+    for (shape, lists) in [(fat, false), (thin, true)] {
+        let ring = format!(
+            "light_samples = 2\nbsdf_samples = 4\n[[light]]\nkind = \"ring\"\nposition_mm = [0, 0, 34]\ndirection = [0, 0, -1]\n{shape}sampling = \"uniform\"\n"
         );
-        assert_eq!(differing, 0, "{}", backend.name());
+        // 13 samples: main's windows of 8 (paths put off, their lights looked up
+        // together at a window's end) and a last one of 5.
+        let cfg = plate_cfg(&ring, 32, 24, 13);
+        let off = plate_cfg(&format!("light_shortcuts = false\n{ring}"), 32, 24, 13);
+        let s = RenderScene::assemble(&common::face_a_plate(), &cfg).expect("scene");
+        let (lo, hi) = s.stage.mesh.bounds();
+        let cover = light_cover(&s.view.light.tris, seen_box(&s.view.camera, [lo, hi]));
+        let full = cover.masks.iter().filter(|&&m| m == ALL_CELLS).count();
+        let partial = cover.masks.len() - full;
+        let listed = cover.hiders.iter().filter(|h| !h.is_empty()).count();
+        println!("cover: {full} clear from every cell, {partial} not, {listed} with hider lists");
+        assert!(
+            full > 0 && partial > 0 && (!lists || listed > 0),
+            "cover: {full} clear from every cell, {partial} not, {listed} with hider lists"
+        );
+        for backend in common::BACKENDS {
+            let a = render_plate(&cfg, backend).1;
+            let b = render_plate(&off, backend).1;
+            let differing = a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count();
+            println!(
+                "{}: mean {:.5}, {differing} pixels differ",
+                backend.name(),
+                mean(&a.data)
+            );
+            assert_eq!(differing, 0, "{}", backend.name());
+        }
     }
 }
 

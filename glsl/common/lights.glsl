@@ -125,6 +125,14 @@ bool light_unhidden(uint li, vec3 x) {
     return ((LIGHT_TRI_WEIGHTS[li - prm.light_first].cover.x >> bit) & 1u) != 0u;
 }
 
+// Whether x lies in the light cover's grid (`light_unhidden`; a light triangle's hider
+// list, LightTri::cover.yz, holds for such points only).
+bool light_in_cover(vec3 x) {
+    vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
+    float side = float(LIGHT_COVER_SIDE);
+    return all(greaterThanEqual(c, vec3(0.0))) && all(lessThan(c, vec3(side)));
+}
+
 // Emitter of scene triangle `tri` (a light triangle).
 uint emitter_of(uint tri) { return LIGHT_TRI_WORDS[tri - prm.light_first].x; }
 

@@ -241,7 +241,7 @@ impl<'s> View<'s> {
         let light_weights = Buffer::from_slice(
             ctx,
             "light triangle weights",
-            &light_tri_blocks(&light.tris, &cover),
+            &light_tri_words(&light_tri_blocks(&light.tris, &cover), &cover),
             storage,
         )?;
         let (_, texels) = scene.map_buffers();
@@ -655,15 +655,23 @@ pub fn pixel_angle(cam: &Camera) -> f32 {
 
 /// Per light triangle (`LightGeometry::tris`, in the order the shader numbers them from
 /// `first`): its centroid, twice its area and its unit normal (`LightTri`), what
-/// glsl/common/lights.glsl `light_weight` takes; one zero block when there is none (a
-/// binding may not be empty; never read).
+/// glsl/common/lights.glsl `light_weight` takes, and its cover: the mask, and where its
+/// hider list starts (in 32-bit words from the blocks' start: after all the blocks, in
+/// the order of the triangles, as `light_tri_words` lays them out) and how long it is;
+/// one zero block when there is none (a binding may not be empty; never read).
 fn light_tri_blocks(tris: &TriangleSoup, cover: &LightCover) -> Vec<LightTri> {
     let p = &tris.positions;
+    let words = tris.triangles.len() * (std::mem::size_of::<LightTri>() / 4);
+    let mut next = words as u32;
     let mut blocks: Vec<LightTri> = tris
         .triangles
         .iter()
         .zip(&cover.masks)
-        .map(|(t, &mask)| {
+        .zip(&cover.hiders)
+        .map(|((t, &mask), hiders)| {
+            let count = hiders.len() as u32;
+            let at = next;
+            next += count;
             let [a, b, c] = t.map(|i| p[i as usize]);
             let n = (b - a).cross(c - a);
             let area2 = n.length();
@@ -671,7 +679,7 @@ fn light_tri_blocks(tris: &TriangleSoup, cover: &LightCover) -> Vec<LightTri> {
             LightTri {
                 center: ((a + b + c) * (1.0 / 3.0)).extend(area2).into(),
                 normal: unit.extend(0.0).into(),
-                cover: [mask, 0, 0, 0],
+                cover: [mask, at, count, 0],
             }
         })
         .collect();
@@ -679,6 +687,14 @@ fn light_tri_blocks(tris: &TriangleSoup, cover: &LightCover) -> Vec<LightTri> {
         blocks.push(LightTri::default());
     }
     blocks
+}
+
+/// The light triangles' buffer: `blocks` as 32-bit words, then each triangle's hider
+/// list (`LightCover::hiders`, indices in the light's list) in order.
+fn light_tri_words(blocks: &[LightTri], cover: &LightCover) -> Vec<u32> {
+    let mut words: Vec<u32> = bytemuck::cast_slice(blocks).to_vec();
+    words.extend(cover.hiders.iter().flatten());
+    words
 }
 
 /// Per light triangle (`LightGeometry::lights`' order) what glsl/common/lights.glsl
@@ -943,9 +959,15 @@ mod tests {
         };
         let cover = LightCover {
             masks: vec![5, 0],
+            hiders: vec![vec![1, 7], vec![3]],
             ..LightCover::none(2)
         };
         let b = light_tri_blocks(&tris, &cover);
+        // The hider lists after both 12-word blocks: words 24 and 25, then 26.
+        assert_eq!(b[1].cover, [0, 26, 1, 0]);
+        let w = light_tri_words(&b, &cover);
+        assert_eq!(w.len(), 27);
+        assert_eq!(&w[24..], &[1, 7, 3]);
         assert_eq!(b.len(), 2);
         let want = [2.0 / 3.0, 1.0, 1.0, 6.0];
         for (got, want) in b[0].center.iter().zip(want) {
@@ -958,7 +980,7 @@ mod tests {
             positions: vec![],
             triangles: vec![],
         };
-        assert_eq!(b[0].cover, [5, 0, 0, 0]);
+        assert_eq!(b[0].cover, [5, 24, 2, 0]);
         assert_eq!(
             light_tri_blocks(&none, &LightCover::none(0)),
             vec![LightTri::default()]

@@ -60,13 +60,26 @@ const GROUP: usize = 8;
 /// A mask with every cell marked.
 pub const ALL_CELLS: u32 = u32::MAX >> (32 - LIGHT_COVER_CELLS);
 
-/// The grid and, per light triangle, its mask of cells (bit x + 2 y + 4 z).
+/// The most light triangles a hider list holds (more: none kept, the lights traversed).
+pub const MAX_HIDERS: usize = 16;
+
+/// The grid and, per light triangle, its mask of cells (bit x + 2 y + 4 z) and its
+/// hiders.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightCover {
     /// The grid's lower corner and its cells' size (mm).
     pub lo: Vec3,
     pub cell: Vec3,
     pub masks: Vec<u32>,
+    /// Per light triangle j with a cell unmarked, the other light triangles (indices in
+    /// the light's list, ascending) that might hide a point of j from some point of
+    /// such a cell: every triangle the separation test could not set apart from the hull
+    /// of j and such a cell's part in front of it. No other triangle can stand between
+    /// any point of an unmarked cell and j, so a shadow ray from the grid toward j meets
+    /// no light nearer than j but among them (the shader tests j and them instead of
+    /// traversing the lights). Empty where every cell is marked, or where more than
+    /// `MAX_HIDERS` would be listed.
+    pub hiders: Vec<Vec<u32>>,
 }
 
 impl LightCover {
@@ -77,6 +90,7 @@ impl LightCover {
             lo: Vec3::ZERO,
             cell: Vec3::ONE,
             masks: vec![0; count],
+            hiders: vec![Vec::new(); count],
         }
     }
 }
@@ -115,14 +129,15 @@ pub fn light_cover(lights: &TriangleSoup, grid: Option<[Vec3; 2]>) -> LightCover
         margin: SEPARATION_MARGIN * scale,
         pad: DVec3::splat(CELL_PAD_REL * scale + CELL_PAD_MM),
     };
-    let masks = (0..count)
+    let (masks, hiders) = (0..count)
         .into_par_iter()
         .map(|j| ctx.mask(j, lo, hi, cell))
-        .collect();
+        .unzip();
     LightCover {
         lo: lo.as_vec3(),
         cell: cell.as_vec3(),
         masks,
+        hiders,
     }
 }
 
@@ -265,12 +280,13 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    /// Triangle j's mask: all cells where the whole box is clear, else cell by cell.
-    fn mask(&self, j: usize, lo: DVec3, hi: DVec3, cell: DVec3) -> u32 {
+    /// Triangle j's mask (all cells where the whole box is clear, else cell by cell)
+    /// and its hiders over the unmarked cells (`LightCover::hiders`).
+    fn mask(&self, j: usize, lo: DVec3, hi: DVec3, cell: DVec3) -> (u32, Vec<u32>) {
         let t = self.tris[j];
         let n = (t[1] - t[0]).cross(t[2] - t[0]);
         if n.length() == 0.0 {
-            return 0;
+            return (0, Vec::new());
         }
         let front = Plane {
             n: n.normalize(),
@@ -278,27 +294,72 @@ impl Ctx<'_> {
         };
         let all = ALL_CELLS;
         if self.clear(j, &front, lo - self.pad, hi + self.pad) {
-            return all;
+            return (all, Vec::new());
         }
         let side = LIGHT_COVER_SIDE;
         let mut mask = 0;
+        let mut hiders = std::collections::BTreeSet::new();
+        let mut listed = true;
         for z in 0..side {
             for y in 0..side {
                 for x in 0..side {
                     let a = lo + cell * DVec3::new(x as f64, y as f64, z as f64);
-                    if self.clear(j, &front, a - self.pad, a + cell + self.pad) {
+                    let (blo, bhi) = (a - self.pad, a + cell + self.pad);
+                    if self.clear(j, &front, blo, bhi) {
                         mask |= 1 << (x + side * (y + side * z));
+                    } else if listed {
+                        listed = self.hiders(j, &front, blo, bhi, &mut hiders);
                     }
                 }
             }
         }
-        mask
+        let hiders = if listed {
+            hiders.into_iter().map(|k| k as u32).collect()
+        } else {
+            Vec::new()
+        };
+        (mask, hiders)
     }
 
     /// Whether no other light triangle with a corner in front of j's plane (only they
     /// can stand between j and a point in front of it) meets a segment from box [lo,
     /// hi]'s part in front of j's plane to j anywhere but on an edge or corner it shares
     /// with j.
+    fn clear(&self, j: usize, front: &Plane, lo: DVec3, hi: DVec3) -> bool {
+        self.walk(j, front, lo, hi, |_| false, |_| false)
+    }
+
+    /// Adds to `out` every other light triangle with a corner in front of j's plane
+    /// that `separated` cannot set apart from the hull of j and box [lo, hi]'s part in
+    /// front of it (those `clear` stops at, all of them); false once `out` would hold
+    /// more than `MAX_HIDERS`.
+    fn hiders(
+        &self,
+        j: usize,
+        front: &Plane,
+        lo: DVec3,
+        hi: DVec3,
+        out: &mut std::collections::BTreeSet<usize>,
+    ) -> bool {
+        let listed = out.clone();
+        self.walk(
+            j,
+            front,
+            lo,
+            hi,
+            |k| listed.contains(&k),
+            |k| {
+                out.insert(k);
+                out.len() <= MAX_HIDERS
+            },
+        )
+    }
+
+    /// Walks the other light triangles that might stand between box [lo, hi]'s part in
+    /// front of j's plane and j (a corner in front of the plane) and are not `skip`ped,
+    /// calls `hider` on each that `separated` cannot set apart from the hull of that
+    /// part and j, and stops with false where `hider` says so; true at the end (and
+    /// where nothing of the box lies in front of j: j lights none of it).
     ///
     /// The triangles are visited in order, whole groups and clusters at a time: one
     /// behind j's plane (by its sphere, with `plane_slack`) or outside the hull (by one
@@ -306,11 +367,19 @@ impl Ctx<'_> {
     /// others are tested triangle by triangle (a corner in front of the plane, then
     /// `separated`). The same triangles reach `separated` in the same order as testing
     /// each triangle first.
-    fn clear(&self, j: usize, front: &Plane, lo: DVec3, hi: DVec3) -> bool {
+    fn walk(
+        &self,
+        j: usize,
+        front: &Plane,
+        lo: DVec3,
+        hi: DVec3,
+        skip: impl Fn(usize) -> bool,
+        mut hider: impl FnMut(usize) -> bool,
+    ) -> bool {
         let t = self.tris[j];
         let mut pts = clip_box(lo, hi, front);
         if pts.is_empty() {
-            return true; // nothing of the box in front of j: j lights none of it
+            return true;
         }
         pts.extend_from_slice(&t);
         let faces = hull_faces(&pts, self.margin);
@@ -333,6 +402,7 @@ impl Ctx<'_> {
                 for k in c * CLUSTER..((c + 1) * CLUSTER).min(self.tris.len()) {
                     let tk = &self.tris[k];
                     if k == j
+                        || skip(k)
                         || !(all_in_front
                             || tk
                                 .iter()
@@ -340,7 +410,7 @@ impl Ctx<'_> {
                     {
                         continue;
                     }
-                    if !self.separated(&t, tk, &pts, &faces) {
+                    if !self.separated(&t, tk, &pts, &faces) && !hider(k) {
                         return false;
                     }
                 }
@@ -543,14 +613,16 @@ mod tests {
     }
 
     /// Every marked (triangle, cell): random segments from the cell's part in front of
-    /// the triangle to points of it cross no other light triangle before their end; and
-    /// the cover marks at least `want_share` of the cells. Returns how many segments from
-    /// unmarked cells were hidden (a check that the segments can find what hides).
+    /// the triangle to points of it cross no other light triangle before their end; from
+    /// an unmarked cell, only triangles of its hider list where it has one; and the
+    /// cover marks at least `want_share` of the cells. Returns how many segments from
+    /// unmarked cells were hidden (a check that the segments can find what hides), and
+    /// how many of those belong to a triangle with a hider list.
     fn check_marked_cells_are_clear(
         lights: &TriangleSoup,
         object: [Vec3; 2],
         want_share: f64,
-    ) -> usize {
+    ) -> (usize, usize) {
         let cover = light_cover(lights, Some(object));
         let tris: Vec<[DVec3; 3]> = lights
             .triangles
@@ -571,6 +643,7 @@ mod tests {
         let (lo, cell) = (cover.lo.as_dvec3(), cover.cell.as_dvec3());
         let mut tested = 0;
         let mut hidden_unmarked = 0;
+        let mut hidden_listed = 0;
         for (j, t) in tris.iter().enumerate() {
             let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
             for c in 0..LIGHT_COVER_CELLS as usize {
@@ -589,20 +662,38 @@ mod tests {
                     if n.dot(x - y) <= 0.0 {
                         continue;
                     }
-                    let hit = tris.iter().enumerate().any(|(k, tk)| {
-                        k != j && cross_at(x, y, tk).is_some_and(|w| w < 1.0 - 1e-9)
-                    });
+                    let hiding: Vec<usize> = (0..tris.len())
+                        .filter(|&k| {
+                            k != j && cross_at(x, y, &tris[k]).is_some_and(|w| w < 1.0 - 1e-9)
+                        })
+                        .collect();
+                    let hit = !hiding.is_empty();
                     if marked {
                         tested += 1;
                         assert!(!hit, "triangle {j}, cell {c}: marked but hidden from {x}");
                     } else if hit {
                         hidden_unmarked += 1;
+                        let list = &cover.hiders[j];
+                        if !list.is_empty() {
+                            hidden_listed += 1;
+                            for k in &hiding {
+                                assert!(
+                                    list.contains(&(*k as u32)),
+                                    "triangle {j}, cell {c}: hidden from {x} by {k}, not in {list:?}"
+                                );
+                            }
+                        }
                     }
                 }
             }
         }
         assert!(tested > 200, "only {tested} segments from marked cells");
-        hidden_unmarked
+        for (j, list) in cover.hiders.iter().enumerate() {
+            assert!(list.len() <= MAX_HIDERS && list.windows(2).all(|w| w[0] < w[1]));
+            assert!(!list.contains(&(j as u32)));
+            assert!(list.is_empty() || cover.masks[j] != ALL_CELLS);
+        }
+        (hidden_unmarked, hidden_listed)
     }
 
     #[test]
@@ -614,6 +705,19 @@ mod tests {
             Vec3::new(200.0, 200.0, 40.0),
         ];
         check_marked_cells_are_clear(&lights, object, 0.5);
+    }
+
+    #[test]
+    fn a_ring_close_over_a_part_lists_what_can_hide_each_triangle() {
+        // The demo's ring (30 / 5 mm) close over a part: from some cells the tube's inner
+        // face is seen at grazing angles, hidden by its neighbours, few of them each.
+        let lights = ring(30.0, 5.0, 48, 12, Vec3::new(0.0, 0.0, 60.0), Vec3::Z);
+        let object = [Vec3::new(-30.0, -30.0, 0.0), Vec3::new(30.0, 30.0, 30.0)];
+        let (hidden, listed) = check_marked_cells_are_clear(&lights, object, 0.5);
+        assert!(
+            hidden > 0 && listed > 0,
+            "{hidden} hidden segments, {listed} listed"
+        );
     }
 
     #[test]
@@ -650,7 +754,7 @@ mod tests {
             Vec3::new(0.3, 0.1, 1.0),
         );
         let object = [Vec3::new(-80.0, -60.0, -20.0), Vec3::new(70.0, 90.0, 30.0)];
-        assert!(check_marked_cells_are_clear(&lights, object, 0.1) > 0);
+        assert!(check_marked_cells_are_clear(&lights, object, 0.1).0 > 0);
     }
 
     #[test]
@@ -701,7 +805,7 @@ mod tests {
         assert_eq!(cover.masks[0], 0);
         assert_eq!(cover.masks[1], 0);
         assert_eq!(cover.masks[2], ALL_CELLS);
-        assert!(check_marked_cells_are_clear(&lights, object, 0.0) > 0);
+        assert!(check_marked_cells_are_clear(&lights, object, 0.0).0 > 0);
     }
 
     #[test]
