@@ -680,10 +680,6 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
 // and its own; 0 without extra rays or without `prm.cv_ray_sums`).
 float cv_rays_of_sample = 0.0;
 
-// `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
-// nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
-// label_of_ray; 0 without (no label read on samples that do not label). `label_only`:
-// the sample is traced for its label alone (its camera ray's first hit, then 0 returned).
 // A path's last trace put off (radiance_sample with `defer`): its ray left the object
 // at a bounce (TQ_CLOSEST_ESCAPE), so all that is left of the path is the light the ray
 // meets (the lights' closest hit, TQ_LIGHTS) and that light's term, added last. `slot`:
@@ -708,6 +704,10 @@ PathLookup path_left;
 // bounce's ray leaves the object ends here with that term left out and put off
 // (`path_put_off`, `path_left`): the caller adds it later, with the lookups of other
 // samples, so that lanes trace the lights together (see `main`).
+// `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
+// nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
+// label_of_ray; 0 without (no label read on samples that do not label). `label_only`:
+// the sample is traced for its label alone (its camera ray's first hit, then 0 returned).
 float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, bool label_only,
                       bool defer, bool lookup, out uint label_word) {
     label_word = 0u;
