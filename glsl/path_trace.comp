@@ -714,13 +714,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
     cv_rays_of_sample = 0.0;
     path_put_off = false;
     Sampler rng = sampler_init(PRM_SAMPLE_GEN, pixel, s, prm.seed);
-    vec3 o, d;
-    [[dont_flatten]] if (lookup) {
-        o = path_left.o;
-        d = path_left.d;
-    } else {
-        pixel_ray(px, py, rng, o, d);
-    }
+    vec3 o = path_left.o, d = path_left.d;
+    [[dont_flatten]] if (!lookup) pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
     // This sample's camera ray, kept for its A' (the extra camera rays' term below).
     uint extra = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC ? PRM_CV_EXTRA_RAYS : 0u;
