@@ -890,12 +890,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                         shadow_max = dist * 1.001;
                         shadow_light = dist * 0.999;
                         // No other light triangle can hide this one from the origin's
-                        // cell (its mask marks the cell): the trace tests it alone for
-                        // the lights' part.
-                        uint cell_bit;
-                        bool in_cover = light_cover_cell(origin, cell_bit);
-                        uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
-                        if (in_cover && ((lcover.x >> cell_bit) & 1u) != 0u) {
+                        // cell: the trace tests it alone for the lights' part.
+                        if (light_unhidden(li, origin)) {
                             light_j.a = lt.a.xyz; light_j.b = lt.b.xyz; light_j.c = lt.c.xyz;
                             light_j.prim = li;
                         }
@@ -906,7 +902,8 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                         // traversal would (the same test, ray and bounds); nearer than
                         // t_light a light hides the sample, else that hit stands for the
                         // lights' traversal as the triangle's own does above.
-                        else if (in_cover && lcover.z > 0u) {
+                        uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
+                        if (light_j.prim == NO_HIT && lcover.z > 0u && light_in_cover(origin)) {
                             TraceRay lr = trace_setup(origin, wi_w);
                             Hit hl = hit_none(shadow_max);
                             trace_tri_test(lt.a.xyz, lt.b.xyz, lt.c.xyz, li, 1u, lr, 0.0, hl);

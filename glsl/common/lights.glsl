@@ -113,17 +113,24 @@ bool misses_lights(vec3 o, vec3 d) {
     return missed;
 }
 
-// The cell of the light cover's grid that holds point x, as the bit of a light
-// triangle's mask (LightTri::cover.x, src/scene/light_cover.rs); false outside the grid
-// (a mask and a hider list, cover.yz, hold inside it only).
-bool light_cover_cell(vec3 x, out uint bit) {
-    bit = 0u;
+// Whether no other light triangle can hide light triangle `li` from point x: x lies in
+// a cell of the light cover's grid that the triangle's mask marks (LightTri::cover,
+// src/scene/light_cover.rs; outside the grid: no).
+bool light_unhidden(uint li, vec3 x) {
     vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
     float side = float(LIGHT_COVER_SIDE);
     if (!all(greaterThanEqual(c, vec3(0.0))) || !all(lessThan(c, vec3(side)))) return false;
     uvec3 ci = f2u(c);
-    bit = ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
-    return true;
+    uint bit = ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
+    return ((LIGHT_TRI_WEIGHTS[li - prm.light_first].cover.x >> bit) & 1u) != 0u;
+}
+
+// Whether x lies in the light cover's grid (`light_unhidden`; a light triangle's hider
+// list, LightTri::cover.yz, holds for such points only).
+bool light_in_cover(vec3 x) {
+    vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
+    float side = float(LIGHT_COVER_SIDE);
+    return all(greaterThanEqual(c, vec3(0.0))) && all(lessThan(c, vec3(side)));
 }
 
 // Emitter of scene triangle `tri` (a light triangle).
