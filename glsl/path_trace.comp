@@ -681,29 +681,36 @@ float cv_bsdf_weight(vec3 o, vec3 d, float pdf, vec3 n, Hit light, uint mask) {
 float cv_rays_of_sample = 0.0;
 
 // A path's last trace put off (radiance_sample with `defer`): its ray left the object
-// at a bounce (TQ_CLOSEST_ESCAPE), so all that is left of the path is the light the ray
-// meets (the lights' closest hit, TQ_LIGHTS) and that light's term, added last. `slot`:
-// the sample's place in main's window.
-struct PathLookup { vec3 o; float T; vec3 d; float prev_pdf; vec3 prev_n; float prev_nb; uint slot; };
+// at a bounce (TQ_CLOSEST_ESCAPE, TQ_LIGHT_CLOSEST_ESCAPE), so all that is left of the
+// path is the light the ray meets (the lights' closest hit, TQ_LIGHTS) and what it adds:
+// the control variate's pending term (cv_pending, cv_mask; the first bounce's ray of a
+// primary hit that has one) and the light's term, then the analytic light's extra camera
+// rays' term (`extra`, computed when the path was put off), in the order the sample
+// would have added them to its partial radiance L. `slot`: the sample's place in main's
+// window.
+struct PathLookup {
+    vec3 o; float T; vec3 d; float prev_pdf; vec3 prev_n; float prev_nb;
+    float L; float cv_pending; uint cv_mask; float extra; uint slot;
+};
 // Set by radiance_sample: whether its path was put off, and what is left of it.
 bool path_put_off = false;
 PathLookup path_left;
 
 // Lights' lookups of paths put off (`main`) can be gathered from several samples: a
-// sample whose last term is the light a bounce's ray meets after leaving the object.
-// Not where the analytic direct light's extra camera rays add their term after the path,
-// nor with `[render] light_shortcuts = false` (every ray traced as it comes: the
+// sample whose last terms are those of the light a bounce's ray meets after leaving the
+// object. Not with `[render] light_shortcuts = false` (every ray traced as it comes: the
 // comparison that tests/lights.rs `light_shortcuts_change_no_pixel` makes).
-#define PATH_DEFER (PRM_SHORTCUTS != 0u && !(PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && PRM_CV_EXTRA_RAYS > 0u))
+#define PATH_DEFER (PRM_SHORTCUTS != 0u)
 // Samples a window of main holds (their lookups, the lanes' put-off paths' lights, are
 // made together at its end).
 #define PATH_WINDOW 8u
 
-// One sample's radiance, or with `lookup` the last term of a path put off (`path_left`:
-// its ray's light; no sample is drawn). With `defer` (PATH_DEFER), a path whose
-// bounce's ray leaves the object ends here with that term left out and put off
-// (`path_put_off`, `path_left`): the caller adds it later, with the lookups of other
-// samples, so that lanes trace the lights together (see `main`).
+// One sample's radiance, or with `lookup` the radiance of a path put off (`path_left`:
+// its partial radiance and what its ray's light adds; no sample is drawn). With `defer`
+// (PATH_DEFER), a path whose bounce's ray leaves the object ends here with its last
+// terms left out and put off (`path_put_off`, `path_left`; the partial radiance
+// returned): the caller looks them up later, with the lookups of other samples, so that
+// lanes trace the lights together (see `main`).
 // `label_word`: with `want_label`, the label word of the primary ray's first hit (0:
 // nothing, or a triangle past the labelled ones, the view's light), as annotate.comp's
 // label_of_ray; 0 without (no label read on samples that do not label). `label_only`:
@@ -717,16 +724,18 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
     vec3 o = path_left.o, d = path_left.d;
     [[dont_flatten]] if (!lookup) pixel_ray(px, py, rng, o, d);
     Conductor cond = path_conductor();
-    // This sample's camera ray, kept for its A' (the extra camera rays' term below).
-    uint extra = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC ? PRM_CV_EXTRA_RAYS : 0u;
+    // This sample's camera ray, kept for its A' (the extra camera rays' term below; a
+    // lookup's was computed when its path was put off).
+    uint extra_rays = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC ? PRM_CV_EXTRA_RAYS : 0u;
+    uint extra = lookup ? 0u : extra_rays;
     vec3 o0 = o, d0 = d;
 
-    float L = 0.0;
+    float L = lookup ? path_left.L : 0.0;
     float T = lookup ? path_left.T : 1.0;
     // The control variate (primary hit): its rings (analytic_rings) and its BSDF-sample
     // term c D / pdf, awaiting the light the next trace meets (cv_bsdf_weight).
-    uint cv_mask = 0u;
-    float cv_pending = 0.0;
+    uint cv_mask = lookup ? path_left.cv_mask : 0u;
+    float cv_pending = lookup ? path_left.cv_pending : 0.0;
     float prev_pdf = lookup ? path_left.prev_pdf : 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = lookup ? path_left.prev_n : vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     float prev_nb = lookup ? path_left.prev_nb : 1.0;     // BSDF samples taken at the ray's origin for its direct light
@@ -743,13 +752,16 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
         if (!stop && !lookup && misses_lights(o, d)) kind = TQ_OBJECT;
         // A bounce's ray whose path can be put off: the lights only where it meets the
         // object (where it does not, the lights' hit is the lookup's).
-        if (defer && kind == TQ_CLOSEST && depth > 0u) kind = TQ_CLOSEST_ESCAPE;
+        bool escape = defer && depth > 0u && (kind == TQ_CLOSEST || kind == TQ_LIGHT_CLOSEST);
+        if (escape) kind = kind == TQ_CLOSEST ? TQ_CLOSEST_ESCAPE : TQ_LIGHT_CLOSEST_ESCAPE;
         TraceResult tq = trace_query_hinted(kind, o, d, 0.0, 3.0e38, 0.0,
                                             depth == 0u ? pix_hint : trace_no_hint());
-        if (kind == TQ_CLOSEST_ESCAPE && tq.blocked) {
+        if (escape && tq.blocked) {
+            // The extra rays' term is still computed (below), kept in path_left.extra.
             path_put_off = true;
-            path_left = PathLookup(o, T, d, prev_pdf, prev_n, prev_nb, 0u);
-            return L;
+            path_left = PathLookup(o, T, d, prev_pdf, prev_n, prev_nb, L, cv_pending,
+                                   cv_mask, 0.0, 0u);
+            break;
         }
         Hit h = tq.h;
         if (cv_pending != 0.0) {
@@ -1041,12 +1053,19 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             }
             if (pair) sum_a += ok ? a.y : 0.0;
         }
-        L += (sum_a - float(extra) * cv_a0) / float(extra + 1u);
+        float extra_term = (sum_a - float(extra) * cv_a0) / float(extra + 1u);
+        if (path_put_off) {
+            path_left.extra = extra_term;
+        } else {
+            L += extra_term;
+        }
         // The rays' mean, whose variance from sample to sample is their share of the
         // sample's (what more rays would average further), for `[render]
         // analytic_rays_max`'s choice.
         if (prm.cv_ray_sums != 0u) cv_rays_of_sample = (sum_a + cv_a0) / float(extra + 1u);
     }
+    // A lookup: its path's extra rays' term, last, as the sample would have added it.
+    if (lookup && extra_rays > 0u) L += path_left.extra;
     return L;
 }
 
@@ -1141,7 +1160,7 @@ void main() {
                                 PATH_DEFER && !label_only, looking, word);
         }
         if (looking) {
-            if (run) window_r[path_left.slot] += r;
+            if (run) window_r[path_left.slot] = r;
             looked_up++;
             continue;
         }

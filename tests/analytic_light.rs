@@ -430,6 +430,41 @@ fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
     );
 }
 
+/// Paths put off (glsl/path_trace.comp, `main`'s windows) under the analytic direct
+/// light with extra camera rays: a bounce's ray that leaves the glossy test body, the
+/// first bounce's too (whose control-variate term awaits the light it meets), ends its
+/// path but for the light it may meet, which is looked up at the window's end, and the
+/// extra rays' term is added after it. The image is the one of the rays traced as they
+/// come (`light_shortcuts = false`) byte for byte, on both backends, at 13 samples (a
+/// window of 8 and one of 5), with two BSDF samples at the first hit and 3 bounces, over
+/// grooves that vary under the pixel.
+#[test]
+fn paths_put_off_under_the_analytic_light_change_no_pixel() {
+    let cfg = |shortcuts: bool| {
+        let text = format!(
+            "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
+             [render]\nspp = 13\nbatch_spp = 13\nmax_bounces = 3\nseed = 11\n\
+             direct_light = \"analytic\"\nanalytic_rays = 4\nbsdf_samples = 2\n\
+             light_shortcuts = {shortcuts}\n\
+             [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
+             groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+        );
+        let mut cfg = SceneConfig::parse(&text).expect("test scene");
+        cfg.set_resolution(32, 24).expect("size");
+        cfg
+    };
+    for backend in common::BACKENDS {
+        let (a, face_a) = common::render_faces(&cfg(true), backend);
+        let (b, face_b) = common::render_faces(&cfg(false), backend);
+        let m = a.data.iter().map(|&x| x as f64).sum::<f64>() / a.data.len() as f64;
+        let differing = a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count();
+        eprintln!("{}: mean {m:.5}, {differing} pixels differ", backend.name());
+        assert!(m > 0.0, "a dark image tests nothing");
+        assert_eq!(differing, 0, "{}", backend.name());
+        assert_eq!(face_a, face_b, "{}: labels", backend.name());
+    }
+}
+
 /// `scene_mesh`'s plane stood up: a 30 x 30 mm wall in the plane y = 0 facing -y, from
 /// the table (z = 0) to z = 30 (the quad behind it, out of every ray's way).
 fn wall_mesh() -> Mesh {

@@ -61,6 +61,14 @@ const uint TQ_CLOSEST_ESCAPE = 7u; // as TQ_CLOSEST where the ray meets the obje
                                    // the hit TQ_CLOSEST would have (the lights' closest,
                                    // from the same bounds). The ray query answers as
                                    // TQ_CLOSEST.
+const uint TQ_LIGHT_CLOSEST_ESCAPE = 8u; // as TQ_LIGHT_CLOSEST where the ray meets the
+                                   // object (the object first, then the lights
+                                   // unbounded: the same light and hit); where it does
+                                   // not, as TQ_CLOSEST_ESCAPE (`blocked`, lights
+                                   // untraversed: with no object hit the first light is
+                                   // also the closest hit, the caller's TQ_LIGHTS query
+                                   // finds both). The ray query answers as
+                                   // TQ_LIGHT_CLOSEST.
 
 struct TraceResult {
     Hit h;
@@ -143,7 +151,7 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
         if (one || step == 1u) break;
         res.light = h;
         if (kind == TQ_LIGHTS) break;
-        if (kind == TQ_LIGHT_CLOSEST) {
+        if (kind == TQ_LIGHT_CLOSEST || kind == TQ_LIGHT_CLOSEST_ESCAPE) {
             mask = 0xffu;   // then the closest hit over both, as TQ_CLOSEST
             continue;
         }
@@ -509,7 +517,10 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
     TraceResult res;
     res.blocked = false;
     res.light = hit_none(3.0e38);
-    bool closest = kind == TQ_CLOSEST || kind == TQ_CLOSEST_ESCAPE;
+    bool closest = kind == TQ_CLOSEST || kind == TQ_CLOSEST_ESCAPE
+        || kind == TQ_LIGHT_CLOSEST_ESCAPE;
+    bool escape = kind == TQ_CLOSEST_ESCAPE || kind == TQ_LIGHT_CLOSEST_ESCAPE;
+    Hit h_object;   // TQ_LIGHT_CLOSEST_ESCAPE: the object's closest hit (step 0)
     uint level = closest || kind == TQ_BLOCKED || kind == TQ_OBJECT ? 0u : 1u;
     bool any = kind == TQ_BLOCKED;
     Hit h = hit_none(tmax);
@@ -549,11 +560,16 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
         }
         if (step == 1u || kind == TQ_OBJECT) break;
         if (closest) {
-            // No object hit: the lights' part left to the caller (TQ_CLOSEST_ESCAPE).
-            if (kind == TQ_CLOSEST_ESCAPE && h.prim == NO_HIT) {
+            // No object hit: the lights' part left to the caller (TQ_CLOSEST_ESCAPE,
+            // TQ_LIGHT_CLOSEST_ESCAPE).
+            if (escape && h.prim == NO_HIT) {
                 res.blocked = true;
                 break;
             }
+            // TQ_LIGHT_CLOSEST_ESCAPE: the lights unbounded (the first light, occluders
+            // ignored), compared with the object's hit after the loop.
+            h_object = h;
+            if (kind == TQ_LIGHT_CLOSEST_ESCAPE) h = hit_none(tmax);
             level = 1u;
         } else if (kind == TQ_BLOCKED) {
             if (h.prim != NO_HIT) break;
@@ -577,6 +593,13 @@ TraceResult trace_query_hinted(uint kind, vec3 o, vec3 d, float tmin, float tmax
         }
     }
     if (any) res.blocked = res.blocked || h.prim != NO_HIT;
+    // The closest hit of TQ_LIGHT_CLOSEST_ESCAPE: the light's where it is nearer than the
+    // object's (at equal distance the object's, whose index is lower: what TQ_LIGHT_CLOSEST's
+    // object traversal bounded by the light's hit keeps).
+    if (kind == TQ_LIGHT_CLOSEST_ESCAPE && !res.blocked) {
+        res.light = h;
+        if (!(h.prim != NO_HIT && h.t < h_object.t)) h = h_object;
+    }
     res.h = hit_finish(h);
     res.light = hit_finish(res.light);
     return res;
