@@ -2,8 +2,9 @@
 //! this device (lavapipe: saturating, NaN to 0) over their callers' ranges (f2u below
 //! 2^24, the octahedral normals' codes included; f2i below 2^22 in magnitude), so the path
 //! tracer's images did not change when it took them (docs/benchmarks/rendering.md, "What
-//! lavapipe compiles lane by lane"); and the shader's octahedral normals
-//! (glsl/common/octahedral.glsl) are their CPU mirror's (`scene::curved::decode_normal`).
+//! lavapipe compiles lane by lane"); the shader's octahedral normals
+//! (glsl/common/octahedral.glsl) are their CPU mirror's (`scene::curved::decode_normal`);
+//! and a direction in one word (`rec_pack`, `rec_unpack`) comes back within its rounding.
 
 mod common;
 
@@ -175,4 +176,29 @@ fn octahedral_normals_decode_as_their_cpu_mirror() {
             .max((n[2] - want.z).abs());
         assert!(err < 1e-5, "code {code}: shader {n:?}, CPU {want:?}");
     }
+}
+
+/// A direction through `rec_pack` and `rec_unpack` (glsl/common/octahedral.glsl: one word,
+/// 16 bits an octahedral axis; the analytic light's recorded ring vertices) comes back
+/// within 1e-4 of itself as a unit vector, all round the sphere and at lengths from 0.01
+/// to 100 (glsl/convert_check.comp `rec_direction`), and the rounding is there (not
+/// the identity).
+#[test]
+fn directions_in_one_word_round_trip() {
+    let xs: Vec<f32> = inputs().into_iter().filter(|x| x.is_finite()).collect();
+    let (_, normals) = run_checks(&xs);
+    let moved: Vec<f32> = normals
+        .iter()
+        .map(|n| n[3])
+        .filter(|m| !m.is_nan())
+        .collect();
+    assert!(moved.len() > 10_000, "{} directions", moved.len());
+    let worst = moved.iter().fold(0.0f32, |a, &m| a.max(m));
+    let mean = moved.iter().map(|&m| m as f64).sum::<f64>() / moved.len() as f64;
+    eprintln!(
+        "{} directions: moved {mean:.2e} on average, {worst:.2e} at most",
+        moved.len()
+    );
+    assert!(worst < 1e-4, "a direction moved by {worst:e}");
+    assert!(mean > 1e-7, "no rounding at all: {mean:e}");
 }

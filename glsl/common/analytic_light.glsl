@@ -96,7 +96,13 @@ float edge_z(vec3 a, vec3 b) {
 // of at most REC_LOOP_VERTS vertices (a ring whose loops are longer is not recorded).
 #define REC_RINGS 2u
 #define REC_LOOP_VERTS 64u
-vec3 rec_w[2u * REC_RINGS * REC_LOOP_VERTS];
+// Each vertex as its unit direction in one word (rec_pack): lavapipe reads a private
+// array at any index but a constant one a lane at a time, a scalar load and insert per
+// lane and component (docs/benchmarks/dataset.md, "The recorded vertices in one word"),
+// so a vec3 cost three such loads a vertex where this costs one. The extra rays' closed
+// form A' need only be one function of the camera ray: directions rounded by at most
+// 6.3e-5 rad keep the estimate unbiased.
+uint rec_w[2u * REC_RINGS * REC_LOOP_VERTS];
 uint rec_n[2u * REC_RINGS];   // vertices of loop i (ring i / 2, its lo loop first)
 float rec_le[REC_RINGS];      // the ring's radiance
 // A cone holding the ring's recorded vertices as seen from the recording point: unit
@@ -140,7 +146,7 @@ struct Loop {
 // Vertex w (world) kept as the loop's next.
 void loop_keep(inout Loop lp, vec3 ns, vec3 ng, Lobe l, vec3 w) {
     if (lp.rec >= 0) {
-        if (lp.n < REC_LOOP_VERTS) rec_w[uint(lp.rec) * REC_LOOP_VERTS + lp.n] = w;
+        if (lp.n < REC_LOOP_VERTS) rec_w[uint(lp.rec) * REC_LOOP_VERTS + lp.n] = rec_pack(w);
         lp.above = lp.above && dot(w, ng) > 0.0;
     } else {
         vec3 v = lobe_point(l, ns, ng, w);
@@ -489,13 +495,13 @@ float analytic_rings(Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor, out uint ma
 vec4 recorded_cone(uint r) {
     vec3 axis = vec3(0.0);
     for (uint i = 2u * r; i < 2u * r + 2u; i++) {
-        for (uint j = 0u; j < rec_n[i]; j++) axis += normalize(rec_w[i * REC_LOOP_VERTS + j]);
+        for (uint j = 0u; j < rec_n[i]; j++) axis += normalize(rec_unpack(rec_w[i * REC_LOOP_VERTS + j]));
     }
     axis = normalize(axis);
     float c = 1.0;
     for (uint i = 2u * r; i < 2u * r + 2u; i++) {
         for (uint j = 0u; j < rec_n[i]; j++) {
-            c = min(c, dot(normalize(rec_w[i * REC_LOOP_VERTS + j]), axis));
+            c = min(c, dot(normalize(rec_unpack(rec_w[i * REC_LOOP_VERTS + j])), axis));
         }
     }
     return vec4(axis, c > 0.0 ? sqrt(max(1.0 - c * c, 0.0)) : 2.0);
@@ -555,8 +561,8 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r) {
 // the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The
 // lobes' widths are taken as reciprocals and the edges from edge_z_unit
 // (roundings of their own: A' needs only to be one function of the camera ray). Each
-// vertex is read once for both lobes (a private array's read at a per-lane index is a
-// load a lane on lavapipe; the lane-uniform loop below makes it one vector load) and
+// vertex is read once for both lobes (a private array's read at any but a constant
+// index is a load a lane on lavapipe, one word a vertex: rec_w) and
 // the two sums give the loop's body independent work; each sum is what a pass of its
 // own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
 // of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
@@ -567,18 +573,17 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     vec3 t11 = l1.t1 * (1.0 / l1.a1), t21 = l1.t2 * (1.0 / l1.a2);
     uint n = rec_n[i];
     // (A loop the table's clip emptied, n = 0: any unit vector, whose one edge is 0.)
-    vec3 w = n > 0u ? rec_w[base] : l0.r;
+    vec3 w = n > 0u ? rec_unpack(rec_w[base]) : l0.r;
     vec3 first0 = recorded_point(w, t10, t20, l0.r);
     vec3 first1 = recorded_point(w, t11, t21, l1.r);
     vec3 prev0 = first0, prev1 = first1;
     float sum0 = 0.0, sum1 = 0.0;
     bool ab0 = n == 0u || first0.z > 0.0, ab1 = n == 0u || first1.z > 0.0;
-    // To the subgroup's longest loop, so that j (and with it the private array's index)
-    // is one value for all lanes: lavapipe then reads rec_w with one vector load instead
-    // of a load per lane; a lane past its own loop keeps its sums.
+    // To the subgroup's longest loop, so that j is one value for all lanes; a lane past
+    // its own loop keeps its sums.
     uint n_all = subgroupMax(n);
     for (uint j = 1u; j < n_all; j++) {
-        w = rec_w[base + j];
+        w = rec_unpack(rec_w[base + j]);
         if (j < n) {
             vec3 v0 = recorded_point(w, t10, t20, l0.r);
             vec3 v1 = recorded_point(w, t11, t21, l1.r);

@@ -1,6 +1,6 @@
 // Octahedral normals: a unit normal coded as one float, the integer u * OCT_LEVELS + v
-// (Tri's w; scene::curved::encode_normal, decode_normal its CPU mirror). Needs
-// interface.glsl (OCT_LEVELS, OCT_STEPS).
+// (Tri's w; scene::curved::encode_normal, decode_normal its CPU mirror); and a direction
+// in one word (rec_pack, rec_unpack). Needs interface.glsl (OCT_LEVELS, OCT_STEPS).
 #ifndef OCTAHEDRAL_GLSL
 #define OCTAHEDRAL_GLSL
 #include "convert.glsl"
@@ -14,5 +14,29 @@ vec3 oct_decode(float code) {
                  (1.0 - abs(e.x)) * (e.y >= 0.0 ? 1.0 : -1.0));
     }
     return normalize(vec3(e, z));
+}
+// Direction w (any nonzero length) in one word: its octahedral projection (the unit
+// octahedron's face point, the lower half folded out) at 16 bits an axis, at most 6.3e-5
+// rad of rounding (the analytic light's recorded ring vertices: analytic_light.glsl
+// rec_w; test `directions_in_one_word_round_trip`).
+uint rec_pack(vec3 w) {
+    vec3 a = abs(w);
+    vec2 p = w.xy / (a.x + a.y + a.z);
+    if (w.z < 0.0) {
+        p = (1.0 - abs(p.yx)) * vec2(p.x >= 0.0 ? 1.0 : -1.0, p.y >= 0.0 ? 1.0 : -1.0);
+    }
+    uint qx = min(f2u((p.x + 1.0) * 32767.5 + 0.5), 65535u);
+    uint qy = min(f2u((p.y + 1.0) * 32767.5 + 0.5), 65535u);
+    return qx | (qy << 16);
+}
+
+// The direction of a rec_pack word (not unit length; its users normalise).
+vec3 rec_unpack(uint code) {
+    vec2 p = vec2(float(code & 0xffffu), float(code >> 16)) * (1.0 / 32767.5) - 1.0;
+    float z = 1.0 - abs(p.x) - abs(p.y);
+    if (z < 0.0) {
+        p = (1.0 - abs(p.yx)) * vec2(p.x >= 0.0 ? 1.0 : -1.0, p.y >= 0.0 ? 1.0 : -1.0);
+    }
+    return vec3(p, z);
 }
 #endif
