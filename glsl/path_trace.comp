@@ -1105,13 +1105,15 @@ void main() {
     vec2 rays = vec2(0.0);
     seg_memo_clear();
     // The samples go in windows of PATH_WINDOW. A path whose bounce's ray leaves the
-    // object is put off with its last term, the light that ray meets (radiance_sample's
-    // `defer`); at the window's end the lanes look their put-off paths' lights up
-    // together (`lookup`), a lane its first, then its second, ..., so that one traversal
-    // of the lights serves the lookups of many lanes where each sample's bounces ran one
-    // for the few lanes whose rays came near a light (lanes run a traversal together, to
-    // the longest). Then the window's samples are added to the pixel's sums in sample
-    // order: the same sums, bit for bit (the term put off is a path's last).
+    // object is put off with its last terms, those of the light that ray meets
+    // (radiance_sample's `defer`); at the window's end the lanes look their put-off
+    // paths' lights up together (`lookup`), a lane its first, then its second, ..., so
+    // that one traversal of the lights serves the lookups of many lanes where each
+    // sample's bounces ran one for the few lanes whose rays came near a light (lanes run
+    // a traversal together, to the longest). Then the window's samples are added to the
+    // pixel's sums in sample order: the same sums, bit for bit (a lookup finishes its
+    // sample from the partial radiance the path left, adding the terms put off in the
+    // order the sample would have).
     float window_r[PATH_WINDOW];
     float window_rays[PATH_WINDOW];
     PathLookup put_off[PATH_WINDOW];
