@@ -3,7 +3,8 @@
 //!
 //! - `#include "x.glsl"` resolves relative to the including file, then to glsl/.
 //! - A shader with a line `//! variants: a=DEFINE_A b=DEFINE_B` is compiled once per
-//!   variant with that define, as `<name>.<variant>`; otherwise once as `<name>`.
+//!   variant with that define, as `<name>.<variant>`; otherwise once as `<name>`. A
+//!   variant may set several defines joined by `+` (`as=DEFINE_A+DEFINE_S`).
 //! - A shader error fails the build with the file:line glslang reports.
 //! - Each output records a hash of its source, includes and defines; unchanged shaders
 //!   are not recompiled.
@@ -246,7 +247,7 @@ fn compile(
     opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
     opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
     opts.set_generate_debug_info();
-    if let Some(d) = define {
+    for d in define.into_iter().flat_map(|d| d.split('+')) {
         opts.add_macro_definition(d, Some("1"));
     }
     let glsl_dir = glsl.to_path_buf();

@@ -2,7 +2,8 @@
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
-//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE
+//! variants: rq=TRACE_RAY_QUERY sw=TRACE_SOFTWARE sw8=TRACE_SOFTWARE_WIDE rqs=TRACE_RAY_QUERY+SPLIT_PATHS sws=TRACE_SOFTWARE+SPLIT_PATHS sw8s=TRACE_SOFTWARE_WIDE+SPLIT_PATHS
+// (The variants ending in s: with SPLIT_PATHS, `[render] split_paths`, below.)
 // Unidirectional path tracer for inspection images: pinhole camera, rough conductor
 // object (materials per region: common/material.glsl), Lambertian table, lights (area
 // lights as emissive triangles: ring, bar, panel, dome; spot lights as points,
@@ -739,273 +740,350 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
     float prev_pdf = lookup ? path_left.prev_pdf : 0.0;   // solid-angle pdf of the BSDF sample that made this ray; 0 = camera
     vec3 prev_n = lookup ? path_left.prev_n : vec3(0.0); // geometric normal at the ray's origin (facing light pdf)
     float prev_nb = lookup ? path_left.prev_nb : 1.0;     // BSDF samples taken at the ray's origin for its direct light
-    // The path stopped with a control-variate term pending: one more trip through the
-    // loop's trace, for the light alone (every trace of the path is that one call: the
-    // shader compiles one traversal for it).
-    bool stop = false;
-    for (uint depth = lookup ? 1u : 0u; depth <= PRM_MAX_BOUNCES || stop; depth++) {
-        // The ray's closest hit; with a control-variate term pending also the first light
-        // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped
-        // or looked up.
-        uint kind = stop || lookup ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
-        // A ray that can meet no light: the object alone (the same hit, no light).
-        if (!stop && !lookup && misses_lights(o, d)) kind = TQ_OBJECT;
-        // A bounce's ray whose path can be put off: the lights only where it meets the
-        // object (where it does not, the lights' hit is the lookup's).
-        bool escape = defer && depth > 0u && (kind == TQ_CLOSEST || kind == TQ_LIGHT_CLOSEST);
-        if (escape) kind = kind == TQ_CLOSEST ? TQ_CLOSEST_ESCAPE : TQ_LIGHT_CLOSEST_ESCAPE;
-        TraceResult tq = trace_query_hinted(kind, o, d, 0.0, 3.0e38, 0.0,
-                                            depth == 0u ? pix_hint : trace_no_hint());
-        if (escape && tq.blocked) {
-            // The extra rays' term is still computed (below), kept in path_left.extra.
-            path_put_off = true;
-            path_left = PathLookup(o, T, d, prev_pdf, prev_n, prev_nb, L, cv_pending,
-                                   cv_mask, 0.0, 0u);
-            break;
-        }
-        Hit h = tq.h;
-        if (cv_pending != 0.0) {
-            L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, tq.light, cv_mask) * cv_pending;
+    // Split paths (`[render] split_paths`; the shader's variants with SPLIT_PATHS, so that
+    // the others are the path tracer without them, at no cost): each of the first hit's
+    // `bsdf_samples` BSDF directions continues as a path (a branch) of weight
+    // 1 / `bsdf_samples`, where otherwise only the path's own goes on and the others are
+    // traced to the first light they meet. Branch 0 is the path's own (from the camera);
+    // branch b > 0 starts again at the first hit, draws its direction there and goes on
+    // from depth 1. Each branch resolves its own control-variate term (its rings:
+    // cv_mask, set at the first hit); only the last can be put off (a lookup finishes
+    // one path). The first hit is kept in few registers (what the camera ray d0 and its
+    // triangle give again, the same values, is made again): its ray origin, shading
+    // normal, triangle and lobe width.
+#if defined(SPLIT_PATHS)
+    uint branches = lookup ? 1u : max(PRM_BSDF_SAMPLES, 1u);
+    float fbranches = float(branches);
+    vec3 v_origin = vec3(0.0), v_ns = vec3(0.0);
+    uint v_prim = NO_HIT;   // NO_HIT: no first hit kept (no branches)
+    float v_alpha = 0.0;
+    for (uint branch = 0u; branch < branches; branch++) {
+#else
+    const uint branch = 0u, branches = 1u;
+    const float fbranches = 1.0;
+    {
+#endif
+        // The path stopped with a control-variate term pending: one more trip through the
+        // loop's trace, for the light alone (every trace of the path is that one call: the
+        // shader compiles one traversal for it).
+        bool stop = false;
+        uint depth_first = lookup ? 1u : 0u;
+#if defined(SPLIT_PATHS)
+        if (branch > 0u) {
+            if (v_prim == NO_HIT) break;
+            // The first hit again: its geometric normal facing the camera ray, surface
+            // (the lobe as LEAN widened it) and frame.
+            vec3 v_ng = normalize(tri_normal(fetch_tri(v_prim)));
+            if (dot(v_ng, d0) > 0.0) v_ng = -v_ng;
+            Surface v_surf = surface_of(mat_word(v_prim) & 0xffu, cond);
+            v_surf.c.alpha = v_alpha;
+            vec3 tb, bt;
+            onb(v_ns, tb, bt);
+            vec3 v_wo = vec3(dot(-d0, tb), dot(-d0, bt), dot(-d0, v_ns));
+            // This branch's direction from there, its weight and pdf, and its
+            // control-variate term (cv_bsdf_weight's, as the path's own at step nl below).
+            vec3 u = vec3(sample_1d(rng), sample_2d(rng));
+            vec3 wi;
+            float weight, pdf;
+            bool sampled = surface_sample(v_surf, v_wo, u, wi, weight, pdf);
+            d = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * v_ns) : vec3(0.0);
+            o = v_origin;
+            T = weight / fbranches;
+            prev_pdf = pdf;
+            prev_n = v_ng;
+            prev_nb = 1.0;
             cv_pending = 0.0;
-        }
-        if (stop) break;
-        if (want_label && depth == 0u && h.prim != NO_HIT
-                && h.prim < uint(label_words.length())) {
-            label_word = UintRef(PT_ADDR(PT_LABEL_WORDS)).v[h.prim];
-        }
-        if (label_only) return 0.0;
-        if (h.prim == NO_HIT) break;   // no environment light
-        Tri t = fetch_tri(h.prim);
-        uint mat = mat_word(h.prim) & 0xffu;
-        uint word = mat_word(h.prim);
-        vec3 ng_raw = tri_normal(t);
-        vec3 ng = normalize(ng_raw);
-        if (mat == MAT_LIGHT) {
-            float cos_l = -dot(ng, d);
-            if (cos_l > 0.0) {
-                float w = 1.0;
-                if (prev_pdf > 0.0) {
-                    w = bsdf_mis_weight(h.prim, h.t, cos_l, o, prev_n, prev_pdf) / prev_nb;
-                }
-                L += T * tri_radiance(h.prim) * w;
+            if (cv_mask != 0u && sampled) {
+                Lobe lobe;
+                conductor_lobe(v_surf.c, v_wo, tb, bt, v_ns, lobe);
+                cv_pending = lobe.c * lobe_d(lobe, d) / pdf;
             }
-            break;
+            if (!sampled) continue;
+            if (!(T > 0.0) || dot(d, v_ng) <= 0.0) {
+                if (cv_pending == 0.0) continue;
+                stop = true;
+            }
+            depth_first = 1u;
         }
-        if (depth == PRM_MAX_BOUNCES) break;
-        Surface surf = surface_of(mat, cond);
-        vec3 p = hit_point(t, h.bary);
-        if (dot(ng, d) > 0.0) ng = -ng;
-        // Shading frame (surface_normal).
-        vec3 ns = surface_normal(h, d, p, ng, word, depth, surf);
-        vec3 tb, bt;
-        onb(ns, tb, bt);
-        vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
-        vec3 origin = offset_ray(p, ng);
+#endif
+        for (uint depth = depth_first; depth <= PRM_MAX_BOUNCES || stop; depth++) {
+            // The ray's closest hit; with a control-variate term pending also the first light
+            // on it with occluders ignored (cv_bsdf_weight), or that light alone if stopped
+            // or looked up.
+            uint kind = stop || lookup ? TQ_LIGHTS : cv_pending != 0.0 ? TQ_LIGHT_CLOSEST : TQ_CLOSEST;
+            // A ray that can meet no light: the object alone (the same hit, no light).
+            if (!stop && !lookup && misses_lights(o, d)) kind = TQ_OBJECT;
+            // A bounce's ray whose path can be put off: the lights only where it meets the
+            // object (where it does not, the lights' hit is the lookup's).
+            bool escape = defer && depth > 0u && branch + 1u == branches
+                && (kind == TQ_CLOSEST || kind == TQ_LIGHT_CLOSEST);
+            if (escape) kind = kind == TQ_CLOSEST ? TQ_CLOSEST_ESCAPE : TQ_LIGHT_CLOSEST_ESCAPE;
+            TraceResult tq = trace_query_hinted(kind, o, d, 0.0, 3.0e38, 0.0,
+                                                depth == 0u ? pix_hint : trace_no_hint());
+            if (escape && tq.blocked) {
+                // The extra rays' term is still computed (below), kept in path_left.extra.
+                path_put_off = true;
+                path_left = PathLookup(o, T, d, prev_pdf, prev_n, prev_nb, L, cv_pending,
+                                       cv_mask, 0.0, 0u);
+                break;
+            }
+            Hit h = tq.h;
+            if (cv_pending != 0.0) {
+                L -= cv_bsdf_weight(o, d, prev_pdf, prev_n, tq.light, cv_mask) * cv_pending;
+                cv_pending = 0.0;
+            }
+            if (stop) break;
+            if (want_label && depth == 0u && h.prim != NO_HIT
+                    && h.prim < uint(label_words.length())) {
+                label_word = UintRef(PT_ADDR(PT_LABEL_WORDS)).v[h.prim];
+            }
+            if (label_only) return 0.0;
+            if (h.prim == NO_HIT) break;   // no environment light
+            Tri t = fetch_tri(h.prim);
+            uint mat = mat_word(h.prim) & 0xffu;
+            uint word = mat_word(h.prim);
+            vec3 ng_raw = tri_normal(t);
+            vec3 ng = normalize(ng_raw);
+            if (mat == MAT_LIGHT) {
+                float cos_l = -dot(ng, d);
+                if (cos_l > 0.0) {
+                    float w = 1.0;
+                    if (prev_pdf > 0.0) {
+                        w = bsdf_mis_weight(h.prim, h.t, cos_l, o, prev_n, prev_pdf) / prev_nb;
+                    }
+                    L += T * tri_radiance(h.prim) * w;
+                }
+                break;
+            }
+            if (depth == PRM_MAX_BOUNCES) break;
+            Surface surf = surface_of(mat, cond);
+            vec3 p = hit_point(t, h.bary);
+            if (dot(ng, d) > 0.0) ng = -ng;
+            // Shading frame (surface_normal).
+            vec3 ns = surface_normal(h, d, p, ng, word, depth, surf);
+            vec3 tb, bt;
+            onb(ns, tb, bt);
+            vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
+            vec3 origin = offset_ray(p, ng);
 
-        // Analytic direct light (control variate) at the primary hit of a conductor.
-        Lobe lobe;
-        bool cv = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && depth == 0u && !surf.diffuse
-            && PRM_EMITTER_COUNT > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
-        // A (closed form, over the rings of cv_rings) and G's light-sample term.
-        uint cv_rings = 0u;
-        float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, 1u, cv_rings) : 0.0;
-        float cv_nee_val = 0.0;
+            // Analytic direct light (control variate) at the primary hit of a conductor.
+            Lobe lobe;
+            bool cv = PRM_DIRECT_LIGHT == DIRECT_ANALYTIC && depth == 0u && !surf.diffuse
+                && PRM_EMITTER_COUNT > 0u && conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
+            // A (closed form, over the rings of cv_rings) and G's light-sample term.
+            uint cv_rings = 0u;
+            float cv_a = cv ? analytic_rings(lobe, origin, ns, ng, 1u, cv_rings) : 0.0;
+            float cv_nee_val = 0.0;
 
-        // Next-event estimation: a light by power, then a point on it (a spot light is
-        // a point: no MIS, it cannot be hit). At the camera ray's first hit
-        // `[render] light_samples` = K of them and `bsdf_samples` = M BSDF directions
-        // (below), each strategy's samples averaged under the one-sample MIS weights
-        // (which sum to 1 whatever K and M: unbiased; the counts are not put into the
-        // heuristic, which measured worse where the light sampler is the better one).
-        uint nl = depth == 0u ? max(PRM_LIGHT_SAMPLES, 1u) : 1u;
-        float fnl = float(nl);
-        uint nb = depth == 0u ? max(PRM_BSDF_SAMPLES, 1u) : 1u;
-        float fnb = float(nb);
-        // The first vertex's direct light in one loop with one trace call (lavapipe
-        // inlines a whole traversal at each call site): steps 0 to nl - 1 the light
-        // samples and their shadow rays, step nl the path's own BSDF sample (no trace),
-        // then the nb - 1 more BSDF directions and the first light each meets. The same
-        // samples drawn and the same terms added in the same order as one loop each.
-        uint lights = PRM_EMITTER_COUNT > 0u ? nl : 0u;
-        uint steps = PRM_EMITTER_COUNT > 0u ? nl + nb : 1u;
-        // The path's own BSDF sample (step nl): its direction (local), weight and pdf.
-        vec3 wi_path = vec3(0.0);
-        float weight = 0.0, pdf = 0.0;
-        bool sampled = false;
-        vec3 d_next = vec3(0.0);
-        for (uint k = 0u; k < steps; k++) {
-            // This step's trace: its query, direction, bounds, and whether it is made.
-            uint shadow = TQ_BLOCKED;
-            vec3 shadow_d = vec3(0.0);
-            float shadow_max = 0.0, shadow_light = 0.0, add = 0.0;
-            bool test = false;
-            float weight_j = 0.0, pdf_j = 0.0;
-            TraceHint light_j = trace_no_hint();
-            if (k < lights) {
-                float ue = sample_1d(rng);
-                uint ei = choose_emitter(ue);
-                LightBlock e = emitter_block(ei);
-                vec2 ul = sample_2d(rng);
-                // The sample's shadow ray (one trace for both kinds of light, below) and what
-                // it adds where nothing blocks it.
-                if (e.shape.z == LIGHT_SPOT) {
-                    vec3 to = e.pos.xyz - origin;
-                    float dist2 = dot(to, to);
-                    float dist = sqrt(dist2);
-                    vec3 wi_w = to / dist;
-                    float I = spot_intensity(e, -wi_w);
-                    vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
-                    if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
-                        float pdf_b;
-                        float f = surface_eval(surf, wo, wi, pdf_b);
-                        if (f > 0.0) {
-                            test = true;
-                            shadow_d = wi_w;
-                            shadow_max = dist;
-                            add = T * f * I / (dist2 * emitter_pdf(ei) * fnl);
+            // Next-event estimation: a light by power, then a point on it (a spot light is
+            // a point: no MIS, it cannot be hit). At the camera ray's first hit
+            // `[render] light_samples` = K of them and `bsdf_samples` = M BSDF directions
+            // (below), each strategy's samples averaged under the one-sample MIS weights
+            // (which sum to 1 whatever K and M: unbiased; the counts are not put into the
+            // heuristic, which measured worse where the light sampler is the better one).
+            uint nl = depth == 0u ? max(PRM_LIGHT_SAMPLES, 1u) : 1u;
+            float fnl = float(nl);
+            uint nb = depth == 0u ? max(PRM_BSDF_SAMPLES, 1u) : 1u;
+            float fnb = float(nb);
+            // The first vertex's direct light in one loop with one trace call (lavapipe
+            // inlines a whole traversal at each call site): steps 0 to nl - 1 the light
+            // samples and their shadow rays, step nl the path's own BSDF sample (no trace),
+            // then the nb - 1 more BSDF directions and the first light each meets. The same
+            // samples drawn and the same terms added in the same order as one loop each.
+            uint lights = PRM_EMITTER_COUNT > 0u ? nl : 0u;
+            // Split paths: the nb - 1 more directions are branches of their own (above).
+            uint steps = PRM_EMITTER_COUNT > 0u ? nl + (branches > 1u ? 1u : nb) : 1u;
+#if defined(SPLIT_PATHS)
+            if (depth == 0u) {
+                // The first hit, kept for the branches.
+                v_origin = origin;
+                v_ns = ns;
+                v_prim = h.prim;
+                v_alpha = surf.c.alpha;
+            }
+#endif
+            // The path's own BSDF sample (step nl): its direction (local), weight and pdf.
+            vec3 wi_path = vec3(0.0);
+            float weight = 0.0, pdf = 0.0;
+            bool sampled = false;
+            vec3 d_next = vec3(0.0);
+            for (uint k = 0u; k < steps; k++) {
+                // This step's trace: its query, direction, bounds, and whether it is made.
+                uint shadow = TQ_BLOCKED;
+                vec3 shadow_d = vec3(0.0);
+                float shadow_max = 0.0, shadow_light = 0.0, add = 0.0;
+                bool test = false;
+                float weight_j = 0.0, pdf_j = 0.0;
+                TraceHint light_j = trace_no_hint();
+                if (k < lights) {
+                    float ue = sample_1d(rng);
+                    uint ei = choose_emitter(ue);
+                    LightBlock e = emitter_block(ei);
+                    vec2 ul = sample_2d(rng);
+                    // The sample's shadow ray (one trace for both kinds of light, below) and what
+                    // it adds where nothing blocks it.
+                    if (e.shape.z == LIGHT_SPOT) {
+                        vec3 to = e.pos.xyz - origin;
+                        float dist2 = dot(to, to);
+                        float dist = sqrt(dist2);
+                        vec3 wi_w = to / dist;
+                        float I = spot_intensity(e, -wi_w);
+                        vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                        if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
+                            float pdf_b;
+                            float f = surface_eval(surf, wo, wi, pdf_b);
+                            if (f > 0.0) {
+                                test = true;
+                                shadow_d = wi_w;
+                                shadow_max = dist;
+                                add = T * f * I / (dist2 * emitter_pdf(ei) * fnl);
+                            }
                         }
+                    } else {
+                        float area_pdf;
+                        uint li = choose_light_pdf(e, ue, origin, ng, emitter_pdf(ei), area_pdf);
+                        Tri lt = fetch_tri(li);
+                        float su = sqrt(ul.x);
+                        float u2 = ul.y;
+                        vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
+                        vec3 to = q - origin;
+                        float dist2 = dot(to, to);
+                        float dist = sqrt(dist2);
+                        vec3 wi_w = to / dist;
+                        float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
+                        vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                        bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
+                        // The control variate's light sample: on a ring it uses (cv_rings; such a
+                        // ring lies above both horizons, so the sample is also lit, up to rounding).
+                        bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0
+                            && ring_clip_keeps(ring_table_clip(e, origin), wi_w);
+                        float pdf_b = 0.0;
+                        float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
+                        float pdf_light = dist2 / cos_l * area_pdf;
+                        if (cv_light) {
+                            // The control variate's light sample: MIS weight times c D Le / pdf.
+                            cv_nee_val += pdf_light > 0.0
+                                ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
+                                    * e.emit.x / (pdf_light * fnl)
+                                : 0.0;
+                        }
+                        if (lit && f > 0.0) {
+                            // Visible: nothing up to the sampled point, or a light triangle no
+                            // nearer than it (up to rounding).
+                            test = true;
+                            shadow = TQ_LIGHT_VISIBLE;
+                            shadow_d = wi_w;
+                            shadow_max = dist * 1.001;
+                            shadow_light = dist * 0.999;
+                            // No other light triangle can hide this one from the origin's
+                            // cell: the trace tests it alone for the lights' part.
+                            if (light_unhidden(li, origin)) {
+                                light_j.a = lt.a.xyz; light_j.b = lt.b.xyz; light_j.c = lt.c.xyz;
+                                light_j.prim = li;
+                            }
+#if defined(TRACE_SOFTWARE)
+                            // Else, from the grid, only the triangle's hiders can stand in front
+                            // of it (LightTri::cover.yz, src/scene/light_cover.rs): it and they
+                            // tested alone give the lights' closest hit up to it, as their
+                            // traversal would (the same test, ray and bounds); nearer than
+                            // t_light a light hides the sample, else that hit stands for the
+                            // lights' traversal as the triangle's own does above.
+                            uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
+                            if (light_j.prim == NO_HIT && lcover.z > 0u && light_in_cover(origin)) {
+                                TraceRay lr = trace_setup(origin, wi_w);
+                                Hit hl = hit_none(shadow_max);
+                                trace_tri_test(lt.a.xyz, lt.b.xyz, lt.c.xyz, li, 1u, lr, 0.0, hl);
+                                for (uint m = 0u; m < lcover.z; m++) {
+                                    uint k = prm.light_first
+                                        + UintRef(PT_ADDR(PT_LIGHT_WEIGHTS)).v[lcover.y + m];
+                                    Tri tk = fetch_tri(k);
+                                    trace_tri_test(tk.a.xyz, tk.b.xyz, tk.c.xyz, k, 1u, lr, 0.0, hl);
+                                }
+                                if (hl.prim != NO_HIT && hl.t < shadow_light) {
+                                    test = false;   // hidden by another light triangle
+                                } else if (hl.prim != NO_HIT) {
+                                    Tri th = fetch_tri(hl.prim);
+                                    light_j.a = th.a.xyz; light_j.b = th.b.xyz; light_j.c = th.c.xyz;
+                                    light_j.prim = hl.prim;
+                                }
+                            }
+#endif
+                            add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
+                        }
+                    }
+                } else if (k == lights) {
+                    // BSDF sampling continues the path.
+                    float u_lobe = sample_1d(rng);
+                    vec3 u = vec3(u_lobe, sample_2d(rng));
+                    sampled = surface_sample(surf, wo, u, wi_path, weight, pdf);
+                    d_next = sampled ? normalize(wi_path.x * tb + wi_path.y * bt + wi_path.z * ns) : vec3(0.0);
+                    if (cv_rings != 0u) {
+                        cv_mask = cv_rings;
+                        L += cv_a - cv_nee_val;
+                        cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
                     }
                 } else {
-                    float area_pdf;
-                    uint li = choose_light_pdf(e, ue, origin, ng, emitter_pdf(ei), area_pdf);
-                    Tri lt = fetch_tri(li);
-                    float su = sqrt(ul.x);
-                    float u2 = ul.y;
-                    vec3 q = lt.a.xyz * (1.0 - su) + lt.b.xyz * (su * (1.0 - u2)) + lt.c.xyz * (su * u2);
-                    vec3 to = q - origin;
-                    float dist2 = dot(to, to);
-                    float dist = sqrt(dist2);
-                    vec3 wi_w = to / dist;
-                    float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
-                    vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
-                    bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
-                    // The control variate's light sample: on a ring it uses (cv_rings; such a
-                    // ring lies above both horizons, so the sample is also lit, up to rounding).
-                    bool cv_light = ei < 32u && (cv_rings & (1u << ei)) != 0u && cos_l > 0.0
-                        && ring_clip_keeps(ring_table_clip(e, origin), wi_w);
-                    float pdf_b = 0.0;
-                    float f = lit || cv_light ? surface_eval(surf, wo, wi, pdf_b) : 0.0;
-                    float pdf_light = dist2 / cos_l * area_pdf;
-                    if (cv_light) {
-                        // The control variate's light sample: MIS weight times c D Le / pdf.
-                        cv_nee_val += pdf_light > 0.0
-                            ? power_heuristic(pdf_light, pdf_b) * lobe.c * lobe_d(lobe, wi_w)
-                                * e.emit.x / (pdf_light * fnl)
-                            : 0.0;
+                    // More BSDF samples for the direct light alone (`[render] bsdf_samples` =
+                    // M at the camera ray's first hit): each of M directions (the path's own
+                    // and M - 1 more) adds the light it meets with its MIS weight over M, and
+                    // the control variate's term likewise; only the path's own direction goes
+                    // on. The trace: the first light on the ray with occluders ignored, and
+                    // whether the object hides it (the answer the closest hit would give, as
+                    // a light sample's shadow test).
+                    vec3 uj = vec3(sample_1d(rng), sample_2d(rng));
+                    vec3 wj;
+                    test = surface_sample(surf, wo, uj, wj, weight_j, pdf_j);
+                    if (test) shadow_d = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
+                    // A direction that can meet no light adds nothing: no trace.
+                    test = test && !misses_lights(origin, shadow_d);
+                    shadow = TQ_LIGHT_SEEN;
+                    shadow_max = 3.0e38;
+                }
+                TraceResult seen;
+                seen.blocked = true;
+                seen.light = hit_none(3.0e38);
+                if (test) seen = trace_query_hinted(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light, light_j);
+                if (k < lights) {
+                    if (test && !seen.blocked) L += add;
+                } else if (k > lights && test && seen.light.prim != NO_HIT) {
+                    // Counted where the light met faces the ray above the surface.
+                    Hit lj = seen.light;
+                    vec3 dj = shadow_d;
+                    float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
+                    if (cos_j > 0.0 && dot(dj, ng) > 0.0 && !seen.blocked) {
+                        L += T * weight_j * tri_radiance(lj.prim)
+                            * bsdf_mis_weight(lj.prim, lj.t, cos_j, origin, ng, pdf_j) / fnb;
                     }
-                    if (lit && f > 0.0) {
-                        // Visible: nothing up to the sampled point, or a light triangle no
-                        // nearer than it (up to rounding).
-                        test = true;
-                        shadow = TQ_LIGHT_VISIBLE;
-                        shadow_d = wi_w;
-                        shadow_max = dist * 1.001;
-                        shadow_light = dist * 0.999;
-                        // No other light triangle can hide this one from the origin's
-                        // cell: the trace tests it alone for the lights' part.
-                        if (light_unhidden(li, origin)) {
-                            light_j.a = lt.a.xyz; light_j.b = lt.b.xyz; light_j.c = lt.c.xyz;
-                            light_j.prim = li;
-                        }
-#if defined(TRACE_SOFTWARE)
-                        // Else, from the grid, only the triangle's hiders can stand in front
-                        // of it (LightTri::cover.yz, src/scene/light_cover.rs): it and they
-                        // tested alone give the lights' closest hit up to it, as their
-                        // traversal would (the same test, ray and bounds); nearer than
-                        // t_light a light hides the sample, else that hit stands for the
-                        // lights' traversal as the triangle's own does above.
-                        uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
-                        if (light_j.prim == NO_HIT && lcover.z > 0u && light_in_cover(origin)) {
-                            TraceRay lr = trace_setup(origin, wi_w);
-                            Hit hl = hit_none(shadow_max);
-                            trace_tri_test(lt.a.xyz, lt.b.xyz, lt.c.xyz, li, 1u, lr, 0.0, hl);
-                            for (uint m = 0u; m < lcover.z; m++) {
-                                uint k = prm.light_first
-                                    + UintRef(PT_ADDR(PT_LIGHT_WEIGHTS)).v[lcover.y + m];
-                                Tri tk = fetch_tri(k);
-                                trace_tri_test(tk.a.xyz, tk.b.xyz, tk.c.xyz, k, 1u, lr, 0.0, hl);
-                            }
-                            if (hl.prim != NO_HIT && hl.t < shadow_light) {
-                                test = false;   // hidden by another light triangle
-                            } else if (hl.prim != NO_HIT) {
-                                Tri th = fetch_tri(hl.prim);
-                                light_j.a = th.a.xyz; light_j.b = th.b.xyz; light_j.c = th.c.xyz;
-                                light_j.prim = hl.prim;
-                            }
-                        }
-#endif
-                        add = T * f * e.emit.x * power_heuristic(pdf_light, pdf_b) / (pdf_light * fnl);
+                    if (cv_rings != 0u) {
+                        L -= cv_bsdf_weight(origin, dj, pdf_j, ng, lj, cv_rings) * lobe.c * lobe_d(lobe, dj) / pdf_j;
                     }
                 }
-            } else if (k == lights) {
-                // BSDF sampling continues the path.
-                float u_lobe = sample_1d(rng);
-                vec3 u = vec3(u_lobe, sample_2d(rng));
-                sampled = surface_sample(surf, wo, u, wi_path, weight, pdf);
-                d_next = sampled ? normalize(wi_path.x * tb + wi_path.y * bt + wi_path.z * ns) : vec3(0.0);
-                if (cv_rings != 0u) {
-                    cv_mask = cv_rings;
-                    L += cv_a - cv_nee_val;
-                    cv_pending = sampled ? lobe.c * lobe_d(lobe, d_next) / pdf : 0.0;
-                }
-            } else {
-                // More BSDF samples for the direct light alone (`[render] bsdf_samples` =
-                // M at the camera ray's first hit): each of M directions (the path's own
-                // and M - 1 more) adds the light it meets with its MIS weight over M, and
-                // the control variate's term likewise; only the path's own direction goes
-                // on. The trace: the first light on the ray with occluders ignored, and
-                // whether the object hides it (the answer the closest hit would give, as
-                // a light sample's shadow test).
-                vec3 uj = vec3(sample_1d(rng), sample_2d(rng));
-                vec3 wj;
-                test = surface_sample(surf, wo, uj, wj, weight_j, pdf_j);
-                if (test) shadow_d = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
-                // A direction that can meet no light adds nothing: no trace.
-                test = test && !misses_lights(origin, shadow_d);
-                shadow = TQ_LIGHT_SEEN;
-                shadow_max = 3.0e38;
             }
-            TraceResult seen;
-            seen.blocked = true;
-            seen.light = hit_none(3.0e38);
-            if (test) seen = trace_query_hinted(shadow, origin, shadow_d, 0.0, shadow_max, shadow_light, light_j);
-            if (k < lights) {
-                if (test && !seen.blocked) L += add;
-            } else if (k > lights && test && seen.light.prim != NO_HIT) {
-                // Counted where the light met faces the ray above the surface.
-                Hit lj = seen.light;
-                vec3 dj = shadow_d;
-                float cos_j = -dot(normalize(tri_normal(fetch_tri(lj.prim))), dj);
-                if (cos_j > 0.0 && dot(dj, ng) > 0.0 && !seen.blocked) {
-                    L += T * weight_j * tri_radiance(lj.prim)
-                        * bsdf_mis_weight(lj.prim, lj.t, cos_j, origin, ng, pdf_j) / fnb;
-                }
-                if (cv_rings != 0u) {
-                    L -= cv_bsdf_weight(origin, dj, pdf_j, ng, lj, cv_rings) * lobe.c * lobe_d(lobe, dj) / pdf_j;
-                }
+            if (!sampled) break;
+            // The next ray (also where a pending control-variate term is resolved when the
+            // path stops here).
+            prev_pdf = pdf;
+            prev_n = ng;
+            // (A split path's branches carry 1 / nb in T: each counts its light in full.)
+            prev_nb = branches > 1u ? 1.0 : fnb;
+            o = origin;
+            d = d_next;
+            T *= weight;
+            if (depth == 0u && branches > 1u) T /= fbranches;
+            bool end = !(T > 0.0);
+            if (!end && depth >= 3u) {
+                // (On the throughput without the branches' 1 / nb.)
+                float q = min(T * fbranches, 0.95);
+                if (sample_1d(rng) >= q) break;
+                T /= q;
             }
-        }
-        if (!sampled) break;
-        // The next ray (also where a pending control-variate term is resolved when the
-        // path stops here).
-        prev_pdf = pdf;
-        prev_n = ng;
-        prev_nb = fnb;
-        o = origin;
-        d = d_next;
-        T *= weight;
-        bool end = !(T > 0.0);
-        if (!end && depth >= 3u) {
-            float q = min(T, 0.95);
-            if (sample_1d(rng) >= q) break;
-            T /= q;
-        }
-        end = end || dot(d, ng) <= 0.0;   // reflected into the surface by a shading normal
-        // A primary BSDF sample whose path stops before its next trace: that trace
-        // still resolves the control variate's pending term.
-        if (end) {
-            if (cv_pending == 0.0) break;
-            stop = true;
+            end = end || dot(d, ng) <= 0.0;   // reflected into the surface by a shading normal
+            // A primary BSDF sample whose path stops before its next trace: that trace
+            // still resolves the control variate's pending term.
+            if (end) {
+                if (cv_pending == 0.0) break;
+                stop = true;
+            }
         }
     }
     // More camera rays for the closed form alone (`[render] analytic_rays` = M + 1): the

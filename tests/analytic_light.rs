@@ -430,6 +430,135 @@ fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
     );
 }
 
+/// Split paths (`[render] split_paths = true`): the first hit's BSDF directions each go
+/// on as a path of weight 1 / `bsdf_samples`. On the glossy test body seen at 20 degrees
+/// on a bright table (albedo 0.5: the light after the first bounce is there), 3 bounces,
+/// the light past the first hit of each seed's image is isolated as its render with 3
+/// bounces less the one with 1 (the same samples at the first hit, so the difference is
+/// exactly what the paths add past it). Over seeds, its means over face A's inner pixels
+/// and over the other pixels equal the unsplit render's within 4 standard errors, on
+/// both backends (the split changes which rays are traced, not how), and its pixel
+/// variance falls at least 1.5x with 3 branches.
+#[test]
+fn split_paths_keep_the_mean_of_the_light_past_the_first_hit() {
+    const SEEDS: u32 = 6;
+    const W: usize = 40;
+    const H: usize = 30;
+    let cfg = |split: bool, bounces: u32, seed: u32| {
+        let text = format!(
+            "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
+             [render]\nspp = 8\nbatch_spp = 8\nmax_bounces = {bounces}\nseed = {seed}\n\
+             direct_light = \"analytic\"\nbsdf_samples = 3\nsplit_paths = {split}\n\
+             [table]\nalbedo = 0.5\n\
+             [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
+             groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+        );
+        let mut cfg = SceneConfig::parse(&text).expect("test scene");
+        cfg.set_resolution(W as u32, H as u32).expect("size");
+        cfg
+    };
+    for backend in [Backend::Software, Backend::RayQuery] {
+        // Per seed: the means over face A's inner pixels and over the others of the light
+        // past the first hit; and that light's images.
+        let run = |split: bool| -> (Vec<f64>, Vec<f64>, Vec<Vec<f64>>) {
+            let (mut inner_means, mut rest_means, mut images) =
+                (Vec::new(), Vec::new(), Vec::new());
+            for s in 0..SEEDS {
+                let (img3, face) = common::render_faces(&cfg(split, 3, 700 + s), backend);
+                let (img1, _) = common::render_faces(&cfg(split, 1, 700 + s), backend);
+                let inner = common::interior(&face, W, H);
+                assert!(inner.len() > 100, "{} pixels of face A", inner.len());
+                let mut is_inner = vec![false; img3.data.len()];
+                inner.iter().for_each(|&i| is_inner[i] = true);
+                let past: Vec<f64> = img3
+                    .data
+                    .iter()
+                    .zip(&img1.data)
+                    .map(|(&a, &b)| a as f64 - b as f64)
+                    .collect();
+                let mean = |keep: bool| {
+                    let v: Vec<f64> = (0..past.len())
+                        .filter(|&i| is_inner[i] == keep)
+                        .map(|i| past[i])
+                        .collect();
+                    v.iter().sum::<f64>() / v.len() as f64
+                };
+                inner_means.push(mean(true));
+                rest_means.push(mean(false));
+                images.push(past);
+            }
+            (inner_means, rest_means, images)
+        };
+        let (i_off, r_off, img_off) = run(false);
+        let (i_on, r_on, img_on) = run(true);
+        for (part, on, off) in [
+            ("face A", &i_on, &i_off),
+            ("the other pixels", &r_on, &r_off),
+        ] {
+            let ((a, ea), (b, eb)) = (mean_se(on), mean_se(off));
+            let z = (a - b) / (ea * ea + eb * eb).sqrt();
+            eprintln!(
+                "{}, {part}, past the first hit: split {a:.6} +- {ea:.1e}, unsplit {b:.6} +- {eb:.1e}, z {z:+.2}",
+                backend.name()
+            );
+            assert!(
+                a > 0.0 && b > 0.0,
+                "no light past the first hit on {part} tests nothing"
+            );
+            assert!(
+                z.abs() < 4.0,
+                "{part}: the means differ by {z:.1} standard errors"
+            );
+        }
+        let (v_off, v_on) = (pixel_variance(&img_off), pixel_variance(&img_on));
+        eprintln!(
+            "{}: pixel variance of the light past the first hit: unsplit {v_off:.3e}, split {v_on:.3e} ({:.2}x)",
+            backend.name(),
+            v_off / v_on
+        );
+        assert!(v_on * 1.5 <= v_off, "{v_off:.3e} -> {v_on:.3e}");
+    }
+}
+
+/// `[render] split_paths`: false by default, true in scene files and jobs only with
+/// `bsdf_samples` >= 2 (the branches are its directions); each refusal names the field.
+#[test]
+fn split_paths_parses_and_needs_bsdf_samples() {
+    assert!(!SceneConfig::default().render.split_paths);
+    let c = SceneConfig::parse("[render]\nbsdf_samples = 4\nsplit_paths = true\n").expect("parse");
+    assert!(c.render.split_paths);
+    let e = SceneConfig::parse("[render]\nsplit_paths = true\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("render.bsdf_samples") && e.contains("split_paths"),
+        "{e}"
+    );
+    let e = SceneConfig::parse("[render]\nsplit_paths = \"on\"\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("split_paths"), "{e}");
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let job = |text: &str| {
+        common::small_smoke_text().replace("[render]\n", &format!("[render]\n{text}\n"))
+    };
+    let j =
+        synosis::dataset::Job::parse(&job("bsdf_samples = 2\nsplit_paths = true"), "job", scenes)
+            .expect("job");
+    assert_eq!(j.render.split_paths, Some(true));
+    let e = synosis::dataset::Job::parse(&job("split_paths = true"), "job", scenes)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("render.bsdf_samples") && e.contains("split_paths"),
+        "{e}"
+    );
+    let e = synosis::dataset::Job::parse(&job("split_paths = 2"), "job", scenes)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("split_paths"), "{e}");
+}
+
 /// Paths put off (glsl/path_trace.comp, `main`'s windows) under the analytic direct
 /// light with extra camera rays: a bounce's ray that leaves the glossy test body, the
 /// first bounce's too (whose control-variate term awaits the light it meets), ends its

@@ -177,6 +177,7 @@ fn face_textures_reach_the_image() {
             analytic_rays: 1,
             light_samples: 1,
             bsdf_samples: 1,
+            split_paths: false,
             batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
             scene: None,
         };
@@ -279,6 +280,7 @@ rim_width = 0.5
             analytic_rays: 1,
             light_samples: 1,
             bsdf_samples: 1,
+            split_paths: false,
             batch_spp: synosis::scene::config::DEFAULT_BATCH_SPP,
             scene: None,
         };

@@ -60,6 +60,7 @@ fn dispatch_misuse_is_a_typed_error_naming_the_pass() {
     let pipe = trace_pipeline(
         &ctx,
         "hits",
+        "",
         Backend::Software,
         &[synosis::vk::BindingKind::StorageBuffer; HitsBinding::COUNT],
         16,

@@ -314,6 +314,7 @@ impl ImageRenderer for GpuRenderer {
         cfg.render.analytic_rays = req.analytic_rays;
         cfg.render.light_samples = req.light_samples;
         cfg.render.bsdf_samples = req.bsdf_samples;
+        cfg.render.split_paths = req.split_paths;
         cfg.render.batch_spp = req.batch_spp;
         if !req.lights.is_empty() {
             // The job's lights replace the default ring.

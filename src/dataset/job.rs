@@ -277,6 +277,11 @@ pub struct RenderSettings {
     /// files' `[render] bsdf_samples`); default 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bsdf_samples: Option<i64>,
+    /// Each of the `bsdf_samples` directions continues as a path of weight
+    /// 1 / `bsdf_samples` (scene files' `[render] split_paths`); default false. Needs
+    /// `bsdf_samples` >= 2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub split_paths: Option<bool>,
     /// Samples per GPU submission, [1, 1024] (scene files' `[render] batch_spp`); default
     /// 16. With `noise_target` the checks after the first (`min_spp`) fall on batch ends,
     /// so a smaller batch lets an image stop earlier; the images do not depend on it.
@@ -1033,6 +1038,16 @@ impl Job {
         }
         if let Some(n) = r.bsdf_samples {
             self.int("render.bsdf_samples", n, 1, 64)?;
+        }
+        let bsdf = r
+            .bsdf_samples
+            .unwrap_or(crate::scene::config::DEFAULT_LIGHT_SAMPLES as i64);
+        if r.split_paths == Some(true) && bsdf < 2 {
+            return Err(self.field(
+                "render.bsdf_samples",
+                bsdf,
+                "must be in [2, 64] with `render.split_paths` (the branches are its directions)",
+            ));
         }
         if let Some(n) = r.batch_spp {
             self.int("render.batch_spp", n, 1, 1024)?;

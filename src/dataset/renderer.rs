@@ -117,6 +117,9 @@ pub struct ImageRequest<'a> {
     pub light_samples: u32,
     /// BSDF samples for the direct light there (`[render] bsdf_samples`; default 1).
     pub bsdf_samples: u32,
+    /// Whether those directions each continue as a path (`[render] split_paths`;
+    /// default false).
+    pub split_paths: bool,
     /// Samples per GPU submission (`[render] batch_spp`; default 16).
     pub batch_spp: u32,
     /// The object instance's scene (stage and acceleration structure) made by the run's

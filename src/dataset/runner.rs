@@ -1507,6 +1507,7 @@ fn render_stage<'p>(
             .render
             .bsdf_samples
             .map_or(crate::scene::config::DEFAULT_LIGHT_SAMPLES, |n| n as u32),
+        split_paths: job.render.split_paths.unwrap_or(false),
         batch_spp: job
             .render
             .batch_spp

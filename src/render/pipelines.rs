@@ -25,16 +25,21 @@ use crate::trace::{Backend, TraceScene, trace_pipeline};
 use crate::vk::{BindingKind, ComputePipeline, Context, ContextOptions, VkError};
 
 /// The path tracer (`glsl/path_trace.comp`), with `specialization` (from
-/// `PathParams::specialization`) its settings compiled in, or none: read at run time.
+/// `PathParams::specialization`) its settings compiled in, or none: read at run time;
+/// `split_paths`: its variant whose first hit's BSDF directions each go on as a path
+/// (`[render] split_paths`; compiled apart, SPLIT_PATHS, so that the loop over those
+/// branches costs nothing where they are off).
 pub fn path_trace(
     ctx: &Arc<Context>,
     backend: Backend,
+    split_paths: bool,
     specialization: &[(u32, u32)],
 ) -> Result<ComputePipeline, VkError> {
     let push = std::mem::size_of::<PathPush>() as u32;
     trace_pipeline(
         ctx,
         "path_trace",
+        if split_paths { "s" } else { "" },
         backend,
         &path_trace_kinds(),
         push,
@@ -69,6 +74,7 @@ pub fn annotate(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline,
     trace_pipeline(
         ctx,
         "annotate",
+        "",
         backend,
         &[BindingKind::StorageBuffer; AnnotateBinding::COUNT],
         push,
@@ -83,6 +89,7 @@ pub fn hits(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, VkE
     trace_pipeline(
         ctx,
         "hits",
+        "",
         backend,
         &[BindingKind::StorageBuffer; HitsBinding::COUNT],
         push,
@@ -97,6 +104,7 @@ pub fn raycast(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, 
     trace_pipeline(
         ctx,
         "raycast",
+        "",
         backend,
         &[BindingKind::StorageBuffer; RaycastBinding::COUNT],
         push,

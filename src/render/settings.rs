@@ -54,6 +54,8 @@ pub struct RenderSettings {
     pub light_samples: u32,
     /// BSDF samples for the direct light there (`[render] bsdf_samples`).
     pub bsdf_samples: u32,
+    /// Whether those directions each continue as a path (`[render] split_paths`).
+    pub split_paths: bool,
     /// Whether rays skip the lights' traversal where it cannot change their answer
     /// (`[render] light_shortcuts`).
     pub light_shortcuts: bool,
@@ -78,6 +80,7 @@ impl RenderSettings {
             analytic_rays: r.analytic_rays,
             light_samples: r.light_samples,
             bsdf_samples: r.bsdf_samples,
+            split_paths: r.split_paths,
             light_shortcuts: r.light_shortcuts,
             specialize: r
                 .specialize

@@ -23,21 +23,22 @@ use crate::vk::{Buffer, ComputePipeline, Context, VkError};
 /// use it to show that pipelines are built once.
 static BUILT: AtomicUsize = AtomicUsize::new(0);
 
-/// The settings a path-tracing pipeline was specialized for (`PathParams::
-/// specialization`), or none: it reads them at run time.
-type PathKey = Option<[(u32, u32); PATH_SPEC_COUNT]>;
+/// A path-tracing pipeline: whether it is the variant with split paths (`[render]
+/// split_paths`, compiled apart), and the settings it was specialized for
+/// (`PathParams::specialization`), or none: it reads them at run time.
+type PathKey = (bool, Option<[(u32, u32); PATH_SPEC_COUNT]>);
 
 /// Pipelines (path tracing, annotation) and the energy tables for one device + backend.
 pub struct PathTracer {
     pub(crate) ctx: Arc<Context>,
     pub backend: Backend,
     /// The path tracer's pipelines made so far, one per distinct setting it was
-    /// specialized for (`[render] specialize`) and one reading them at run time, each
-    /// taken at its first use (the one reading them begun by `new`) and kept for the
-    /// process.
+    /// specialized for (`[render] specialize`) and one reading them at run time, per
+    /// variant (split paths or not), each taken at its first use (the one reading them
+    /// without split paths begun by `new`) and kept for the process.
     paths: Mutex<Vec<(PathKey, Arc<ComputePipeline>)>>,
-    /// The pipeline reading its settings at run time while its thread makes it (taken
-    /// into `paths` at its first use).
+    /// The pipeline reading its settings at run time (without split paths) while its
+    /// thread makes it (taken into `paths` at its first use).
     unspecialized: Mutex<Option<JoinHandle<Result<ComputePipeline, VkError>>>>,
     pub(crate) annotate: ComputePipeline,
     pub(crate) energy: Buffer,
@@ -76,7 +77,7 @@ impl PathTracer {
             let ctx = ctx.clone();
             std::thread::Builder::new()
                 .name("path tracer pipeline".into())
-                .spawn(move || super::pipelines::path_trace(&ctx, backend, &[]))
+                .spawn(move || super::pipelines::path_trace(&ctx, backend, false, &[]))
                 .ok()
         } else {
             None
@@ -111,32 +112,34 @@ impl PathTracer {
     /// The path-tracing pipeline for a view's parameters: with `specialize`, compiled for
     /// their settings (`PathParams::specialization`: the driver drops the code they
     /// switch off), made at its first use, else the one that reads them at run time
-    /// (begun by [`PathTracer::new`] on a thread of its own, waited for here).
+    /// (without split paths begun by [`PathTracer::new`] on a thread of its own, waited
+    /// for here); `split_paths`: the variant with split paths (`[render] split_paths`).
     pub(crate) fn path_pipeline(
         &self,
         params: &PathParams,
         specialize: bool,
+        split_paths: bool,
     ) -> Result<Arc<ComputePipeline>, RenderError> {
-        let key: PathKey = specialize.then(|| params.specialization());
+        let key: PathKey = (split_paths, specialize.then(|| params.specialization()));
         let mut paths = self.paths.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, p)) = paths.iter().find(|(k, _)| *k == key) {
             return Ok(p.clone());
         }
         let made = match key {
-            None => self
+            (false, None) => self
                 .unspecialized
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())
                 .take(),
-            Some(_) => None,
+            _ => None,
         };
-        let spec = key.as_ref().map_or(&[][..], |k| &k[..]);
+        let spec = key.1.as_ref().map_or(&[][..], |k| &k[..]);
         let p = Arc::new(match made {
             Some(thread) => thread.join().map_err(|_| {
                 VkError::Other("the thread making the path tracer's pipeline panicked".into())
             })??,
             // No thread could be started, or a specialized pipeline: made here.
-            None => super::pipelines::path_trace(&self.ctx, self.backend, spec)?,
+            None => super::pipelines::path_trace(&self.ctx, self.backend, split_paths, spec)?,
         });
         paths.push((key, p.clone()));
         Ok(p)

@@ -127,6 +127,8 @@ pub struct View<'s> {
     variance: Option<usize>,
     /// Whether `path` is specialized for `params_block` (`[render] specialize`).
     specialize: bool,
+    /// Whether `path` is the variant with split paths (`[render] split_paths`).
+    split_paths: bool,
     annotation: Option<(AnnotationTargets, u32)>,
     /// The path tracer's first batch labels the pixels from its own samples
     /// (`[render] labels`, [`LabelSource::from_samples`]) instead of the annotation pass.
@@ -270,7 +272,8 @@ impl<'s> View<'s> {
             && params.direct_light == DirectLight::Analytic as u32
             && params.cv_extra_rays > 0;
         params.cv_ray_sums = ray_sums as u32;
-        let path = tracer.path_pipeline(&params, settings.specialize)?;
+        let split_paths = settings.split_paths && settings.bsdf_samples > 1;
+        let path = tracer.path_pipeline(&params, settings.specialize, split_paths)?;
         Ok(View {
             scene,
             trace,
@@ -281,6 +284,7 @@ impl<'s> View<'s> {
             params: Buffer::from_slice(ctx, "path params", &[params], storage)?,
             params_block: params,
             specialize: settings.specialize,
+            split_paths,
             path,
             accum: Buffer::new(ctx, "radiance sum", n * 4, usage, MemoryKind::Readback)?,
             noise_sums: {
@@ -507,7 +511,7 @@ impl<'s> View<'s> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         self.params = Buffer::from_slice(&tracer.ctx, "path params", &[p], storage)?;
         if self.specialize {
-            self.path = tracer.path_pipeline(&p, true)?;
+            self.path = tracer.path_pipeline(&p, true, self.split_paths)?;
         }
         self.params_block = p;
         Ok(())

@@ -907,6 +907,13 @@ pub struct RenderConfig {
     /// reflection of a partly hidden light (docs/rendering.md, "More light and BSDF
     /// samples at the first hit").
     pub bsdf_samples: u32,
+    /// Each of those `bsdf_samples` directions continues as a path of its own, a branch
+    /// of weight 1 / `bsdf_samples` (default false: only the path's own goes on, the
+    /// others end at the light they meet). Lowers the noise of the light that reaches
+    /// the first hit after a bounce, as where a face mirrors the part's own metal, at
+    /// the cost of the branches' paths (docs/rendering.md, "Split paths at the first
+    /// hit"). Needs `bsdf_samples` >= 2.
+    pub split_paths: bool,
     /// Rays that need no traversal of the lights skip it (default true): a light
     /// sample's shadow ray toward a light triangle no other can hide tests that triangle
     /// alone (src/scene/light_cover.rs), and a ray that can meet no light is traced
@@ -1050,6 +1057,7 @@ impl Default for RenderConfig {
             analytic_ray_cost: None,
             light_samples: DEFAULT_LIGHT_SAMPLES,
             bsdf_samples: DEFAULT_LIGHT_SAMPLES,
+            split_paths: false,
             light_shortcuts: true,
             specialize: None,
         }
@@ -1534,6 +1542,13 @@ impl SceneConfig {
         }
         range_u("render.light_samples", r.light_samples, 1, 64, "[1, 64]")?;
         range_u("render.bsdf_samples", r.bsdf_samples, 1, 64, "[1, 64]")?;
+        if r.split_paths && r.bsdf_samples < 2 {
+            return Err(ConfigError::Range {
+                field: "render.bsdf_samples",
+                value: r.bsdf_samples.to_string(),
+                range: "[2, 64] with render.split_paths (the branches are its directions)",
+            });
+        }
         if let Some(m) = r.min_spp {
             if r.noise_target.is_none() {
                 return Err(ConfigError::Invalid {

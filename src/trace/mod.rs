@@ -538,19 +538,21 @@ impl TraceScene {
     }
 }
 
-/// Creates the pipeline of shader `name` for `backend`, with the pass's bindings `extra`
-/// after the backend's and the given specialization constants ((constant_id, value);
-/// none: the shader's defaults).
+/// Creates the pipeline of shader `name` for `backend` (its variant `<name>.<backend's
+/// suffix><tag>`), with the pass's bindings `extra` after the backend's and the given
+/// specialization constants ((constant_id, value); none: the shader's defaults).
+#[allow(clippy::too_many_arguments)]
 pub fn trace_pipeline(
     ctx: &Arc<Context>,
     name: &str,
+    tag: &str,
     backend: Backend,
     extra: &[BindingKind],
     push_size: u32,
     local_size: [u32; 3],
     specialization: &[(u32, u32)],
 ) -> Result<ComputePipeline, VkError> {
-    let variant = format!("{name}.{}", backend.shader_suffix());
+    let variant = format!("{name}.{}{tag}", backend.shader_suffix());
     let spirv = crate::shaders::spirv(&variant)
         .ok_or_else(|| VkError::Other(format!("no shader variant {variant}")))?;
     let mut kinds = TraceScene::binding_kinds(backend);
