@@ -1,0 +1,61 @@
+#!/usr/bin/env python3
+"""Dataset images of one crop side by side, the last one the reference: each radiance in
+grey levels at the reference's exposure (the brightest 5 % of its inspected faces'
+pixels at 255, faces.png != 0, as tools/bench-ab compares), clipped to [0, 255], enlarged
+2x and titled; prints each image's RMS difference from the reference in those clipped
+grey levels. Used for docs/img/issue15-split-paths.png (docs/benchmarks/dataset.md,
+"Split paths at the first hit"). Needs numpy, OpenEXR and Pillow.
+
+Usage: tools/side-by-side-picture.py OUT.png DIR:TITLE [DIR:TITLE ...] REF_DIR:TITLE
+(DIR: a dataset image's folder, with radiance.exr and faces.png)
+"""
+import sys
+
+import Imath
+import numpy as np
+import OpenEXR
+from PIL import Image, ImageDraw
+
+
+def radiance(folder):
+    f = OpenEXR.InputFile(folder + "/radiance.exr")
+    dw = f.header()["dataWindow"]
+    w, h = dw.max.x - dw.min.x + 1, dw.max.y - dw.min.y + 1
+    v = np.frombuffer(f.channel("Y", Imath.PixelType(Imath.PixelType.FLOAT)), np.float32)
+    return v.reshape(h, w)
+
+
+def main():
+    if len(sys.argv) < 4:
+        sys.exit(__doc__)
+    out, items = sys.argv[1], [a.split(":", 1) for a in sys.argv[2:]]
+    if any(len(i) != 2 for i in items):
+        sys.exit("each image is DIR:TITLE")
+    ref_dir = items[-1][0]
+    ref = radiance(ref_dir)
+    faces = np.array(Image.open(ref_dir + "/faces.png"))
+    faces = faces if faces.ndim == 2 else faces[..., 0]
+    scale = 255.0 / np.percentile(ref[faces != 0], 95)
+    grey = lambda a: np.clip(a * scale, 0, 255)
+    tiles = []
+    for folder, title in items:
+        g = grey(radiance(folder))
+        if folder != ref_dir:
+            rms = float(np.sqrt(np.mean((g - grey(ref)) ** 2)))
+            print(f"{title}: {rms:.2f} grey levels RMS from the reference")
+        im = Image.fromarray((g + 0.5).astype(np.uint8)).convert("RGB")
+        im = im.resize((im.width * 2, im.height * 2), Image.NEAREST)
+        tile = Image.new("RGB", (im.width, im.height + 22), (255, 255, 255))
+        tile.paste(im, (0, 22))
+        ImageDraw.Draw(tile).text((6, 5), title, fill=(0, 0, 0))
+        tiles.append(tile)
+    picture = Image.new("RGB", (sum(t.width for t in tiles) + 8 * (len(tiles) - 1), tiles[0].height), (255, 255, 255))
+    x = 0
+    for t in tiles:
+        picture.paste(t, (x, 0))
+        x += t.width + 8
+    picture.save(out, optimize=True)
+
+
+if __name__ == "__main__":
+    main()
