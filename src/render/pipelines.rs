@@ -150,8 +150,9 @@ pub fn exercise(
 /// driver's shader cache holds every pipeline, so later processes on this machine start
 /// rendering at once. Calls `done(backend, time)` as each backend finishes, from its
 /// thread; validation messages are errors, and so is a shader variant of the backend
-/// that [`exercise`] did not dispatch; the first error is returned after the others
-/// finish.
+/// (`<name>.<suffix>`) that [`exercise`] did not dispatch; the first error is returned
+/// after the others finish. The path tracer's split-paths variants (`<suffix>s`,
+/// `[render] split_paths`, opt-in) are not warmed: made at their first use.
 pub fn prepare(
     options: &ContextOptions,
     backends: &[Backend],
