@@ -645,7 +645,7 @@ bool pixel_plane_lobe(vec3 o, vec3 d, out Lobe lobe, out vec3 ns) {
     ns = surface_normal(h, d, p, pix_plane.ng, pix_plane.word, 0u, surf);
     vec3 tb, bt;
     onb(ns, tb, bt);
-    vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
+    vec3 wo = to_frame(-d, tb, bt, ns);
     // Where LEAN widened this ray's lobe (alpha not the line's), the exact amplitude.
     if (surf.c.alpha != pix_plane.surf.c.alpha) {
         return conductor_lobe(surf.c, wo, tb, bt, ns, lobe);
@@ -779,14 +779,14 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             v_surf.c.alpha = v_alpha;
             vec3 tb, bt;
             onb(v_ns, tb, bt);
-            vec3 v_wo = vec3(dot(-d0, tb), dot(-d0, bt), dot(-d0, v_ns));
+            vec3 v_wo = to_frame(-d0, tb, bt, v_ns);
             // This branch's direction from there, its weight and pdf, and its
             // control-variate term (cv_bsdf_weight's, as the path's own at step nl below).
             vec3 u = vec3(sample_1d(rng), sample_2d(rng));
             vec3 wi;
             float weight, pdf;
             bool sampled = surface_sample(v_surf, v_wo, u, wi, weight, pdf);
-            d = sampled ? normalize(wi.x * tb + wi.y * bt + wi.z * v_ns) : vec3(0.0);
+            d = sampled ? normalize(from_frame(wi, tb, bt, v_ns)) : vec3(0.0);
             o = v_origin;
             T = weight / fbranches;
             prev_pdf = pdf;
@@ -863,7 +863,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
             vec3 ns = surface_normal(h, d, p, ng, word, depth, surf);
             vec3 tb, bt;
             onb(ns, tb, bt);
-            vec3 wo = vec3(dot(-d, tb), dot(-d, bt), dot(-d, ns));
+            vec3 wo = to_frame(-d, tb, bt, ns);
             vec3 origin = offset_ray(p, ng);
 
             // Analytic direct light (control variate) at the primary hit of a conductor.
@@ -928,7 +928,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                         float dist = sqrt(dist2);
                         vec3 wi_w = to / dist;
                         float I = spot_intensity(e, -wi_w);
-                        vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                        vec3 wi = to_frame(wi_w, tb, bt, ns);
                         if (I > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0) {
                             float pdf_b;
                             float f = surface_eval(surf, wo, wi, pdf_b);
@@ -951,7 +951,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                         float dist = sqrt(dist2);
                         vec3 wi_w = to / dist;
                         float cos_l = -dot(normalize(tri_normal(lt)), wi_w);
-                        vec3 wi = vec3(dot(wi_w, tb), dot(wi_w, bt), dot(wi_w, ns));
+                        vec3 wi = to_frame(wi_w, tb, bt, ns);
                         bool lit = cos_l > 0.0 && wi.z > 0.0 && dot(wi_w, ng) > 0.0;
                         // The control variate's light sample: on a ring it uses (cv_rings; such a
                         // ring lies above both horizons, so the sample is also lit, up to rounding).
@@ -1016,7 +1016,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                     float u_lobe = sample_1d(rng);
                     vec3 u = vec3(u_lobe, sample_2d(rng));
                     sampled = surface_sample(surf, wo, u, wi_path, weight, pdf);
-                    d_next = sampled ? normalize(wi_path.x * tb + wi_path.y * bt + wi_path.z * ns) : vec3(0.0);
+                    d_next = sampled ? normalize(from_frame(wi_path, tb, bt, ns)) : vec3(0.0);
                     if (cv_rings != 0u) {
                         cv_mask = cv_rings;
                         L += cv_a - cv_nee_val;
@@ -1033,7 +1033,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                     vec3 uj = vec3(sample_1d(rng), sample_2d(rng));
                     vec3 wj;
                     test = surface_sample(surf, wo, uj, wj, weight_j, pdf_j);
-                    if (test) shadow_d = normalize(wj.x * tb + wj.y * bt + wj.z * ns);
+                    if (test) shadow_d = normalize(from_frame(wj, tb, bt, ns));
                     // A direction that can meet no light adds nothing: no trace.
                     test = test && !misses_lights(origin, shadow_d);
                     shadow = TQ_LIGHT_SEEN;

@@ -56,8 +56,8 @@ float lobe_d(Lobe l, vec3 w) {
 // at or below it, or fc <= 0).
 bool conductor_lobe_fc(Conductor c, float fc, vec3 wo, vec3 tb, vec3 bt, vec3 ns, out Lobe l) {
     vec3 r_local = vec3(-wo.x, -wo.y, wo.z);
-    vec3 wo_w = wo.x * tb + wo.y * bt + wo.z * ns;
-    l.r = normalize(r_local.x * tb + r_local.y * bt + r_local.z * ns);
+    vec3 wo_w = from_frame(wo, tb, bt, ns);
+    l.r = normalize(from_frame(r_local, tb, bt, ns));
     vec3 across = cross(ns, wo_w);
     float al = length(across);
     l.t2 = al > 1e-6 ? across / al : tb;

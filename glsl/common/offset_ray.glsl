@@ -30,4 +30,9 @@ void onb(vec3 n, out vec3 t, out vec3 b) {
     t = vec3(1.0 + s * n.x * n.x * a, s * c, -s * n.x);
     b = vec3(c, s + n.y * n.y * a, -n.y);
 }
+
+// Direction w given in the basis (t, b, n) (n its z axis) in world space; and world
+// direction v in that basis.
+vec3 from_frame(vec3 w, vec3 t, vec3 b, vec3 n) { return w.x * t + w.y * b + w.z * n; }
+vec3 to_frame(vec3 v, vec3 t, vec3 b, vec3 n) { return vec3(dot(v, t), dot(v, b), dot(v, n)); }
 #endif
