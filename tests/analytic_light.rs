@@ -358,6 +358,21 @@ fn more_light_and_bsdf_samples_keep_the_mean_and_lower_the_noise() {
     }
 }
 
+/// The glossy test body (alpha 0.05) seen from A20 with fine grooves (20 µm texels, 0.2 mm
+/// period), `w` x `h` pixels at the paper camera's pixel: the scene of the tests below,
+/// with `render` as its `[render]` section's lines and `more` as further sections.
+fn grooved_body(render: &str, more: &str, w: u32, h: u32) -> SceneConfig {
+    let text = format!(
+        "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
+         [render]\n{render}\n{more}\
+         [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
+         groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+    );
+    let mut cfg = SceneConfig::parse(&text).expect("test scene");
+    cfg.set_resolution(w, h).expect("size");
+    cfg
+}
+
 /// More camera rays for the control variate's closed form (`[render] analytic_rays`)
 /// keep the mean and average a texture that varies under the pixel: the test body's face
 /// A with fine grooves (20 µm texels, 0.2 mm period: about two periods under each of the
@@ -370,16 +385,11 @@ fn more_light_and_bsdf_samples_keep_the_mean_and_lower_the_noise() {
 fn more_analytic_rays_keep_the_mean_and_average_the_texture() {
     const SEEDS: u32 = 8;
     let cfg = |direct: &str, rays: u32, seed: u32| {
-        let text = format!(
-            "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
-             [render]\nspp = 8\nbatch_spp = 8\nmax_bounces = 3\nseed = {seed}\n\
-             direct_light = \"{direct}\"\nanalytic_rays = {rays}\n\
-             [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
-             groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+        let render = format!(
+            "spp = 8\nbatch_spp = 8\nmax_bounces = 3\nseed = {seed}\n\
+             direct_light = \"{direct}\"\nanalytic_rays = {rays}"
         );
-        let mut cfg = SceneConfig::parse(&text).expect("test scene");
-        cfg.set_resolution(64, 48).expect("size");
-        cfg
+        grooved_body(&render, "", 64, 48)
     };
     // Per seed: the mean over face A's inner pixels, the mean over every other pixel (the
     // extra rays' closed form takes the plane of the pixel centre's hit: edges, other
@@ -454,17 +464,11 @@ fn split_paths_keep_the_mean_of_the_light_past_the_first_hit() {
     const W: usize = 40;
     const H: usize = 30;
     let cfg = |split: bool, bounces: u32, seed: u32| {
-        let text = format!(
-            "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
-             [render]\nspp = 8\nbatch_spp = 8\nmax_bounces = {bounces}\nseed = {seed}\n\
-             direct_light = \"analytic\"\nbsdf_samples = 3\nsplit_paths = {split}\n\
-             [table]\nalbedo = 0.5\n\
-             [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
-             groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+        let render = format!(
+            "spp = 8\nbatch_spp = 8\nmax_bounces = {bounces}\nseed = {seed}\n\
+             direct_light = \"analytic\"\nbsdf_samples = 3\nsplit_paths = {split}"
         );
-        let mut cfg = SceneConfig::parse(&text).expect("test scene");
-        cfg.set_resolution(W as u32, H as u32).expect("size");
-        cfg
+        grooved_body(&render, "[table]\nalbedo = 0.5\n", W as u32, H as u32)
     };
     for backend in [Backend::Software, Backend::RayQuery] {
         // Per seed: the means over face A's inner pixels and over the others of the light
@@ -561,17 +565,12 @@ fn split_paths_parses_and_needs_bsdf_samples() {
 #[test]
 fn paths_put_off_under_the_analytic_light_change_no_pixel() {
     let cfg = |shortcuts: bool| {
-        let text = format!(
-            "[camera]\nwidth = 1224\nheight = 1025\nview = \"A20\"\n[material]\nalpha = 0.05\n\
-             [render]\nspp = 13\nbatch_spp = 13\nmax_bounces = 3\nseed = 11\n\
+        let render = format!(
+            "spp = 13\nbatch_spp = 13\nmax_bounces = 3\nseed = 11\n\
              direct_light = \"analytic\"\nanalytic_rays = 4\nbsdf_samples = 2\n\
-             light_shortcuts = {shortcuts}\n\
-             [texture]\nkind = \"test-grooves\"\nspacing_um = 20.0\n\
-             groove_period_mm = 0.2\ngroove_max_slope_deg = 20.0\nrotation_deg = [25.0, 0.0, 0.0]\n"
+             light_shortcuts = {shortcuts}"
         );
-        let mut cfg = SceneConfig::parse(&text).expect("test scene");
-        cfg.set_resolution(32, 24).expect("size");
-        cfg
+        grooved_body(&render, "", 32, 24)
     };
     for backend in common::BACKENDS {
         let (a, face_a) = common::render_faces(&cfg(true), backend);
