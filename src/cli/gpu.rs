@@ -90,6 +90,11 @@ pub struct CompileArgs {
     /// Only this backend's pipelines (default: every backend the device supports).
     #[arg(long, value_enum)]
     accel: Option<AccelChoice>,
+    /// Also the path tracer's split-paths variants (`[render] split_paths`, opt-in; about
+    /// as long again on lavapipe): a job with split paths otherwise compiles them at its
+    /// first image.
+    #[arg(long)]
+    split_paths: bool,
 }
 
 /// Compiles every pipeline into the driver's shader cache, the backends at once.
@@ -116,16 +121,21 @@ pub fn compile_cmd(a: CompileArgs) -> anyhow::Result<()> {
     let device = ctx.info.name.clone();
     drop(ctx);
     eprintln!(
-        "compiling the pipelines of {} on {} (each run once on a 16 x 16 image)",
+        "compiling the pipelines of {}{} on {} (each run once on a 16 x 16 image)",
         backends
             .iter()
             .map(|b| b.name())
             .collect::<Vec<_>>()
             .join(", "),
+        if a.split_paths {
+            ", with the split-paths path tracers"
+        } else {
+            ""
+        },
         device
     );
     let start = std::time::Instant::now();
-    synosis::render::pipelines::prepare(&options, &backends, &|b, t| {
+    synosis::render::pipelines::prepare(&options, &backends, a.split_paths, &|b, t| {
         eprintln!("  {:<14} {:6.1} s", b.name(), t.as_secs_f64());
     })?;
     eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());

@@ -114,16 +114,19 @@ pub fn raycast(ctx: &Arc<Context>, backend: Backend) -> Result<ComputePipeline, 
 }
 
 /// Runs every pipeline of `backend` once on a tiny scene (the built-in test body, 16 x 16
-/// pixels, 1 sample, labels from the annotation pass; a raycast; a list of one ray):
-/// lavapipe compiles a pipeline's machine code at its first dispatch, not at its
-/// creation, and keeps it in its shader cache from then on.
+/// pixels, 1 sample, labels from the annotation pass; a raycast; a list of one ray), and
+/// with `split_paths` the path tracer's split-paths variant too (a second render with
+/// `split_paths = true`): lavapipe compiles a pipeline's machine code at its first
+/// dispatch, not at its creation, and keeps it in its shader cache from then on.
 pub fn exercise(
     ctx: &Arc<Context>,
     backend: Backend,
     tables: &EnergyTables,
+    split_paths: bool,
 ) -> Result<(), RenderError> {
-    let mut cfg = SceneConfig::parse("[render]\nspp = 1\nbatch_spp = 1\nlabels = \"pass\"\n")
-        .expect("the warm-up scene parses");
+    let base = "[render]\nspp = 1\nbatch_spp = 1\nlabels = \"pass\"\n";
+    let split = "bsdf_samples = 2\nsplit_paths = true\n";
+    let mut cfg = SceneConfig::parse(base).expect("the warm-up scene parses");
     cfg.set_resolution(16, 16).expect("16 x 16 is a valid size");
     let object = load_object(&cfg)?;
     let scene = RenderScene::assemble(&object, &cfg)?;
@@ -132,6 +135,13 @@ pub fn exercise(
         ..Default::default()
     };
     super::render_scene(ctx, &scene, &cfg, backend, tables, opts, |_| {})?;
+    if split_paths {
+        let mut cfg =
+            SceneConfig::parse(&format!("{base}{split}")).expect("the split warm-up scene parses");
+        cfg.set_resolution(16, 16).expect("16 x 16 is a valid size");
+        let scene = RenderScene::assemble(&object, &cfg)?;
+        super::render_scene(ctx, &scene, &cfg, backend, tables, opts, |_| {})?;
+    }
     let traced = TraceScene::build(ctx, &object, backend, None)?;
     super::raycast::raycast(ctx, &traced, &Camera::framing(&object, 2, 2), None)?;
     let ray = RayIn {
@@ -152,10 +162,12 @@ pub fn exercise(
 /// thread; validation messages are errors, and so is a shader variant of the backend
 /// (`<name>.<suffix>`) that [`exercise`] did not dispatch; the first error is returned
 /// after the others finish. The path tracer's split-paths variants (`<suffix>s`,
-/// `[render] split_paths`, opt-in) are not warmed: made at their first use.
+/// `[render] split_paths`, opt-in) are warmed, and checked, only with `split_paths`
+/// (otherwise made at their first use).
 pub fn prepare(
     options: &ContextOptions,
     backends: &[Backend],
+    split_paths: bool,
     done: &(dyn Fn(Backend, Duration) + Sync),
 ) -> Result<(), RenderError> {
     let tables = EnergyTables::compute();
@@ -167,12 +179,16 @@ pub fn prepare(
                 s.spawn(move || {
                     let t = Instant::now();
                     let ctx = Context::new(options)?;
-                    exercise(&ctx, b, tables)?;
+                    exercise(&ctx, b, tables, split_paths)?;
                     ctx.check_validation()?;
                     let suffix = format!(".{}", b.shader_suffix());
+                    let split_suffix = format!("{suffix}s");
                     let ran = ctx.dispatched_pipelines();
                     let missed: Vec<&str> = crate::shaders::names()
-                        .filter(|n| n.ends_with(&suffix) && !ran.contains(*n))
+                        .filter(|n| {
+                            n.ends_with(&suffix) || (split_paths && n.ends_with(&split_suffix))
+                        })
+                        .filter(|n| !ran.contains(*n))
                         .collect();
                     if !missed.is_empty() {
                         return Err(RenderError::Vk(VkError::Other(format!(
