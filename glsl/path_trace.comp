@@ -977,7 +977,9 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                             shadow_light = dist * 0.999;
                             // No other light triangle can hide this one from the origin's
                             // cell: the trace tests it alone for the lights' part.
-                            if (light_unhidden(li, origin)) {
+                            uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
+                            uint cell = light_cover_cell(origin);
+                            if (light_unhidden(lcover.x, cell)) {
                                 light_j.a = lt.a.xyz; light_j.b = lt.b.xyz; light_j.c = lt.c.xyz;
                                 light_j.prim = li;
                             }
@@ -988,8 +990,7 @@ float radiance_sample(uint pixel, uint px, uint py, uint s, bool want_label, boo
                             // traversal would (the same test, ray and bounds); nearer than
                             // t_light a light hides the sample, else that hit stands for the
                             // lights' traversal as the triangle's own does above.
-                            uvec4 lcover = LIGHT_TRI_WEIGHTS[li - prm.light_first].cover;
-                            if (light_j.prim == NO_HIT && lcover.z > 0u && light_in_cover(origin)) {
+                            if (light_j.prim == NO_HIT && lcover.z > 0u && cell != NO_COVER_CELL) {
                                 TraceRay lr = trace_setup(origin, wi_w);
                                 Hit hl = hit_none(shadow_max);
                                 trace_tri_test(lt.a.xyz, lt.b.xyz, lt.c.xyz, li, 1u, lr, 0.0, hl);

@@ -113,24 +113,22 @@ bool misses_lights(vec3 o, vec3 d) {
     return missed;
 }
 
-// Whether no other light triangle can hide light triangle `li` from point x: x lies in
-// a cell of the light cover's grid that the triangle's mask marks (LightTri::cover,
-// src/scene/light_cover.rs; outside the grid: no).
-bool light_unhidden(uint li, vec3 x) {
+// The light cover's grid cell that point x lies in, as the bit of a light triangle's
+// mask (LightTri::cover.x, src/scene/light_cover.rs), or NO_COVER_CELL outside the grid
+// (where no mask marks it and no hider list, LightTri::cover.yz, holds).
+const uint NO_COVER_CELL = 0xffffffffu;
+uint light_cover_cell(vec3 x) {
     vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
     float side = float(LIGHT_COVER_SIDE);
-    if (!all(greaterThanEqual(c, vec3(0.0))) || !all(lessThan(c, vec3(side)))) return false;
+    if (!all(greaterThanEqual(c, vec3(0.0))) || !all(lessThan(c, vec3(side)))) return NO_COVER_CELL;
     uvec3 ci = f2u(c);
-    uint bit = ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
-    return ((LIGHT_TRI_WEIGHTS[li - prm.light_first].cover.x >> bit) & 1u) != 0u;
+    return ci.x + LIGHT_COVER_SIDE * (ci.y + LIGHT_COVER_SIDE * ci.z);
 }
 
-// Whether x lies in the light cover's grid (`light_unhidden`; a light triangle's hider
-// list, LightTri::cover.yz, holds for such points only).
-bool light_in_cover(vec3 x) {
-    vec3 c = (x - prm.cover_lo.xyz) / prm.cover_cell.xyz;
-    float side = float(LIGHT_COVER_SIDE);
-    return all(greaterThanEqual(c, vec3(0.0))) && all(lessThan(c, vec3(side)));
+// Whether no other light triangle can hide the light triangle whose cover mask is
+// `mask` from the points of grid cell `cell` (light_cover_cell; outside the grid: no).
+bool light_unhidden(uint mask, uint cell) {
+    return cell != NO_COVER_CELL && ((mask >> cell) & 1u) != 0u;
 }
 
 // Emitter of scene triangle `tri` (a light triangle).
