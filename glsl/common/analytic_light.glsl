@@ -94,12 +94,20 @@ float edge_z(vec3 a, vec3 b) {
 // forms (recorded_rings2) take a pixel's rings as seen from one reference point and so
 // need the walk once per pixel, not once per ray. Up to REC_RINGS rings, each two loops
 // of at most REC_LOOP_VERTS vertices (a ring whose loops are longer is not recorded).
-#define REC_RINGS 2u
+#define REC_RING_COUNT 2
+#define REC_RINGS uint(REC_RING_COUNT)
 #define REC_LOOP_VERTS 64u
+// The vertices of each loop that recorded_loop2 reads at constant indices (its loop
+// written out to here, recorded_rings2's rings too): lavapipe reads a private array at
+// a constant index with one vector load, at any other a lane at a time (below). A pixel's
+// loops hold 17 vertices on the paper job (the coarse ring's 16 sections and the closing
+// one); the rest of a longer loop is read in a loop.
+#define REC_UNROLLED 17u
 // Each vertex as its unit direction in one word (rec_pack): lavapipe reads a private
 // array at any index but a constant one a lane at a time, a scalar load and insert per
 // lane and component (docs/benchmarks/dataset.md, "The recorded vertices in one word"),
-// so a vec3 cost three such loads a vertex where this costs one. The extra rays' closed
+// so a vec3 cost three such loads a vertex where this costs one (and where the index is
+// a constant, REC_UNROLLED, one vector load). The extra rays' closed
 // form A' need only be one function of the camera ray: directions rounded by at most
 // 6.3e-5 rad keep the estimate unbiased.
 uint rec_w[2u * REC_RINGS * REC_LOOP_VERTS];
@@ -567,6 +575,25 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r) {
 // own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
 // of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
 // rays' edge sums in pairs").
+// One vertex (its word, rec_w) of recorded_loop2's loop for both lobes (reciprocal
+// widths t1*, t2*, axes r*), where `live` (the lane's loop has it): the edges from the
+// previous vertices added to the sums, the vertex kept as the previous and in `above`.
+void recorded_step2(uint word, bool live, vec3 t10, vec3 t20, vec3 r0, vec3 t11, vec3 t21,
+                    vec3 r1, inout vec3 prev0, inout vec3 prev1, inout float sum0,
+                    inout float sum1, inout bool ab0, inout bool ab1) {
+    vec3 w = rec_unpack(word);
+    if (live) {
+        vec3 v0 = recorded_point(w, t10, t20, r0);
+        vec3 v1 = recorded_point(w, t11, t21, r1);
+        sum0 += edge_z_unit(prev0, v0);
+        sum1 += edge_z_unit(prev1, v1);
+        prev0 = v0;
+        prev1 = v1;
+        ab0 = ab0 && v0.z > 0.0;
+        ab1 = ab1 && v1.z > 0.0;
+    }
+}
+
 vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     uint base = i * REC_LOOP_VERTS;
     vec3 t10 = l0.t1 * (1.0 / l0.a1), t20 = l0.t2 * (1.0 / l0.a2);
@@ -580,23 +607,33 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     float sum0 = 0.0, sum1 = 0.0;
     bool ab0 = n == 0u || first0.z > 0.0, ab1 = n == 0u || first1.z > 0.0;
     // To the subgroup's longest loop, so that j is one value for all lanes; a lane past
-    // its own loop keeps its sums.
+    // its own loop keeps its sums. The first REC_UNROLLED vertices written out (with i a
+    // constant, recorded_rings2: every index a constant), the rest in a loop.
     uint n_all = subgroupMax(n);
-    for (uint j = 1u; j < n_all; j++) {
-        w = rec_unpack(rec_w[base + j]);
-        if (j < n) {
-            vec3 v0 = recorded_point(w, t10, t20, l0.r);
-            vec3 v1 = recorded_point(w, t11, t21, l1.r);
-            sum0 += edge_z_unit(prev0, v0);
-            sum1 += edge_z_unit(prev1, v1);
-            prev0 = v0;
-            prev1 = v1;
-            ab0 = ab0 && v0.z > 0.0;
-            ab1 = ab1 && v1.z > 0.0;
+    [[unroll]] for (uint j = 1u; j < REC_UNROLLED; j++) {
+        [[dont_flatten]] if (j < n_all) {
+            recorded_step2(rec_w[base + j], j < n, t10, t20, l0.r, t11, t21, l1.r,
+                           prev0, prev1, sum0, sum1, ab0, ab1);
         }
+    }
+    for (uint j = REC_UNROLLED; j < n_all; j++) {
+        recorded_step2(rec_w[base + j], j < n, t10, t20, l0.r, t11, t21, l1.r,
+                       prev0, prev1, sum0, sum1, ab0, ab1);
     }
     above = bvec2(ab0, ab1);
     return vec2(sum0 + edge_z_unit(prev0, first0), sum1 + edge_z_unit(prev1, first1));
+}
+
+// Recorded ring r's part of recorded_rings2: 0 for a lobe unless both loops are above
+// its cosine space's horizon and the cone (rec_cone) above its shading horizon.
+vec2 recorded_ring2(uint r, Lobe l0, vec3 ns0, Lobe l1, vec3 ns1) {
+    bvec2 above_lo, above_hi;
+    vec2 lo = recorded_loop2(2u * r, l0, l1, above_lo);
+    vec2 hi = recorded_loop2(2u * r + 1u, l0, l1, above_hi);
+    vec4 cone = rec_cone[r];
+    bool up0 = dot(cone.xyz, ns0) > cone.w, up1 = dot(cone.xyz, ns1) > cone.w;
+    return vec2(up0 && above_lo.x && above_hi.x ? l0.c * rec_le[r] * abs(lo.x - hi.x) : 0.0,
+                up1 && above_lo.y && above_hi.y ? l1.c * rec_le[r] * abs(lo.y - hi.y) : 0.0);
 }
 
 // analytic_rings' closed form for lobes l0 and l1 over the recorded rings (as seen from
@@ -607,17 +644,20 @@ vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
 // be one function of the camera ray.)
 vec2 recorded_rings2(Lobe l0, vec3 ns0, Lobe l1, vec3 ns1) {
     vec2 a = vec2(0.0);
-    // Lane-uniform as recorded_loop2's vertex loop, for its loop index.
+    // Lane-uniform as recorded_loop2's vertex loop. The rings written out, not a loop,
+    // so that each recorded_loop2's i, and so its vertices' indices, are constants:
+    // 0.90 of the paper crops' path tracing at the 2-spp floor against a loop over the
+    // rings (lavapipe gathered each vertex a lane at a time; docs/benchmarks/dataset.md,
+    // "The recorded vertices read at constant indices"), the same sums bit for bit.
     uint rings_all = subgroupMax(rec_rings);
-    for (uint r = 0u; r < rings_all; r++) {
-        if (r >= rec_rings) continue;
-        bvec2 above_lo, above_hi;
-        vec2 lo = recorded_loop2(2u * r, l0, l1, above_lo);
-        vec2 hi = recorded_loop2(2u * r + 1u, l0, l1, above_hi);
-        vec4 cone = rec_cone[r];
-        bool up0 = dot(cone.xyz, ns0) > cone.w, up1 = dot(cone.xyz, ns1) > cone.w;
-        if (up0 && above_lo.x && above_hi.x) a.x += l0.c * rec_le[r] * abs(lo.x - hi.x);
-        if (up1 && above_lo.y && above_hi.y) a.y += l1.c * rec_le[r] * abs(lo.y - hi.y);
+#if REC_RING_COUNT != 2
+#error "recorded_rings2 writes out REC_RINGS = 2 rings"
+#endif
+    [[dont_flatten]] if (rings_all > 0u) {
+        [[dont_flatten]] if (rec_rings > 0u) a += recorded_ring2(0u, l0, ns0, l1, ns1);
+    }
+    [[dont_flatten]] if (rings_all > 1u) {
+        [[dont_flatten]] if (rec_rings > 1u) a += recorded_ring2(1u, l0, ns0, l1, ns1);
     }
     return a;
 }
