@@ -563,18 +563,6 @@ vec3 recorded_point(vec3 w, vec3 rt1, vec3 rt2, vec3 r) {
     return v * inversesqrt(dot(v, v));
 }
 
-// Recorded loop i summed as ring_integral sums a loop, for two lobes at once (the extra
-// camera rays go in pairs): lobes l0 and l1, closed, over 2 pi; `above` where every
-// vertex is above each lobe's cosine-space horizon (record_rings kept only loops above
-// the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The
-// lobes' widths are taken as reciprocals and the edges from edge_z_unit
-// (roundings of their own: A' needs only to be one function of the camera ray). Each
-// vertex is read once for both lobes (a private array's read at any but a constant
-// index is a load a lane on lavapipe, one word a vertex: rec_w) and
-// the two sums give the loop's body independent work; each sum is what a pass of its
-// own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
-// of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
-// rays' edge sums in pairs").
 // One vertex (its word, rec_w) of recorded_loop2's loop for both lobes (reciprocal
 // widths t1*, t2*, axes r*), where `live` (the lane's loop has it): the edges from the
 // previous vertices added to the sums, the vertex kept as the previous and in `above`.
@@ -594,6 +582,18 @@ void recorded_step2(uint word, bool live, vec3 t10, vec3 t20, vec3 r0, vec3 t11,
     }
 }
 
+// Recorded loop i summed as ring_integral sums a loop, for two lobes at once (the extra
+// camera rays go in pairs): lobes l0 and l1, closed, over 2 pi; `above` where every
+// vertex is above each lobe's cosine-space horizon (record_rings kept only loops above
+// the geometric horizon; the shading horizon is the cone's test, recorded_rings2). The
+// lobes' widths are taken as reciprocals and the edges from edge_z_unit
+// (roundings of their own: A' needs only to be one function of the camera ray). Each
+// vertex is read once for both lobes (a private array's read at any but a constant
+// index is a load a lane on lavapipe, one word a vertex: rec_w) and
+// the two sums give the loop's body independent work; each sum is what a pass of its
+// own would give, bit for bit. Pairs measured 0.91x to 0.92x the path tracing
+// of one ray at a time, groups of four 1.02x pairs' (docs/benchmarks/dataset.md, "The extra
+// rays' edge sums in pairs").
 vec2 recorded_loop2(uint i, Lobe l0, Lobe l1, out bvec2 above) {
     uint base = i * REC_LOOP_VERTS;
     vec3 t10 = l0.t1 * (1.0 / l0.a1), t20 = l0.t2 * (1.0 / l0.a2);
