@@ -170,6 +170,21 @@ fn same_mean_less_variance(
     );
 }
 
+/// [`same_mean_less_variance`] of the sampled and the analytic direct light, each
+/// estimator's seeds rendered by `run` (the sampled one first) and taken through
+/// [`statistics`].
+fn sampled_against_analytic(name: &str, run: impl Fn(DirectLight) -> Vec<Vec<f64>>, gain: f64) {
+    let (sampled, var_s) = statistics(&run(DirectLight::Sampled));
+    let (analytic, var_a) = statistics(&run(DirectLight::Analytic));
+    same_mean_less_variance(
+        name,
+        ["sampled", "analytic"],
+        (&sampled, var_s),
+        (&analytic, var_a),
+        gain,
+    );
+}
+
 #[test]
 fn the_analytic_direct_light_is_unbiased_and_lowers_the_variance() {
     const SEEDS: u32 = 10;
@@ -198,20 +213,12 @@ fn the_analytic_direct_light_is_unbiased_and_lowers_the_variance() {
                     })
                     .collect()
             };
-            let (sampled, var_s) = statistics(&run(DirectLight::Sampled));
-            let (analytic, var_a) = statistics(&run(DirectLight::Analytic));
             let name = format!(
                 "{} alpha {alpha}{}",
                 backend.name(),
                 panel_x.map_or(String::new(), |x| format!(", three lights, panel at x {x}"))
             );
-            same_mean_less_variance(
-                &name,
-                ["sampled", "analytic"],
-                (&sampled, var_s),
-                (&analytic, var_a),
-                gain,
-            );
+            sampled_against_analytic(&name, run, gain);
         }
     }
 }
@@ -659,15 +666,7 @@ fn the_tables_clip_keeps_the_mean_and_lowers_the_variance() {
                 })
                 .collect()
         };
-        let (sampled, var_s) = statistics(&run(DirectLight::Sampled));
-        let (analytic, var_a) = statistics(&run(DirectLight::Analytic));
         let name = format!("{}, table {table_mm} mm, {rays} rays", backend.name());
-        same_mean_less_variance(
-            &name,
-            ["sampled", "analytic"],
-            (&sampled, var_s),
-            (&analytic, var_a),
-            gain,
-        );
+        sampled_against_analytic(&name, run, gain);
     }
 }
