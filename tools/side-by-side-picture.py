@@ -11,18 +11,14 @@ Usage: tools/side-by-side-picture.py OUT.png DIR:TITLE [DIR:TITLE ...] REF_DIR:T
 """
 import sys
 
-import Imath
 import numpy as np
-import OpenEXR
 from PIL import Image, ImageDraw
+
+from picture_row import load_exr, row
 
 
 def radiance(folder):
-    f = OpenEXR.InputFile(folder + "/radiance.exr")
-    dw = f.header()["dataWindow"]
-    w, h = dw.max.x - dw.min.x + 1, dw.max.y - dw.min.y + 1
-    v = np.frombuffer(f.channel("Y", Imath.PixelType(Imath.PixelType.FLOAT)), np.float32)
-    return v.reshape(h, w)
+    return load_exr(folder + "/radiance.exr")
 
 
 def main():
@@ -49,12 +45,7 @@ def main():
         tile.paste(im, (0, 22))
         ImageDraw.Draw(tile).text((6, 5), title, fill=(0, 0, 0))
         tiles.append(tile)
-    picture = Image.new("RGB", (sum(t.width for t in tiles) + 8 * (len(tiles) - 1), tiles[0].height), (255, 255, 255))
-    x = 0
-    for t in tiles:
-        picture.paste(t, (x, 0))
-        x += t.width + 8
-    picture.save(out, optimize=True)
+    row(tiles, 8).save(out, optimize=True)
 
 
 if __name__ == "__main__":

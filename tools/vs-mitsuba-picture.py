@@ -9,19 +9,10 @@ Usage: tools/vs-mitsuba-picture.py OUT.png --exposure 12 --box 53 38 253 218 \
 """
 import argparse
 
-import Imath
 import numpy as np
-import OpenEXR
 from PIL import Image, ImageDraw
 
-
-def load(path):
-    f = OpenEXR.InputFile(path)
-    dw = f.header()["dataWindow"]
-    w, h = dw.max.x - dw.min.x + 1, dw.max.y - dw.min.y + 1
-    channels = f.header()["channels"]
-    ch = "Y" if "Y" in channels else ("R" if "R" in channels else next(iter(channels)))
-    return np.frombuffer(f.channel(ch, Imath.PixelType(Imath.PixelType.FLOAT)), np.float32).reshape(h, w)
+from picture_row import load_exr, row
 
 
 def main():
@@ -34,7 +25,7 @@ def main():
     imgs = []
     for panel in a.panels:
         label, path = panel.split("=", 1)
-        v = np.clip(load(path) * a.exposure, 0, 1) ** (1 / 2.2)
+        v = np.clip(load_exr(path) * a.exposure, 0, 1) ** (1 / 2.2)
         im = Image.fromarray((v * 255 + 0.5).astype(np.uint8)).convert("RGB")
         if a.box:
             im = im.crop(tuple(a.box))
@@ -43,11 +34,7 @@ def main():
         d.rectangle((0, 0, im.width, 16), fill=(0, 0, 0))
         d.text((4, 2), label, fill=(255, 255, 255))
         imgs.append(im)
-    out = Image.new("RGB", (sum(i.width for i in imgs) + 6 * (len(imgs) - 1), imgs[0].height), (255, 255, 255))
-    x = 0
-    for i in imgs:
-        out.paste(i, (x, 0))
-        x += i.width + 6
+    out = row(imgs, 6)
     out.save(a.out, optimize=True)
     print(f"wrote {a.out} ({out.width} x {out.height})")
 
