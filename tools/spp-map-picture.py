@@ -9,10 +9,10 @@ Usage: tools/spp-map-picture.py OUT.png IMAGE_DIR [--exposure 9.8] [--title TEXT
 """
 import argparse
 
-import Imath
 import numpy as np
-import OpenEXR
 from PIL import Image, ImageDraw
+
+from picture_row import load_exr
 
 
 def main():
@@ -22,11 +22,9 @@ def main():
     ap.add_argument("--exposure", type=float, default=9.8)
     ap.add_argument("--title", default="image")
     a = ap.parse_args()
-    f = OpenEXR.InputFile(a.image_dir + "/radiance.exr")
-    dw = f.header()["dataWindow"]
-    w, h = dw.max.x + 1, dw.max.y + 1
-    radiance = np.frombuffer(f.channel("Y", Imath.PixelType(Imath.PixelType.FLOAT)), np.float32)
-    v = np.clip(radiance.reshape(h, w) * a.exposure, 0, 1) ** (1 / 2.2)
+    radiance = load_exr(a.image_dir + "/radiance.exr")
+    h, w = radiance.shape
+    v = np.clip(radiance * a.exposure, 0, 1) ** (1 / 2.2)
     image = Image.fromarray((v * 255 + 0.5).astype(np.uint8)).convert("RGB")
     spp = np.array(Image.open(a.image_dir + "/spp.png")).astype(np.float64)
     lo, hi = spp.min(), spp.max()
