@@ -63,18 +63,19 @@ void trace_tri_test(vec3 v0, vec3 v1, vec3 v2, uint prim, uint level, TraceRay r
     bool pos = any(greaterThan(ivec3(ubits), ivec3(0)));
     bool inside = !(neg && pos);
     precise float det = u + v + w;
-    precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
-    precise float t = tt / det;
-    // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
-    // triangle index, so the result does not depend on the traversal order. Taken
-    // with selects, not a branch: lanes run both sides of a branch on lavapipe.
-    bool take = inside && det != 0.0 && t >= tmin
-        && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim));
-    h.t = take ? t : h.t;
-    h.prim = take ? prim : h.prim;
-    h.bary = take ? vec2(v, w) : h.bary;   // divided by det when the query returns
-    h.det = take ? det : h.det;
-    h.inst = take ? level : h.inst;
+    [[dont_flatten]] if (inside && det != 0.0) {
+        precise float tt = (u * (r.s.z * a[r.kz]) + v * (r.s.z * b[r.kz])) + w * (r.s.z * c[r.kz]);
+        precise float t = tt / det;
+        // Closest hit; at exactly equal distance (a ray through a shared edge) the lower
+        // triangle index, so the result does not depend on the traversal order. Taken
+        // with selects, not a branch: lanes run both sides of a branch on lavapipe.
+        bool take = t >= tmin && (t < h.t || (t == h.t && h.prim != NO_HIT && prim < h.prim));
+        h.t = take ? t : h.t;
+        h.prim = take ? prim : h.prim;
+        h.bary = take ? vec2(v, w) : h.bary;   // divided by det when the query returns
+        h.det = take ? det : h.det;
+        h.inst = take ? level : h.inst;
+    }
 }
 
 // A hit of the traversal with its barycentrics divided out (the same division the test
