@@ -23,6 +23,17 @@ use crate::vk::{Buffer, ComputePipeline, Context, VkError};
 /// use it to show that pipelines are built once.
 static BUILT: AtomicUsize = AtomicUsize::new(0);
 
+/// Whether the path tracer can run on a device with these features: it needs subgroup
+/// arithmetic in compute shaders (`subgroupMax`, glsl/common/analytic_light.glsl
+/// `recorded_loop2`); refused by name where it is missing. (The trace backends' own
+/// needs are `trace::resolve`'s.)
+fn path_tracer_supported(info: &crate::vk::DeviceInfo) -> Result<(), VkError> {
+    if !info.subgroup_arithmetic {
+        return Err(VkError::NoSubgroupArithmetic);
+    }
+    Ok(())
+}
+
 /// A path-tracing pipeline: whether it is the variant with split paths (`[render]
 /// split_paths`, compiled apart), and the settings it was specialized for
 /// (`PathParams::specialization`), or none: it reads them at run time.
@@ -70,9 +81,7 @@ impl PathTracer {
         tables: &EnergyTables,
         begin_unspecialized: bool,
     ) -> Result<PathTracer, RenderError> {
-        if !ctx.info.subgroup_arithmetic {
-            return Err(VkError::NoSubgroupArithmetic.into());
-        }
+        path_tracer_supported(&ctx.info)?;
         let unspecialized = if begin_unspecialized {
             let ctx = ctx.clone();
             std::thread::Builder::new()
@@ -153,5 +162,25 @@ impl PathTracer {
     /// Path tracers built by this process so far.
     pub fn built_count() -> usize {
         BUILT.load(Ordering::Relaxed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vk::DeviceInfo;
+
+    /// A device without subgroup arithmetic is refused by name before any pipeline is
+    /// made; one with it passes.
+    #[test]
+    fn path_tracer_needs_subgroup_arithmetic() {
+        let without = DeviceInfo {
+            subgroup_arithmetic: false,
+            ..DeviceInfo::test_device()
+        };
+        let e = path_tracer_supported(&without).unwrap_err();
+        assert!(matches!(e, VkError::NoSubgroupArithmetic), "{e}");
+        assert!(e.to_string().contains("subgroup arithmetic"), "{e}");
+        assert!(path_tracer_supported(&DeviceInfo::test_device()).is_ok());
     }
 }

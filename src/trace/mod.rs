@@ -599,27 +599,11 @@ mod tests {
         shader_int64: bool,
     ) -> DeviceInfo {
         DeviceInfo {
-            name: "test device".into(),
-            device_type: "DISCRETE_GPU".into(),
-            driver_name: String::new(),
-            driver_info: String::new(),
-            vulkan_version: "1.2.0".into(),
             ray_query_supported: ray_query,
             ray_query_enabled: ray_query,
             buffer_device_address,
             shader_int64,
-            subgroup_arithmetic: true,
-            is_cpu: false,
-            cpu_lanes: crate::vk::LaneWidth::Driver,
-            cpu_shader_cache: None,
-            timestamp_period_ns: 1.0,
-            timestamps_supported: true,
-            queue_count: 1,
-            max_storage_buffer_range: u32::MAX,
-            max_texel_buffer_elements: u32::MAX,
-            max_workgroup_count: [65_535; 3],
-            memory_heaps: Vec::new(),
-            validation: false,
+            ..DeviceInfo::test_device()
         }
     }
 

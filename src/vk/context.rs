@@ -74,6 +74,37 @@ pub struct DeviceInfo {
     pub validation: bool,
 }
 
+#[cfg(test)]
+impl DeviceInfo {
+    /// A discrete GPU with every feature the renderer needs and no ray query, for unit
+    /// tests of what a device's features decide (set a field to take one away).
+    pub(crate) fn test_device() -> DeviceInfo {
+        DeviceInfo {
+            name: "test device".into(),
+            device_type: "DISCRETE_GPU".into(),
+            driver_name: String::new(),
+            driver_info: String::new(),
+            vulkan_version: "1.2.0".into(),
+            ray_query_supported: false,
+            ray_query_enabled: false,
+            buffer_device_address: true,
+            shader_int64: true,
+            subgroup_arithmetic: true,
+            is_cpu: false,
+            cpu_lanes: super::LaneWidth::Driver,
+            cpu_shader_cache: None,
+            timestamp_period_ns: 1.0,
+            timestamps_supported: true,
+            queue_count: 1,
+            max_storage_buffer_range: u32::MAX,
+            max_texel_buffer_elements: u32::MAX,
+            max_workgroup_count: [65_535; 3],
+            memory_heaps: Vec::new(),
+            validation: false,
+        }
+    }
+}
+
 impl DeviceInfo {
     /// Whether `bytes` of `what`, read as one texel buffer of 16-byte texels
     /// (`TEXEL_BUFFER_FORMAT`), fit the device's `maxTexelBufferElements`; if not, an
