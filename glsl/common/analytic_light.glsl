@@ -20,10 +20,13 @@
 // so E[G] = A exactly whatever the lobe's fit, at every shading point where each ray
 // meets the ring at most once and no other light stands in front of it (ring_cv_valid;
 // elsewhere the ring is left to the sampled estimator alone): the estimate stays
-// unbiased, and its variance falls where f V ~ g over the ring.
+// unbiased, and its variance falls where f V ~ g over the ring. ("Exactly" up to the
+// closed form's arithmetic: each edge's angle from a rational fit within 1.5e-6 of it,
+// polygon_edge.glsl, and float rounding.)
 #ifndef ANALYTIC_LIGHT_GLSL
 #define ANALYTIC_LIGHT_GLSL
 #extension GL_EXT_control_flow_attributes : require
+#include "polygon_edge.glsl"
 
 // A linearly transformed cosine in world space: orthonormal frame (t1, t2, r), r its
 // axis, widths a1 along t1 and a2 along t2; g = c D.
@@ -81,14 +84,6 @@ float conductor_lobe_amplitude(Conductor c, float mu) {
     return conductor_eval_cos(c, vec3(s, 0.0, mu), vec3(-s, 0.0, mu));
 }
 
-// Angle between unit a and b times the z of their unit normal: one edge of the
-// clamped-cosine polygon integral (atan2 form: exact for short edges too).
-float edge_z(vec3 a, vec3 b) {
-    vec3 c = cross(a, b);
-    float s = length(c);
-    return s > 0.0 ? atan(s, dot(a, b)) * c.z / s : 0.0;
-}
-
 // Rings recorded as seen from one point (record_rings): the world vertices of their
 // boundary loops, for the extra camera rays of `[render] analytic_rays`, whose closed
 // forms (recorded_rings2) take a pixel's rings as seen from one reference point and so
@@ -129,7 +124,7 @@ vec3 lobe_point(Lobe l, vec3 ns, vec3 ng, vec3 w) {
 }
 
 // A closed loop of directions (world vectors from the shading point, any length) whose
-// edges are summed as edge_z in the lobe's cosine space: `sum` / (2 pi) is the
+// edges are summed as edge_z in the lobe's cosine space: `sum` (edge_z: over 2 pi) is the
 // clamped-cosine integral over the region it bounds when every vertex is above the
 // horizons (`above`, lobe_point). With `rec` >= 0 the loop only records its world
 // vertices as recorded loop `rec` (`n` of them; more than REC_LOOP_VERTS: not recorded),
@@ -432,7 +427,7 @@ float ring_integral(LightBlock e, Lobe l, vec3 x, vec3 ns, vec3 ng, uint divisor
         return 0.0;
     }
     ok = lo.lp.above && hi.lp.above;
-    return abs(lo.lp.sum - hi.lp.sum) * (0.5 / PI);
+    return abs(lo.lp.sum - hi.lp.sum);
 }
 
 // Whether the control variate may use ring k at x: no ray from x can meet its tube twice
@@ -535,25 +530,6 @@ void record_rings(vec3 x, vec3 ng, uint divisor) {
             }
         }
     }
-}
-
-// One edge of the clamped-cosine polygon integral between unit a and b, over 2 pi:
-// angle / sin(angle) from a rational fit in cos(angle) (Hill's, of the LTC reference
-// code; relative error below 2e-6 over (0, pi), measured), no atan: what the extra
-// camera rays' closed form takes (edge_z is kept where A must equal E[G]). An obtuse
-// edge (one passing near the lobe's axis: few of a loop's) takes pi / sin(angle) minus
-// the acute fit; that square root and division sit behind a real branch
-// (`[[dont_flatten]]`): as a select, which the compiler makes of so small an `if`,
-// lavapipe computed them for every edge of every lane (the same values; with the cone's
-// horizon test, recorded_rings2, 0.987x the path tracing of whole paper frames,
-// docs/benchmarks/dataset.md).
-float edge_z_unit(vec3 a, vec3 b) {
-    float x = dot(a, b);
-    float y = abs(x);
-    float v = (0.8543985 + (0.4965155 + 0.0145206 * y) * y) / (3.4175940 + (4.1616724 + y) * y);
-    float ts = v;
-    [[dont_flatten]] if (!(x > 0.0)) ts = 0.5 * inversesqrt(max(1.0 - x * x, 1e-7)) - v;
-    return (a.x * b.y - a.y * b.x) * ts;
 }
 
 // Recorded vertex w in the cosine space of lobe l (reciprocal widths rt1, rt2, axis r),
