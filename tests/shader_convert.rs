@@ -240,13 +240,14 @@ fn run_edges(pairs: &[[f32; 4]]) -> Vec<[f32; 2]> {
 /// The analytic direct light's closed form sums, per edge of a ring's loops, the angle
 /// between two directions times the z of their unit normal (over 2 pi; edge_z, from a
 /// rational fit of theta / sin theta). Over 40 000 pairs at angles from 1e-4 rad to pi -
-/// 1e-3 and at lengths from 0.01 to 1e4 (the lobe's cosine space stretches by 1 /
-/// alpha), against float64 from the same f32 inputs: with the first vector along x, where
-/// the inputs' products round once, within 3e-6 of the edge's angle (the fit's own
-/// error: 1.5e-6); in every orientation within that plus the f32 rounding of the cross
-/// product's terms. A zero vector, parallel and opposite vectors give 0. The atan form it
-/// replaced is measured beside it and printed (NIR's atan: a polynomial, 2.1e-5 of short
-/// edges' angle).
+/// 1e-3 and at lengths from 0.01 to 1e8 (world vectors in mm, which a near-mirror lobe's
+/// cosine space stretches up to 1e4 times; edge_z's product of the squared lengths stays
+/// within f32 up to lengths of about 4e9), against float64 from the same f32 inputs:
+/// with the first vector along x, where the inputs' products round once, within 3e-6 of
+/// the edge's angle (the fit's own error: 1.5e-6); in every orientation within that plus
+/// the f32 rounding of the cross product's terms. A zero vector, parallel and opposite
+/// vectors give 0. The atan form it replaced is measured beside it and printed (NIR's
+/// atan: a polynomial, 2.1e-5 of short edges' angle).
 #[test]
 fn polygon_edges_match_float64() {
     use glam::DVec3;
@@ -270,8 +271,8 @@ fn polygon_edges_match_float64() {
             1e-4 + (pi - 1e-3 - 1e-4) * unit()
         };
         let (la, lb) = (
-            10f64.powf(-2.0 + 6.0 * unit()),
-            10f64.powf(-2.0 + 6.0 * unit()),
+            10f64.powf(-2.0 + 10.0 * unit()),
+            10f64.powf(-2.0 + 10.0 * unit()),
         );
         let r = 2.0 * pi * unit();
         let (u, w) = if k % 2 == 0 {

@@ -19,7 +19,7 @@ float edge_fit(float y) {
 // 2 pi: the angle between them times the z of their unit normal, / (2 pi). From the
 // fit above, not `atan`: NIR's atan is itself a polynomial (relative error 2.1e-5 for
 // short edges, the ring's), with a division, a reciprocal and minima and maxima that
-// lavapipe splits into 256-bit halves; the fit is 13 times closer (1.6e-6 of the angle
+// lavapipe splits into 256-bit halves; the fit is 12 times closer (1.7e-6 of the angle
 // against 2.1e-5 on lavapipe, tests/shader_convert.rs) and cheaper
 // (docs/benchmarks/dataset.md, "The closed form's edges without atan"). An obtuse edge
 // (x <= 0) takes pi / sin theta minus the fit, sin theta from the cross product's
