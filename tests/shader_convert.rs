@@ -11,8 +11,9 @@
 mod common;
 
 use ash::vk;
+use std::sync::Arc;
 use synosis::graph::Graph;
-use synosis::vk::{BindingKind, Buffer, ComputePipeline, MemoryKind};
+use synosis::vk::{BindingKind, Buffer, ComputePipeline, Context, MemoryKind};
 
 /// Floats at the edges (zeros, halves, the ranges' ends, NaN, subnormals) and random ones
 /// over the ranges, as bits.
@@ -76,22 +77,28 @@ fn inputs() -> Vec<f32> {
     xs
 }
 
-/// Runs glsl/convert_check.comp over `xs`: per float its conversions (f2u, uint(), the
-/// bits of f2i and int()) and its octahedral decode.
-fn run_checks(xs: &[f32]) -> (Vec<[u32; 4]>, Vec<[f32; 4]>) {
-    let ctx = common::gpu();
-    let spirv = synosis::shaders::spirv("convert_check").expect("build.rs compiles convert_check");
-    let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let pipe = ComputePipeline::new(
-        &ctx,
-        "convert_check",
+/// A check shader (`name`.comp, compiled by build.rs) with `bindings` storage buffers and
+/// 64 invocations a workgroup, no push constants.
+fn check_pipeline(ctx: &Arc<Context>, name: &str, bindings: usize) -> ComputePipeline {
+    let spirv = synosis::shaders::spirv(name).unwrap_or_else(|| panic!("build.rs compiles {name}"));
+    ComputePipeline::new(
+        ctx,
+        name,
         &spirv,
-        &[BindingKind::StorageBuffer; 3],
+        &vec![BindingKind::StorageBuffer; bindings],
         0,
         [64, 1, 1],
         &[],
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// Runs glsl/convert_check.comp over `xs`: per float its conversions (f2u, uint(), the
+/// bits of f2i and int()) and its octahedral decode.
+fn run_checks(xs: &[f32]) -> (Vec<[u32; 4]>, Vec<[f32; 4]>) {
+    let ctx = common::gpu();
+    let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let pipe = check_pipeline(&ctx, "convert_check", 3);
     let input = Buffer::from_slice(&ctx, "floats", xs, storage).unwrap();
     let readback = |name: &str| {
         Buffer::new(
@@ -209,18 +216,8 @@ fn directions_in_one_word_round_trip() {
 /// edge through GLSL's atan.
 fn run_edges(pairs: &[[f32; 4]]) -> Vec<[f32; 2]> {
     let ctx = common::gpu();
-    let spirv = synosis::shaders::spirv("edge_check").expect("build.rs compiles edge_check");
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let pipe = ComputePipeline::new(
-        &ctx,
-        "edge_check",
-        &spirv,
-        &[BindingKind::StorageBuffer; 2],
-        0,
-        [64, 1, 1],
-        &[],
-    )
-    .unwrap();
+    let pipe = check_pipeline(&ctx, "edge_check", 2);
     let input = Buffer::from_slice(&ctx, "pairs", pairs, storage).unwrap();
     let n = pairs.len() / 2;
     let output = Buffer::new(&ctx, "edges", n as u64 * 8, storage, MemoryKind::Readback).unwrap();
