@@ -1,6 +1,7 @@
-"""What the picture tools share (tools/vs-mitsuba-picture.py, tools/side-by-side-picture.py):
-reading a one-channel EXR and setting pictures side by side in a row. Needs numpy,
-OpenEXR and Pillow."""
+"""Reading a one-channel EXR (load_exr: the picture tools, tools/vs-mitsuba-picture.py,
+side-by-side-picture.py and spp-map-picture.py, and the benchmarks bench-ab, bench-lean and
+bench-paper-spp) and setting pictures side by side in a row (row: the first two). Needs
+numpy, OpenEXR and Pillow."""
 import Imath
 import numpy as np
 import OpenEXR

@@ -41,12 +41,11 @@ float edge_z(vec3 a, vec3 b) {
 
 // One edge of the clamped-cosine polygon integral between unit a and b, over 2 pi:
 // edge_z for unit vectors (edge_fit; no normalisation), what the extra camera rays'
-// closed form takes. An obtuse
-// edge (one passing near the lobe's axis: few of a loop's) takes pi / sin(angle) minus
-// the acute fit; that square root and division sit behind a real branch
-// (`[[dont_flatten]]`): as a select, which the compiler makes of so small an `if`,
-// lavapipe computed them for every edge of every lane (the same values; with the cone's
-// horizon test, recorded_rings2, 0.987x the path tracing of whole paper frames,
+// closed form takes. An obtuse edge (one passing near the lobe's axis: few of a loop's)
+// takes pi / sin(angle) minus the acute fit; that square root and division sit behind a
+// real branch (`[[dont_flatten]]`): as a select, which the compiler makes of so small an
+// `if`, lavapipe computed them for every edge of every lane (the same values; with the
+// cone's horizon test, recorded_rings2, 0.987x the path tracing of whole paper frames,
 // docs/benchmarks/dataset.md).
 float edge_z_unit(vec3 a, vec3 b) {
     float x = dot(a, b);
