@@ -71,15 +71,12 @@ impl crate::trace::Triangles for Mesh {
 }
 
 impl Mesh {
-    /// Axis-aligned bounds (min, max). Empty meshes give (+inf, -inf).
+    /// Axis-aligned bounds (min, max) of the corners the triangles use. Empty meshes give
+    /// (+inf, -inf).
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        self.triangles
-            .iter()
-            .flatten()
-            .map(|&i| self.positions[i as usize])
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p), hi.max(p))
-            })
+        use crate::trace::Triangles;
+        self.corner_bounds()
+            .map_or((Vec3::INFINITY, Vec3::NEG_INFINITY), |[lo, hi]| (lo, hi))
     }
 
     /// The three corners of triangle `t`.

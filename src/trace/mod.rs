@@ -144,6 +144,20 @@ pub trait Triangles {
     fn corner_w(&self) -> Option<&[[f32; 3]]> {
         None
     }
+    /// The axis-aligned box of the corners the triangles use ([lower, upper]); None
+    /// without triangles.
+    fn corner_bounds(&self) -> Option<[Vec3; 2]> {
+        let positions = self.positions();
+        let triangles = self.triangles();
+        (!triangles.is_empty()).then(|| {
+            triangles
+                .iter()
+                .flatten()
+                .fold([Vec3::INFINITY, Vec3::NEG_INFINITY], |[lo, hi], &i| {
+                    [lo.min(positions[i as usize]), hi.max(positions[i as usize])]
+                })
+        })
+    }
 }
 
 /// Plain indexed triangles.
@@ -346,14 +360,7 @@ impl LevelData {
         } else {
             shade
         };
-        let bounds = (!triangles.is_empty()).then(|| {
-            triangles
-                .iter()
-                .flatten()
-                .fold([Vec3::INFINITY, Vec3::NEG_INFINITY], |[lo, hi], &i| {
-                    [lo.min(positions[i as usize]), hi.max(positions[i as usize])]
-                })
-        });
+        let bounds = geo.corner_bounds();
         let start = std::time::Instant::now();
         let kind = match backend {
             Backend::RayQuery => LevelKind::RayQuery {
