@@ -944,94 +944,29 @@ impl Job {
         }
         self.int("render.spp", r.spp, 1, 1 << 16)?;
         self.int("render.bounces", r.bounces, 1, 64)?;
-        if let Some(t) = r.noise_target {
-            self.real("render.noise_target", t, 0.01, 100.0)?;
-            if let SensorModel::Linear { .. } = self.sensor.model {
-                return Err(self.field(
-                    "render.noise_target",
-                    t,
-                    "needs the EMVA 1288 sensor (`[sensor] exposure = \"auto\"` or `{ ms = .. }`): the target is the render noise over the camera's own noise, and the linear model has none; remove it to render exactly `spp`",
-                ));
-            }
+        crate::scene::config::NoiseFields {
+            spp: r.spp,
+            noise_target: r.noise_target,
+            min_spp: r.min_spp,
+            adaptive_radius: r.adaptive_radius,
+            noise_target_growth: r.noise_target_growth,
+            noise_estimate: r.noise_estimate,
+            analytic_rays: r.analytic_rays,
+            analytic_rays_max: r.analytic_rays_max,
+            analytic_ray_cost: r.analytic_ray_cost,
+            direct_light_sampled: r.direct_light
+                == Some(crate::scene::config::DirectLight::Sampled),
         }
-        if let Some(m) = r.min_spp {
-            if r.noise_target.is_none() {
-                return Err(self.field(
-                    "render.min_spp",
-                    m,
-                    "is the first noise check of `render.noise_target`: give that too, or remove it",
-                ));
-            }
-            self.int("render.min_spp", m, 2, r.spp.max(2))?;
-        }
-        if let Some(a) = r.adaptive_radius {
-            if r.noise_target.is_none() {
-                return Err(self.field(
-                    "render.adaptive_radius",
-                    a,
-                    "stops each pixel by its share of `render.noise_target`: give that too, or remove it",
-                ));
-            }
-            self.int("render.adaptive_radius", a, 0, 16)?;
-        }
-        if let Some(g) = r.noise_target_growth {
-            if r.noise_target.is_none() {
-                return Err(self.field(
-                    "render.noise_target_growth",
-                    g,
-                    "is how `render.noise_target` grows with an image's samples: give that too, or remove it",
-                ));
-            }
-            self.real("render.noise_target_growth", g, 0.0, 1.0)?;
-        }
-        if let Some(e) = r.noise_estimate
-            && r.noise_target.is_none()
+        .check()
+        .map_err(|e| self.field(e.field, e.value, &e.allowed))?;
+        if let Some(t) = r.noise_target
+            && let SensorModel::Linear { .. } = self.sensor.model
         {
             return Err(self.field(
-                "render.noise_estimate",
-                format!("{e:?}").to_lowercase(),
-                "is how `render.noise_target` estimates the noise: give that too, or remove it",
+                "render.noise_target",
+                t,
+                "needs the EMVA 1288 sensor (`[sensor] exposure = \"auto\"` or `{ ms = .. }`): the target is the render noise over the camera's own noise, and the linear model has none; remove it to render exactly `spp`",
             ));
-        }
-        if let Some(n) = r.analytic_rays {
-            self.int("render.analytic_rays", n, 1, 64)?;
-        }
-        if let Some(m) = r.analytic_rays_max {
-            if r.noise_target.is_none() {
-                return Err(self.field(
-                    "render.analytic_rays_max",
-                    m,
-                    "is chosen at the first check of `render.noise_target`: give that too, or remove it",
-                ));
-            }
-            if r.direct_light == Some(crate::scene::config::DirectLight::Sampled) {
-                return Err(self.field(
-                    "render.analytic_rays_max",
-                    m,
-                    "takes the analytic direct light, which `render.direct_light = \"sampled\"` turns off: remove one of the two",
-                ));
-            }
-            let first = r.analytic_rays.unwrap_or(1);
-            if first < 2 {
-                return Err(self.field(
-                    "render.analytic_rays",
-                    first,
-                    "must be in [2, 64] with `render.analytic_rays_max` (the first samples' rays measure their spread)",
-                ));
-            }
-            self.int("render.analytic_rays_max", m, first, 64)?;
-        }
-        if let Some(k) = r.analytic_ray_cost {
-            if r.analytic_rays_max.is_none() {
-                return Err(self.field(
-                    "render.analytic_ray_cost",
-                    k,
-                    "is what `render.analytic_rays_max`'s choice takes: give that too, or remove it",
-                ));
-            }
-            if !(k > 0.0 && k <= 10.0) {
-                return Err(self.field("render.analytic_ray_cost", k, "must be in (0, 10]"));
-            }
         }
         if let Some(n) = r.light_samples {
             self.int("render.light_samples", n, 1, 64)?;

@@ -29,6 +29,10 @@ pub enum ConfigError {
         field: &'static str,
         message: String,
     },
+    /// A field that breaks the rules a scene file shares with dataset jobs
+    /// ([`NoiseFields`]).
+    #[error("{} = {}: {}", .0.field, .0.value, .0.allowed)]
+    Rule(FieldRule),
     /// A `[[light]]` entry (index from 0) has a bad field.
     #[error("light[{index}].{field}: {message}")]
     Light {
@@ -1223,6 +1227,162 @@ fn range_u(
     }
 }
 
+/// The `[render]` fields of the noise target and of the extra rays' choice, as a scene
+/// file and a dataset job both give them (integers as i64 and numbers as f64, as a job
+/// reads them), checked by one set of rules ([`NoiseFields::check`]). What the noise
+/// target needs of the camera (the EMVA 1288 sensor) each file checks itself: the two
+/// say it differently.
+#[derive(Clone, Debug, Default)]
+pub struct NoiseFields {
+    pub spp: i64,
+    pub noise_target: Option<f64>,
+    pub min_spp: Option<i64>,
+    pub adaptive_radius: Option<i64>,
+    pub noise_target_growth: Option<f64>,
+    pub noise_estimate: Option<NoiseEstimator>,
+    /// `analytic_rays` where given (the rules read 1 without).
+    pub analytic_rays: Option<i64>,
+    pub analytic_rays_max: Option<i64>,
+    pub analytic_ray_cost: Option<f64>,
+    /// `direct_light = "sampled"`.
+    pub direct_light_sampled: bool,
+}
+
+/// A field that breaks [`NoiseFields`]' rules: its name, its value and what is allowed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldRule {
+    pub field: &'static str,
+    pub value: String,
+    pub allowed: String,
+}
+
+impl From<FieldRule> for ConfigError {
+    fn from(r: FieldRule) -> Self {
+        ConfigError::Rule(r)
+    }
+}
+
+impl NoiseFields {
+    /// Each field in its range, and every one that only works with another given with it.
+    pub fn check(&self) -> Result<(), FieldRule> {
+        fn broken(
+            field: &'static str,
+            value: impl ToString,
+            allowed: &str,
+        ) -> Result<(), FieldRule> {
+            Err(FieldRule {
+                field,
+                value: value.to_string(),
+                allowed: allowed.to_string(),
+            })
+        }
+        let int = |field, v: i64, lo: i64, hi: i64| {
+            if (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                broken(field, v, &format!("must be an integer in [{lo}, {hi}]"))
+            }
+        };
+        let real = |field, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && v >= lo && v <= hi {
+                Ok(())
+            } else {
+                broken(field, v, &format!("must be a number in [{lo}, {hi}]"))
+            }
+        };
+        let with_target = self.noise_target.is_some();
+        if let Some(t) = self.noise_target {
+            real("render.noise_target", t, 0.01, 100.0)?;
+        }
+        if let Some(m) = self.min_spp {
+            if !with_target {
+                return broken(
+                    "render.min_spp",
+                    m,
+                    "is the first noise check of `render.noise_target`: give that too, or remove it",
+                );
+            }
+            int("render.min_spp", m, 2, self.spp.max(2))?;
+        }
+        if let Some(a) = self.adaptive_radius {
+            if !with_target {
+                return broken(
+                    "render.adaptive_radius",
+                    a,
+                    "stops each pixel by its share of `render.noise_target`: give that too, or remove it",
+                );
+            }
+            int("render.adaptive_radius", a, 0, 16)?;
+        }
+        if let Some(g) = self.noise_target_growth {
+            if !with_target {
+                return broken(
+                    "render.noise_target_growth",
+                    g,
+                    "is how `render.noise_target` grows with an image's samples: give that too, or remove it",
+                );
+            }
+            real("render.noise_target_growth", g, 0.0, 1.0)?;
+        }
+        if let Some(e) = self.noise_estimate
+            && !with_target
+        {
+            return broken(
+                "render.noise_estimate",
+                format!("{e:?}").to_lowercase(),
+                "is how `render.noise_target` estimates the noise: give that too, or remove it",
+            );
+        }
+        if let Some(n) = self.analytic_rays {
+            int("render.analytic_rays", n, 1, 64)?;
+        }
+        if let Some(m) = self.analytic_rays_max {
+            if !with_target {
+                return broken(
+                    "render.analytic_rays_max",
+                    m,
+                    "is chosen at the first check of `render.noise_target`: give that too, or remove it",
+                );
+            }
+            if self.direct_light_sampled {
+                return broken(
+                    "render.analytic_rays_max",
+                    m,
+                    "takes the analytic direct light, which `render.direct_light = \"sampled\"` turns off: remove one of the two",
+                );
+            }
+            let first = self.analytic_rays.unwrap_or(1);
+            if first < 2 {
+                return broken(
+                    "render.analytic_rays",
+                    first,
+                    "must be in [2, 64] with `render.analytic_rays_max` (the first samples' rays measure their spread)",
+                );
+            }
+            int("render.analytic_rays_max", m, first, 64)?;
+        }
+        if let Some(k) = self.analytic_ray_cost {
+            if self.analytic_rays_max.is_none() {
+                return broken(
+                    "render.analytic_ray_cost",
+                    k,
+                    "is what `render.analytic_rays_max`'s choice takes: give that too, or remove it",
+                );
+            }
+            if !(k > 0.0 && k <= 10.0) {
+                return broken("render.analytic_ray_cost", k, "must be a number in (0, 10]");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A scene file's f32 as the f64 its text gave (0.01 stays 0.01, where `as f64` would
+/// give 0.009999999776), so that [`NoiseFields`]' bounds and messages read it as written.
+fn as_written(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::NAN)
+}
+
 /// The image must fit one storage buffer on every Vulkan device
 /// (`gpu_interface::MAX_IMAGE_PIXELS`, 33,554,432 pixels, e.g. 8192 x 4096).
 pub fn pixel_count(field: &'static str, width: u32, height: u32) -> Result<(), ConfigError> {
@@ -1493,52 +1653,25 @@ impl SceneConfig {
             false,
             "[0.25, 4]",
         )?;
-        if let Some(t) = r.noise_target {
-            range_f("render.noise_target", t, 0.01, 100.0, false, "[0.01, 100]")?;
-            if self.sensor.is_none() {
-                return Err(ConfigError::Invalid {
-                    field: "render.noise_target",
-                    message: "needs a [sensor] section (the EMVA 1288 camera): the target is the render noise over the camera's own noise, and the linear exposure model has none".into(),
-                });
-            }
+        NoiseFields {
+            spp: r.spp as i64,
+            noise_target: r.noise_target.map(as_written),
+            min_spp: r.min_spp.map(i64::from),
+            adaptive_radius: r.adaptive_radius.map(i64::from),
+            noise_target_growth: r.noise_target_growth.map(as_written),
+            noise_estimate: r.noise_estimate,
+            analytic_rays: Some(r.analytic_rays as i64),
+            analytic_rays_max: r.analytic_rays_max.map(i64::from),
+            analytic_ray_cost: r.analytic_ray_cost.map(as_written),
+            direct_light_sampled: r.direct_light == DirectLight::Sampled,
         }
-        range_u("render.analytic_rays", r.analytic_rays, 1, 64, "[1, 64]")?;
-        if let Some(m) = r.analytic_rays_max {
-            if r.noise_target.is_none() {
-                return Err(ConfigError::Invalid {
-                    field: "render.analytic_rays_max",
-                    message: "is chosen at the first check of render.noise_target: give that too, or remove it".into(),
-                });
-            }
-            if r.direct_light == DirectLight::Sampled {
-                return Err(ConfigError::Invalid {
-                    field: "render.analytic_rays_max",
-                    message: "takes the analytic direct light, which render.direct_light = \"sampled\" turns off: remove one of the two".into(),
-                });
-            }
-            if r.analytic_rays < 2 {
-                return Err(ConfigError::Range {
-                    field: "render.analytic_rays",
-                    value: r.analytic_rays.to_string(),
-                    range: "[2, 64] with render.analytic_rays_max (the first samples' rays measure their spread)",
-                });
-            }
-            range_u(
-                "render.analytic_rays_max",
-                m,
-                r.analytic_rays,
-                64,
-                "[render.analytic_rays, 64]",
-            )?;
-        }
-        if let Some(k) = r.analytic_ray_cost {
-            if r.analytic_rays_max.is_none() {
-                return Err(ConfigError::Invalid {
-                    field: "render.analytic_ray_cost",
-                    message: "is what render.analytic_rays_max's choice takes: give that too, or remove it".into(),
-                });
-            }
-            range_f("render.analytic_ray_cost", k, 0.0, 10.0, true, "(0, 10]")?;
+        .check()
+        .map_err(ConfigError::from)?;
+        if r.noise_target.is_some() && self.sensor.is_none() {
+            return Err(ConfigError::Invalid {
+                field: "render.noise_target",
+                message: "needs a [sensor] section (the EMVA 1288 camera): the target is the render noise over the camera's own noise, and the linear exposure model has none".into(),
+            });
         }
         range_u("render.light_samples", r.light_samples, 1, 64, "[1, 64]")?;
         range_u("render.bsdf_samples", r.bsdf_samples, 1, 64, "[1, 64]")?;
@@ -1547,41 +1680,6 @@ impl SceneConfig {
                 field: "render.bsdf_samples",
                 value: r.bsdf_samples.to_string(),
                 range: "[2, 64] with render.split_paths (the branches are its directions)",
-            });
-        }
-        if let Some(m) = r.min_spp {
-            if r.noise_target.is_none() {
-                return Err(ConfigError::Invalid {
-                    field: "render.min_spp",
-                    message: "is the first noise check of render.noise_target: give that too, or remove it".into(),
-                });
-            }
-            range_u("render.min_spp", m, 2, r.spp.max(2), "[2, render.spp]")?;
-        }
-        if let Some(a) = r.adaptive_radius {
-            if r.noise_target.is_none() {
-                return Err(ConfigError::Invalid {
-                    field: "render.adaptive_radius",
-                    message: "stops each pixel by its share of render.noise_target: give that too, or remove it".into(),
-                });
-            }
-            range_u("render.adaptive_radius", a, 0, 16, "[0, 16]")?;
-        }
-        if let Some(g) = r.noise_target_growth {
-            if r.noise_target.is_none() {
-                return Err(ConfigError::Invalid {
-                    field: "render.noise_target_growth",
-                    message: "is how render.noise_target grows with an image's samples: give that too, or remove it".into(),
-                });
-            }
-            range_f("render.noise_target_growth", g, 0.0, 1.0, false, "[0, 1]")?;
-        }
-        if r.noise_estimate.is_some() && r.noise_target.is_none() {
-            return Err(ConfigError::Invalid {
-                field: "render.noise_estimate",
-                message:
-                    "is how render.noise_target estimates the noise: give that too, or remove it"
-                        .into(),
             });
         }
         let t = &self.texture;
@@ -1770,12 +1868,12 @@ mod tests {
             (
                 "noise_target = 9.0\nanalytic_rays = 32\nanalytic_rays_max = 16\n",
                 "render.analytic_rays_max",
-                "[render.analytic_rays, 64]",
+                "[32, 64]",
             ),
             (
                 "noise_target = 9.0\nanalytic_rays = 32\nanalytic_rays_max = 65\n",
                 "render.analytic_rays_max",
-                "[render.analytic_rays, 64]",
+                "[32, 64]",
             ),
             (
                 "noise_target = 9.0\nanalytic_ray_cost = 0.05\n",
@@ -1960,5 +2058,130 @@ mod tests {
         let v = parse_view("B12.5@-30").unwrap();
         assert_eq!((v.face, v.angle_deg, v.azimuth_deg), (2, 12.5, -30.0));
         assert!(parse_view("A10@400").is_err() && parse_view("A10@").is_err());
+    }
+
+    #[test]
+    fn noise_fields_rules_name_the_field_for_scene_files_and_jobs() {
+        let ok = NoiseFields {
+            spp: 64,
+            noise_target: Some(1.0),
+            min_spp: Some(16),
+            adaptive_radius: Some(4),
+            noise_target_growth: Some(0.5),
+            noise_estimate: Some(NoiseEstimator::Samples),
+            analytic_rays: Some(16),
+            analytic_rays_max: Some(64),
+            analytic_ray_cost: Some(0.05),
+            direct_light_sampled: false,
+        };
+        assert_eq!(ok.check(), Ok(()));
+        let broken = |f: NoiseFields| f.check().unwrap_err().field;
+        // Without the target, the first field that needs it is named.
+        let untargeted = NoiseFields {
+            noise_target: None,
+            ..ok.clone()
+        };
+        assert_eq!(broken(untargeted.clone()), "render.min_spp");
+        for (f, field) in [
+            (
+                NoiseFields {
+                    min_spp: None,
+                    ..untargeted.clone()
+                },
+                "render.adaptive_radius",
+            ),
+            (
+                NoiseFields {
+                    min_spp: None,
+                    adaptive_radius: None,
+                    noise_target_growth: None,
+                    ..untargeted.clone()
+                },
+                "render.noise_estimate",
+            ),
+            (
+                NoiseFields {
+                    noise_target: Some(0.005),
+                    ..ok.clone()
+                },
+                "render.noise_target",
+            ),
+            (
+                NoiseFields {
+                    min_spp: Some(65),
+                    ..ok.clone()
+                },
+                "render.min_spp",
+            ),
+            (
+                NoiseFields {
+                    adaptive_radius: Some(17),
+                    ..ok.clone()
+                },
+                "render.adaptive_radius",
+            ),
+            (
+                NoiseFields {
+                    noise_target_growth: Some(1.5),
+                    ..ok.clone()
+                },
+                "render.noise_target_growth",
+            ),
+            (
+                NoiseFields {
+                    analytic_rays: Some(1),
+                    ..ok.clone()
+                },
+                "render.analytic_rays",
+            ),
+            (
+                NoiseFields {
+                    analytic_rays: None,
+                    ..ok.clone()
+                },
+                "render.analytic_rays",
+            ),
+            (
+                NoiseFields {
+                    analytic_rays_max: Some(8),
+                    ..ok.clone()
+                },
+                "render.analytic_rays_max",
+            ),
+            (
+                NoiseFields {
+                    direct_light_sampled: true,
+                    ..ok.clone()
+                },
+                "render.analytic_rays_max",
+            ),
+            (
+                NoiseFields {
+                    analytic_ray_cost: Some(0.0),
+                    ..ok.clone()
+                },
+                "render.analytic_ray_cost",
+            ),
+            (
+                NoiseFields {
+                    analytic_rays_max: None,
+                    ..ok.clone()
+                },
+                "render.analytic_ray_cost",
+            ),
+        ] {
+            assert_eq!(broken(f), field);
+        }
+        // A scene file's f32 read as written: its lowest target and growth 1 are allowed.
+        assert_eq!(as_written(0.01), 0.01);
+        let text = "[camera]\nf_number = 8\n[sensor]\n[render]\nspp = 8\nnoise_target = 0.01\nnoise_target_growth = 1.0\n";
+        SceneConfig::parse(text).expect("the lowest target");
+        let e = SceneConfig::parse(&text.replace("0.01", "0.009"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("render.noise_target = 0.009: must be a number in [0.01, 100]"),
+            "{e}"
+        );
     }
 }
