@@ -259,6 +259,23 @@ fn bad_mesh_files_name_the_file() {
         .err()
         .unwrap();
     assert!(matches!(e, MeshError::NotFound { .. }), "{e}");
+    // A file over the size limit is refused by its size, before it is read (sparse
+    // files: nothing is written).
+    for name in ["big.stl", "big.glb"] {
+        let p = d.join(name);
+        std::fs::File::create(&p)
+            .unwrap()
+            .set_len(synosis::limits::MAX_MESH_BYTES + 1)
+            .unwrap();
+        let msg = load_mesh(&p, None, GltfUnitDefault::Spec, Degenerates::Reject)
+            .err()
+            .unwrap_or_else(|| panic!("{name} loaded"))
+            .to_string();
+        assert!(
+            msg.contains(name) && msg.contains("over the limit for mesh files"),
+            "{name}: {msg}"
+        );
+    }
 }
 
 /// The same part as GLB and as STL (no labels), both given the inspected face by region

@@ -88,12 +88,13 @@ struct LabelExtras {
     instance: u16,
 }
 
-/// Reads every triangle primitive of the default scene (node transforms applied).
-pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, MeshError> {
-    let malformed = |reason: String| MeshError::Malformed {
-        path: path.to_path_buf(),
-        reason,
-    };
+/// Whether mesh file `path` exists (else `NotFound`) and is within
+/// `limits::MAX_MESH_BYTES` (else `too_large`'s error, given the reason: each reader
+/// names its own format).
+pub(crate) fn check_mesh_file(
+    path: &Path,
+    too_large: impl FnOnce(String) -> MeshError,
+) -> Result<(), MeshError> {
     if !path.exists() {
         return Err(MeshError::NotFound {
             path: path.to_path_buf(),
@@ -102,10 +103,21 @@ pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, Me
     let len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
     let limit = crate::limits::MAX_MESH_BYTES;
     if len > limit {
-        return Err(malformed(format!(
+        return Err(too_large(format!(
             "{len} bytes: over the limit for mesh files ({limit} bytes)"
         )));
     }
+    Ok(())
+}
+
+/// Reads every triangle primitive of the default scene (node transforms applied).
+pub fn import_mesh(path: &Path, degenerates: Degenerates) -> Result<Imported, MeshError> {
+    let malformed = |reason: String| MeshError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    check_mesh_file(path, malformed)?;
+    let limit = crate::limits::MAX_MESH_BYTES;
     let gltf = gltf::Gltf::open(path).map_err(|e| malformed(e.to_string()))?;
     for b in gltf.document.buffers() {
         if b.length() as u64 > limit {

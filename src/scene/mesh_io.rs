@@ -19,7 +19,9 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use super::gltf_io::{Degenerates, Imported, MeshError, check_imported, import_mesh};
+use super::gltf_io::{
+    Degenerates, Imported, MeshError, check_imported, check_mesh_file, import_mesh,
+};
 use super::mesh::{Mesh, TriLabel, face_from_name};
 
 /// The length unit of a mesh file's coordinates.
@@ -117,22 +119,9 @@ pub fn load_mesh(
     degenerates: Degenerates,
 ) -> Result<LoadedMesh, MeshError> {
     let format = MeshFormat::of(path)?;
-    if !path.exists() {
-        return Err(MeshError::NotFound {
-            path: path.to_path_buf(),
-        });
-    }
-    let len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
-    let limit = crate::limits::MAX_MESH_BYTES;
-    if len > limit {
-        return Err(MeshError::Parse {
-            path: path.to_path_buf(),
-            format: format.name(),
-            reason: format!("{len} bytes: over the limit for mesh files ({limit} bytes)"),
-        });
-    }
     let (imported, unit) = match format {
         MeshFormat::Gltf => {
+            // import_mesh checks the file itself.
             let mut imported = import_mesh(path, degenerates)?;
             let synosis_file = imported
                 .generator
@@ -152,6 +141,11 @@ pub fn load_mesh(
             (imported, unit)
         }
         _ => {
+            check_mesh_file(path, |reason| MeshError::Parse {
+                path: path.to_path_buf(),
+                format: format.name(),
+                reason,
+            })?;
             let unit = unit.unwrap_or(MeshUnit::Mm);
             let mesh = match format {
                 MeshFormat::Obj => read_obj(path, unit.mm())?,
