@@ -907,19 +907,11 @@ impl Job {
     }
 
     fn int(&self, field: &str, v: i64, lo: i64, hi: i64) -> Result<()> {
-        if (lo..=hi).contains(&v) {
-            Ok(())
-        } else {
-            Err(self.field(field, v, &format!("must be an integer in [{lo}, {hi}]")))
-        }
+        crate::scene::config::int_in(v, lo, hi).map_err(|allowed| self.field(field, v, &allowed))
     }
 
     fn real(&self, field: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
-        if v.is_finite() && v >= lo && v <= hi {
-            Ok(())
-        } else {
-            Err(self.field(field, v, &format!("must be a number in [{lo}, {hi}]")))
-        }
+        crate::scene::config::real_in(v, lo, hi).map_err(|allowed| self.field(field, v, &allowed))
     }
 
     /// Every check that needs no file other than the job itself (meshes and the defect

@@ -1277,18 +1277,10 @@ impl NoiseFields {
             })
         }
         let int = |field, v: i64, lo: i64, hi: i64| {
-            if (lo..=hi).contains(&v) {
-                Ok(())
-            } else {
-                broken(field, v, &format!("must be an integer in [{lo}, {hi}]"))
-            }
+            int_in(v, lo, hi).or_else(|allowed| broken(field, v, &allowed))
         };
         let real = |field, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && v >= lo && v <= hi {
-                Ok(())
-            } else {
-                broken(field, v, &format!("must be a number in [{lo}, {hi}]"))
-            }
+            real_in(v, lo, hi).or_else(|allowed| broken(field, v, &allowed))
         };
         let with_target = self.noise_target.is_some();
         if let Some(t) = self.noise_target {
@@ -1374,6 +1366,25 @@ impl NoiseFields {
             }
         }
         Ok(())
+    }
+}
+
+/// Whether integer `v` lies in [lo, hi]; else what is allowed, in the words of
+/// [`NoiseFields`]' rules and of dataset jobs' ranges.
+pub fn int_in(v: i64, lo: i64, hi: i64) -> Result<(), String> {
+    if (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(format!("must be an integer in [{lo}, {hi}]"))
+    }
+}
+
+/// Whether `v` is a finite number in [lo, hi]; else what is allowed (as [`int_in`]).
+pub fn real_in(v: f64, lo: f64, hi: f64) -> Result<(), String> {
+    if v.is_finite() && v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("must be a number in [{lo}, {hi}]"))
     }
 }
 
