@@ -486,6 +486,57 @@ fn compare_fit_alignment_recovers_an_affine_map() {
     }
 }
 
+// `compare_with_progress` (the CLI's progress bar): each pass reported at its start with
+// its total, then once per image up to that total, in the passes' order; a line per
+// viewpoint; the same report as `compare`.
+#[test]
+fn compare_reports_each_pass_and_every_image() {
+    use synosis::metrics::compare::{ComparePhase, compare_with_progress};
+    let set = make_set();
+    let mut cfg = config(&set);
+    cfg.align = AlignMode::Fit(metrics::paper_defaults());
+    let events = std::sync::Mutex::new(Vec::new());
+    let notes = std::cell::RefCell::new(Vec::new());
+    let report = compare_with_progress(
+        &cfg,
+        &|phase, done, total| events.lock().unwrap().push((phase, done, total)),
+        &|line| notes.borrow_mut().push(line.to_string()),
+    )
+    .unwrap();
+    let events = events.into_inner().unwrap();
+    let mut order = Vec::new();
+    for phase in [
+        ComparePhase::MetaMasks,
+        ComparePhase::Alignment,
+        ComparePhase::Matching,
+    ] {
+        let mine: Vec<(usize, usize)> = events
+            .iter()
+            .filter(|e| e.0 == phase)
+            .map(|e| (e.1, e.2))
+            .collect();
+        let total = mine[0].1;
+        assert!(total > 0, "{phase:?}");
+        assert_eq!(mine[0].0, 0, "{phase:?} starts at 0");
+        assert_eq!(mine.len(), total + 1, "{phase:?}: {mine:?}");
+        assert!(mine.iter().all(|&(_, t)| t == total));
+        assert_eq!(mine.iter().map(|e| e.0).max(), Some(total), "{phase:?}");
+        order.push(events.iter().position(|e| e.0 == phase).unwrap());
+    }
+    assert!(order.windows(2).all(|w| w[0] < w[1]), "{events:?}");
+    let notes = notes.into_inner();
+    assert_eq!(notes.len(), report.meta_mask_pixels.len(), "{notes:?}");
+    assert!(
+        notes.iter().all(|n| n.starts_with("viewpoint ")),
+        "{notes:?}"
+    );
+    let plain = compare(&cfg).unwrap();
+    assert_eq!(
+        serde_json::to_string(&report).unwrap(),
+        serde_json::to_string(&plain).unwrap()
+    );
+}
+
 #[test]
 fn compare_bad_inputs_error_cleanly() {
     let set = make_set();

@@ -130,7 +130,35 @@ pub fn run_compare(a: CompareArgs) -> anyhow::Result<()> {
     } else {
         AlignMode::Table(table)
     };
-    let report = metrics::compare::compare(&cfg).with_context(|| {
+    // A bar on stderr (hidden where stderr is not a terminal), one pass at a time.
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg:14} {bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let progress = |phase: metrics::compare::ComparePhase, done: usize, total: usize| {
+        // Each pass starts at 0; its images finish on several threads, in any order.
+        if done == 0 {
+            bar.set_message(phase.describe());
+            bar.set_length(total as u64);
+            bar.reset();
+        } else {
+            bar.inc(1);
+        }
+    };
+    // The viewpoints' lines above the bar (a hidden bar prints nothing: then stderr).
+    let note = |line: &str| {
+        if bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            bar.println(line);
+        }
+    };
+    let result = metrics::compare::compare_with_progress(&cfg, &progress, &note);
+    bar.finish_and_clear();
+    let report = result.with_context(|| {
         format!(
             "comparing {} with {}",
             a.real.display(),

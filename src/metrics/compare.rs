@@ -51,6 +51,58 @@ pub enum AlignMode {
     Fit(BTreeMap<String, Alignment>),
 }
 
+/// The passes of a comparison over the images, reported to [`compare_with_progress`]'s
+/// callback with the images done and the pass's total.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ComparePhase {
+    /// Every image's face masks decoded into the viewpoints' meta-masks.
+    MetaMasks,
+    /// Every image's moments inside the meta-masks (`AlignMode::Fit` only).
+    Alignment,
+    /// Every synthetic image against its viewpoint's real images.
+    Matching,
+}
+
+impl ComparePhase {
+    /// A few words for a progress bar.
+    pub fn describe(self) -> &'static str {
+        match self {
+            ComparePhase::MetaMasks => "meta-masks",
+            ComparePhase::Alignment => "alignment fit",
+            ComparePhase::Matching => "matching",
+        }
+    }
+}
+
+/// A pass's count of images done, reported after each (from any thread).
+struct Tally<'a> {
+    phase: ComparePhase,
+    total: usize,
+    done: std::sync::atomic::AtomicUsize,
+    report: &'a (dyn Fn(ComparePhase, usize, usize) + Sync),
+}
+
+impl<'a> Tally<'a> {
+    fn start(
+        phase: ComparePhase,
+        total: usize,
+        report: &'a (dyn Fn(ComparePhase, usize, usize) + Sync),
+    ) -> Self {
+        report(phase, 0, total);
+        Tally {
+            phase,
+            total,
+            done: Default::default(),
+            report,
+        }
+    }
+
+    fn tick(&self) {
+        let done = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        (self.report)(self.phase, done, self.total);
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct CompareConfig {
     pub real_dir: PathBuf,
@@ -119,6 +171,19 @@ struct ViewpointData {
 }
 
 pub fn compare(cfg: &CompareConfig) -> Result<CompareReport, MetricsError> {
+    compare_with_progress(cfg, &|_, _, _| (), &|line| eprintln!("{line}"))
+}
+
+/// [`compare`], calling `progress(phase, images done, images in the pass)` as each pass
+/// starts and after each image (from the worker threads; a run over thousands of images
+/// takes minutes, docs/benchmarks/metrics.md), and `note` with a line on each viewpoint
+/// as its matching starts (its real and synthetic images and meta-mask; [`compare`]
+/// writes them to stderr).
+pub fn compare_with_progress(
+    cfg: &CompareConfig,
+    progress: &(dyn Fn(ComparePhase, usize, usize) + Sync),
+    note: &dyn Fn(&str),
+) -> Result<CompareReport, MetricsError> {
     if cfg.face_labels.is_empty() || cfg.face_labels.len() > 255 {
         return Err(MetricsError::param(
             "face_labels",
@@ -138,11 +203,13 @@ pub fn compare(cfg: &CompareConfig) -> Result<CompareReport, MetricsError> {
         }
     }
 
+    let images: usize = viewpoints.values().map(|(r, s)| r.len() + s.len()).sum();
     let mut vdata = BTreeMap::new();
+    let masks = Tally::start(ComparePhase::MetaMasks, images, progress);
     for (&vp, (r, s)) in &viewpoints {
         let faces = selected_faces(cfg, vp)?;
         let all: Vec<&Sample> = r.iter().chain(s).copied().collect();
-        let mask = meta_mask(cfg, &faces, &all)?;
+        let mask = meta_mask(cfg, &faces, &all, &masks)?;
         let indices = mask.indices();
         if indices.is_empty() {
             return Err(MetricsError::EmptyMask {
@@ -155,18 +222,27 @@ pub fn compare(cfg: &CompareConfig) -> Result<CompareReport, MetricsError> {
         vdata.insert(vp, ViewpointData { mask, indices });
     }
 
-    let alignments = resolve_alignment(cfg, &viewpoints, &vdata)?;
+    let alignments = resolve_alignment(cfg, &viewpoints, &vdata, images, progress)?;
     let ssim = Ssim::default();
     let mut results = Vec::new();
+    let synthetic: usize = viewpoints.values().map(|(_, s)| s.len()).sum();
+    let matching = Tally::start(ComparePhase::Matching, synthetic, progress);
     for (&vp, (reals, synths)) in &viewpoints {
         let vd = &vdata[vp];
-        eprintln!(
+        note(&format!(
             "viewpoint {vp}: {} real x {} synthetic, meta-mask {} px",
             reals.len(),
             synths.len(),
             vd.indices.len()
-        );
-        results.extend(match_viewpoint(cfg, &ssim, vd, reals, synths, &alignments)?);
+        ));
+        results.extend(match_viewpoint(
+            cfg,
+            &ssim,
+            vd,
+            (reals, synths),
+            &alignments,
+            &matching,
+        )?);
     }
     let table = SimilarityTable::from_results(&results);
     Ok(CompareReport {
@@ -210,11 +286,13 @@ fn meta_mask(
     cfg: &CompareConfig,
     faces: &[usize],
     samples: &[&Sample],
+    tally: &Tally,
 ) -> Result<Mask, MetricsError> {
     let per_face = samples
         .par_iter()
         .map(|s| {
             let masks = s.face_masks(&cfg.face_labels, faces)?;
+            tally.tick();
             Ok::<_, MetricsError>((s.id.clone(), masks))
         })
         .try_reduce_with(|(ida, mut a), (idb, b)| {
@@ -245,6 +323,8 @@ fn resolve_alignment(
     cfg: &CompareConfig,
     viewpoints: &BTreeMap<&str, (Vec<&Sample>, Vec<&Sample>)>,
     vdata: &BTreeMap<&str, ViewpointData>,
+    images: usize,
+    progress: &(dyn Fn(ComparePhase, usize, usize) + Sync),
 ) -> Result<BTreeMap<String, Alignment>, MetricsError> {
     let synth_types: std::collections::BTreeSet<String> = viewpoints
         .values()
@@ -262,6 +342,7 @@ fn resolve_alignment(
     };
     let mut out = BTreeMap::new();
     if fit {
+        let tally = Tally::start(ComparePhase::Alignment, images, progress);
         let mut real_m: BTreeMap<String, Moments> = BTreeMap::new();
         let mut synth_m: BTreeMap<String, Moments> = BTreeMap::new();
         for (vp, (r, s)) in viewpoints {
@@ -276,6 +357,7 @@ fn resolve_alignment(
                         for &i in ix {
                             m.add(img.data[i as usize]);
                         }
+                        tally.tick();
                         Ok((smp.texture(), m))
                     })
                     .collect::<Result<_, MetricsError>>()?;
@@ -401,9 +483,9 @@ fn match_viewpoint(
     cfg: &CompareConfig,
     ssim: &Ssim,
     vd: &ViewpointData,
-    reals: &[&Sample],
-    synths: &[&Sample],
+    (reals, synths): (&[&Sample], &[&Sample]),
     alignments: &BTreeMap<String, Alignment>,
+    tally: &Tally,
 ) -> Result<Vec<RealResult>, MetricsError> {
     let real_prep: Vec<Prepared> = reals
         .par_iter()
@@ -418,6 +500,7 @@ fn match_viewpoint(
                 .filter(|&ri| is_candidate(cfg, reals[ri], s))
                 .collect();
             if wanted.is_empty() {
+                tally.tick();
                 return Ok(out);
             }
             let sp = prepare(ssim, vd, s, alignments[&s.texture()])?;
@@ -433,6 +516,7 @@ fn match_viewpoint(
                     n: 1,
                 };
             }
+            tally.tick();
             Ok(out)
         })
         .try_reduce(
