@@ -86,36 +86,32 @@ fn bad_input_fails_before_any_work_naming_the_input() {
     );
     assert!(!dp.join("o").exists(), "a refused job leaves no folder");
     // Images in flight: 1 to 64; renderers: 1 to 8 (usage errors: clap's exit code 2,
-    // naming the option and its range, no folder).
-    for (flag, value, range) in [
-        ("--in-flight", "0", "1..=64"),
-        ("--renderers", "9", "1..=8"),
+    // naming the option and its range, no folder), the same for `dataset run` and
+    // `bench-gpu`, which share the options.
+    for command in [
+        &["dataset", "run", job, "--out", "o"][..],
+        &["bench-gpu", "--job", job, "--out", "o"][..],
     ] {
-        let o = synosis(&["dataset", "run", job, "--out", "o", flag, value], dp);
-        assert_eq!(o.status.code(), Some(2), "{flag} {value}");
-        let err = text(&o.stderr);
-        assert!(err.contains(flag) && err.contains(range), "{err}");
-        assert!(!dp.join("o").exists());
+        for (flag, value, range) in [
+            ("--in-flight", "0", "1..=64"),
+            ("--renderers", "9", "1..=8"),
+        ] {
+            let o = synosis(&[command, &[flag, value]].concat(), dp);
+            assert_eq!(o.status.code(), Some(2), "{command:?} {flag} {value}");
+            let err = text(&o.stderr);
+            assert!(err.contains(flag) && err.contains(range), "{err}");
+            assert!(!dp.join("o").exists());
+        }
+        // Several renderers with one image in flight: refused before any work.
+        assert_fails(
+            &synosis(
+                &[command, &["--renderers", "2", "--in-flight", "1"]].concat(),
+                dp,
+            ),
+            &["--renderers 2", "--in-flight 2 or more"],
+        );
+        assert!(!dp.join("o").exists(), "{command:?}");
     }
-    // Several renderers with one image in flight: refused before any work.
-    assert_fails(
-        &synosis(
-            &[
-                "dataset",
-                "run",
-                job,
-                "--out",
-                "o",
-                "--renderers",
-                "2",
-                "--in-flight",
-                "1",
-            ],
-            dp,
-        ),
-        &["--renderers 2", "--in-flight 2 or more"],
-    );
-    assert!(!dp.join("o").exists());
     // A missing job file: the OS error once.
     let e = assert_fails(
         &synosis(&["dataset", "run", "missing.toml", "--out", "o"], dp),
@@ -405,6 +401,7 @@ fn bench_gpu_writes_its_table() {
         "| stage write |",
         "| GPU busy |",
         "| CPU busy |",
+        "| device memory in live buffers and images",
         "| rays (",
     ] {
         assert!(table.contains(row), "no row {row} in\n{table}");
@@ -425,7 +422,23 @@ fn bench_gpu_writes_its_table() {
     assert!(steady > 0.0 && steady <= per, "{steady} {per}");
     assert!(v["images"].as_u64().unwrap() > 0);
     assert!(v["rays"]["primary_mrays_s"].as_f64().unwrap() > 0.0);
-    assert!(dp.join("run.json").is_file());
+    // The device memory after each image (the run's profile counters): some held.
+    let m = &v["device_memory"];
+    assert!(m["first_mib"].as_f64().unwrap() > 0.0, "{m}");
+    assert!(
+        m["most_mib"].as_f64().unwrap() >= m["last_mib"].as_f64().unwrap(),
+        "{m}"
+    );
+    assert!(m["last_allocations"].as_f64().unwrap() >= 1.0, "{m}");
+    let trace: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dp.join("run.json")).unwrap()).unwrap();
+    let counted = trace["traceEvents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["ph"] == "C" && e["name"] == "device memory (MiB)")
+        .count();
+    assert_eq!(counted as u64, v["images"].as_u64().unwrap(), "{trace}");
     // The default images in flight: 1 on a CPU Vulkan device (lavapipe), 3 on a GPU.
     let cpu = v["device"].as_str().unwrap().contains("llvmpipe");
     let want = if cpu { 1 } else { 3 };

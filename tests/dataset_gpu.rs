@@ -145,6 +145,55 @@ fn overlapped_gpu_run_writes_the_same_files_as_one_image_at_a_time_with_renderer
     }
 }
 
+// A run's GPU resources go with it (QUALITY.md: no leaks across thousands of images):
+// the device memory in live buffers and images after the smoke shard's run equals that
+// after the same run again, one image at a time and with images in flight (the renderer
+// keeps the last instance's scene either way); and the run's profile records it after
+// every image. A buffer or image kept per image would make the second run's larger.
+#[test]
+fn a_run_leaves_no_device_memory_behind() {
+    use synosis::dataset::{ImageRenderer, RunOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    let mut r = GpuRenderer::new(AccelChoice::Software, true)
+        .unwrap_or_else(|e| panic!("{e} (run tools/setup)"));
+    let text = common::small_smoke_text().replace("spp = 4", "spp = 1");
+    let scenes = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"));
+    let prep = dataset::prepare_text(&text, "smoke", scenes).unwrap();
+    let before = r
+        .device_memory()
+        .expect("the GPU renderer counts its memory");
+    let mut after = Vec::new();
+    for (i, in_flight) in [1, 1, 3, 3].into_iter().enumerate() {
+        let profiler = synosis::vk::Profiler::new();
+        let mut textures = synosis::dataset::texture_bridge::ModuleTextures::default();
+        let opts = RunOptions {
+            shard: Shard { index: 0, count: 4 },
+            in_flight,
+            profiler: Some(&profiler),
+            ..Default::default()
+        };
+        let out = tmp.path().join(format!("run-{i}"));
+        let rep = dataset::run(&prep, &out, &mut r, &mut textures, opts).unwrap();
+        assert_eq!(rep.rendered, 4);
+        let per_image: Vec<f64> = profiler
+            .counters()
+            .iter()
+            .filter(|c| c.name == dataset::DEVICE_MEMORY_COUNTER)
+            .map(|c| c.value)
+            .collect();
+        assert_eq!(per_image.len(), 4, "run {i}: {per_image:?}");
+        assert!(per_image.iter().all(|&m| m > 0.0), "run {i}: {per_image:?}");
+        after.push(r.device_memory().unwrap());
+    }
+    println!("device memory before {before:?}, after each run {after:?}");
+    assert!(
+        after[0].bytes > before.bytes && after[0].allocations > before.allocations,
+        "the last instance's scene is kept: {before:?} -> {after:?}"
+    );
+    assert_eq!(after[0], after[1], "one image at a time");
+    assert_eq!(after[2], after[3], "images in flight");
+}
+
 #[test]
 fn face_textures_reach_the_image() {
     use std::sync::Arc;

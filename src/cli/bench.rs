@@ -50,16 +50,8 @@ pub struct BenchGpuArgs {
     /// Also write the run's Chrome trace here.
     #[arg(long)]
     profile: Option<PathBuf>,
-    /// Images in flight (as `dataset run --in-flight`): 1 runs the stages one after the
-    /// other. Default: 3 on a GPU, 1 on a CPU Vulkan device (lavapipe); with several
-    /// renderers, one per renderer and two more.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
-    in_flight: Option<usize>,
-    /// Renderers, each with its own Vulkan context on the one device (as `dataset run
-    /// --renderers`). Default: 6 on a GPU for a job with `[render] noise_target` (at most
-    /// one per 2 GiB of device memory), else 1.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=8))]
-    renderers: Option<usize>,
+    #[command(flatten)]
+    concurrency: super::dataset::Concurrency,
 }
 
 /// The job text with `[render]` overrides.
@@ -105,7 +97,7 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     if a.instances == 0 {
         anyhow::bail!("--instances 0: allowed 1 or more");
     }
-    super::dataset::check_renderers(a.renderers, a.in_flight)?;
+    a.concurrency.check()?;
     if a.out.exists() && std::fs::read_dir(&a.out)?.next().is_some() {
         anyhow::bail!("--out {}: must be empty or absent", a.out.display());
     }
@@ -133,9 +125,11 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     let t0 = Instant::now();
     let accel = super::accel_from_env()?.unwrap_or(synosis::trace::AccelChoice::Auto);
     let mut renderer = GpuRenderer::new(accel, false).map_err(anyhow::Error::msg)?;
-    let renderers = super::dataset::renderer_count(a.renderers, a.in_flight, &renderer, &prep.job);
-    let in_flight = super::dataset::in_flight(a.in_flight, renderers, &renderer);
-    let mut more = super::dataset::more_renderers(renderers, &renderer)?;
+    let super::dataset::Started {
+        renderers,
+        in_flight,
+        mut more,
+    } = a.concurrency.start(&renderer, &prep.job)?;
     let startup_s = t0.elapsed().as_secs_f64();
     let describe = synosis::dataset::ImageRenderer::describe(&renderer);
     let bar = indicatif::ProgressBar::new(0);
@@ -196,6 +190,26 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
         .fold(f64::INFINITY, f64::min)
         .clamp(loop_start_us, loop_end_us);
     let steady = (loop_s - (first_render_us - loop_start_us) / 1e6).max(0.0) / n;
+    // The device memory in live buffers and images after each image's render (the run's
+    // profile counters): first, last and most, and the allocations' count first and last.
+    let counter = |name: &str| -> Vec<f64> {
+        profiler
+            .counters()
+            .iter()
+            .filter(|c| c.name == name)
+            .map(|c| c.value)
+            .collect()
+    };
+    let (memory, allocations) = (
+        counter(dataset::DEVICE_MEMORY_COUNTER),
+        counter(dataset::DEVICE_ALLOCATIONS_COUNTER),
+    );
+    let device_memory = (memory.first().zip(memory.last()))
+        .zip(allocations.first().zip(allocations.last()))
+        .map(|((&m0, &m1), (&a0, &a1))| {
+            let most = memory.iter().copied().fold(m0, f64::max);
+            (m0, m1, most, a0, a1)
+        });
     let (w, h, spp) = (
         prep.job.render.width,
         prep.job.render.height,
@@ -256,6 +270,11 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
     if let Some(m) = peak_rss_mib() {
         println!("| peak memory (RSS) | {m:.0} MiB |");
     }
+    if let Some((m0, m1, most, a0, a1)) = device_memory {
+        println!(
+            "| device memory in live buffers and images, after the first image / the last (most) | {m0:.1} / {m1:.1} MiB ({most:.1}); {a0:.0} / {a1:.0} allocations |"
+        );
+    }
     if let Some((name, tris, nrays, p, r)) = &rays {
         println!(
             "| rays ({name}, {tris} triangles, {nrays} per set) | primary {p:.1} Mrays/s, random {r:.1} Mrays/s (GPU pass time) |"
@@ -280,6 +299,10 @@ pub fn run(a: BenchGpuArgs) -> Result<()> {
             "cpu_cores": cores,
             "cpu_busy_fraction": cpu.map(|c| c.1),
             "peak_rss_mib": peak_rss_mib(),
+            "device_memory": device_memory.map(|(m0, m1, most, a0, a1)| serde_json::json!({
+                "first_mib": m0, "last_mib": m1, "most_mib": most,
+                "first_allocations": a0, "last_allocations": a1,
+            })),
             "rays": rays.as_ref().map(|(name, tris, nrays, p, r)| serde_json::json!({
                 "backend": name, "triangles": tris, "rays_per_set": nrays,
                 "primary_mrays_s": p, "random_mrays_s": r,

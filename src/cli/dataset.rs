@@ -101,6 +101,14 @@ struct RunArgs {
     /// passes; the GPU's busy share of the run goes to stderr.
     #[arg(long)]
     profile: Option<PathBuf>,
+    #[command(flatten)]
+    concurrency: Concurrency,
+}
+
+/// How many images a run (`dataset run`, `bench-gpu`) keeps in flight and how many
+/// renderers share the device: declared once for both commands.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub(super) struct Concurrency {
     /// Images in flight: 1 makes, renders and writes one image after the other; N >= 2
     /// renders one while N - 1 writer threads write earlier ones and the next images'
     /// meshes and textures are made ahead (same files either way). Default: 3 on a GPU,
@@ -118,34 +126,6 @@ struct RunArgs {
     renderers: Option<usize>,
 }
 
-/// `--in-flight`, or its default for the renderer's device: [`dataset::DEFAULT_IN_FLIGHT`]
-/// on a GPU, 1 on a CPU implementation (lavapipe), where the render uses the same cores
-/// as the overlapped stages (docs/benchmarks/dataset.md, "Overlapped run"); with
-/// several renderers (`renderers` above 1), one per renderer and two more everywhere.
-pub(super) fn in_flight(arg: Option<usize>, renderers: usize, renderer: &GpuRenderer) -> usize {
-    arg.unwrap_or(if renderers > 1 {
-        // Every renderer an image, and two more being written.
-        renderers + 2
-    } else if renderer.device_is_cpu() {
-        1
-    } else {
-        dataset::DEFAULT_IN_FLIGHT
-    })
-}
-
-/// Refuses `--renderers` above 1 with `--in-flight 1` (one image made, rendered and
-/// written at a time), before any work.
-pub(super) fn check_renderers(renderers: Option<usize>, in_flight: Option<usize>) -> Result<()> {
-    if let (Some(n), Some(1)) = (renderers, in_flight)
-        && n > 1
-    {
-        anyhow::bail!(
-            "--renderers {n}: several renderers need --in-flight 2 or more (with --in-flight 1 one image is made, rendered and written at a time)"
-        );
-    }
-    Ok(())
-}
-
 /// Renderers on a GPU by default (`--renderers`) for a job with `[render] noise_target`:
 /// its noise checks are CPU work between short batches, and while one renderer does
 /// them the others' batches keep the GPU busy (the paper job at the recommended setting
@@ -161,35 +141,81 @@ pub const DEFAULT_GPU_RENDERERS_ADAPTIVE: usize = 6;
 /// pixels, measured on the H100), so that a smaller GPU is not filled.
 pub const DEVICE_BYTES_PER_DEFAULT_RENDERER: u64 = 2 << 30;
 
-/// How many renderers: `--renderers`, or the default for the device and job:
-/// [`DEFAULT_GPU_RENDERERS_ADAPTIVE`] (at most one per
-/// [`DEVICE_BYTES_PER_DEFAULT_RENDERER`] of device memory) on a GPU for a job with a
-/// noise target, else 1. With one image in flight (`--in-flight 1`), 1: the image
-/// renders on the calling thread alone ([`check_renderers`] refused an explicit
-/// `--renderers` above 1 with it).
-pub(super) fn renderer_count(
-    arg: Option<usize>,
-    in_flight_arg: Option<usize>,
-    first: &GpuRenderer,
-    job: &dataset::Job,
-) -> usize {
-    if in_flight_arg == Some(1) {
-        return 1;
-    }
-    arg.unwrap_or_else(|| {
-        if !first.device_is_cpu() && job.render.noise_target.is_some() {
-            let fit = first.device_local_bytes() / DEVICE_BYTES_PER_DEFAULT_RENDERER;
-            DEFAULT_GPU_RENDERERS_ADAPTIVE.min(fit as usize).max(1)
-        } else {
-            1
+impl Concurrency {
+    /// Refuses `--renderers` above 1 with `--in-flight 1` (one image made, rendered and
+    /// written at a time), before any work.
+    pub(super) fn check(&self) -> Result<()> {
+        if let (Some(n), Some(1)) = (self.renderers, self.in_flight)
+            && n > 1
+        {
+            anyhow::bail!(
+                "--renderers {n}: several renderers need --in-flight 2 or more (with --in-flight 1 one image is made, rendered and written at a time)"
+            );
         }
-    })
+        Ok(())
+    }
+
+    /// How many renderers: `--renderers`, or the default for the device and job:
+    /// [`DEFAULT_GPU_RENDERERS_ADAPTIVE`] (at most one per
+    /// [`DEVICE_BYTES_PER_DEFAULT_RENDERER`] of device memory) on a GPU for a job with a
+    /// noise target, else 1. With one image in flight (`--in-flight 1`), 1: the image
+    /// renders on the calling thread alone ([`Concurrency::check`] refused an explicit
+    /// `--renderers` above 1 with it).
+    fn renderers(&self, first: &GpuRenderer, job: &dataset::Job) -> usize {
+        if self.in_flight == Some(1) {
+            return 1;
+        }
+        self.renderers.unwrap_or_else(|| {
+            if !first.device_is_cpu() && job.render.noise_target.is_some() {
+                let fit = first.device_local_bytes() / DEVICE_BYTES_PER_DEFAULT_RENDERER;
+                DEFAULT_GPU_RENDERERS_ADAPTIVE.min(fit as usize).max(1)
+            } else {
+                1
+            }
+        })
+    }
+
+    /// `--in-flight`, or its default for the renderer's device:
+    /// [`dataset::DEFAULT_IN_FLIGHT`] on a GPU, 1 on a CPU implementation (lavapipe),
+    /// where the render uses the same cores as the overlapped stages
+    /// (docs/benchmarks/dataset.md, "Overlapped run"); with several renderers
+    /// (`renderers` above 1), one per renderer and two more everywhere.
+    fn in_flight(&self, renderers: usize, renderer: &GpuRenderer) -> usize {
+        self.in_flight.unwrap_or(if renderers > 1 {
+            // Every renderer an image, and two more being written.
+            renderers + 2
+        } else if renderer.device_is_cpu() {
+            1
+        } else {
+            dataset::DEFAULT_IN_FLIGHT
+        })
+    }
+
+    /// The run's renderers and images in flight for `first`'s device and `job`, and the
+    /// renderers beside `first` ([`more_renderers`]).
+    pub(super) fn start(&self, first: &GpuRenderer, job: &dataset::Job) -> Result<Started> {
+        let renderers = self.renderers(first, job);
+        Ok(Started {
+            renderers,
+            in_flight: self.in_flight(renderers, first),
+            more: more_renderers(renderers, first)?,
+        })
+    }
+}
+
+/// What [`Concurrency::start`] chose and started.
+pub(super) struct Started {
+    /// Renderers in all, `first` included.
+    pub renderers: usize,
+    pub in_flight: usize,
+    /// The renderers beside `first`.
+    pub more: Vec<GpuRenderer>,
 }
 
 /// The `n - 1` renderers beside `first` on its Vulkan device
 /// ([`GpuRenderer::beside`]: each its own context, queue, path tracer and GPU scenes),
 /// made at once on threads of their own.
-pub(super) fn more_renderers(n: usize, first: &GpuRenderer) -> Result<Vec<GpuRenderer>> {
+fn more_renderers(n: usize, first: &GpuRenderer) -> Result<Vec<GpuRenderer>> {
     first
         .beside(n.saturating_sub(1))
         .map_err(|e| with_renderers_hint(anyhow::Error::msg(e), n))
@@ -371,7 +397,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
 fn run_job(a: RunArgs) -> Result<()> {
     let shard = resolve_shard(&a)?;
     // Everything is checked before the renderer starts or a file is written.
-    check_renderers(a.renderers, a.in_flight)?;
+    a.concurrency.check()?;
     synosis::util::check_writable_dir(&a.out)
         .with_context(|| format!("--out {}", a.out.display()))?;
     if let Some(p) = &a.profile
@@ -399,10 +425,12 @@ fn run_job(a: RunArgs) -> Result<()> {
     );
     bar.enable_steady_tick(Duration::from_millis(500));
     let mut progress = bar_progress(&bar);
-    let renderers = renderer_count(a.renderers, a.in_flight, &renderer, &prep.job);
-    let in_flight = in_flight(a.in_flight, renderers, &renderer);
-    let mut more = profiler.cpu("Vulkan init, pipelines, energy tables", || {
-        more_renderers(renderers, &renderer)
+    let Started {
+        renderers,
+        in_flight,
+        mut more,
+    } = profiler.cpu("Vulkan init, pipelines, energy tables", || {
+        a.concurrency.start(&renderer, &prep.job)
     })?;
     let result = dataset::run(
         &prep,

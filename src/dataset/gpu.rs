@@ -292,6 +292,9 @@ impl ImageRenderer for GpuRenderer {
     fn last_rays(&self) -> Option<u32> {
         self.rays
     }
+    fn device_memory(&self) -> Option<crate::vk::MemoryInUse> {
+        Some(self.ctx.memory_in_use())
+    }
 
     fn render(&mut self, req: &ImageRequest) -> Result<RenderedImage, String> {
         // The scene defaults with the job's camera (intrinsics and lens).

@@ -27,7 +27,8 @@ pub use plan::{InstancePlan, ItemPlan, Label, Plan, Split, expand};
 pub use post::{Frame, PostStep};
 pub use renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 pub use runner::{
-    DEFAULT_IN_FLIGHT, ManifestEntry, Prepared, RunOptions, RunReport, Shard, finish, merge,
-    postprocess_dir, prepare, prepare_text, read_manifest, render_one, render_one_seeded, run,
+    DEFAULT_IN_FLIGHT, DEVICE_ALLOCATIONS_COUNTER, DEVICE_MEMORY_COUNTER, ManifestEntry, Prepared,
+    RunOptions, RunReport, Shard, finish, merge, postprocess_dir, prepare, prepare_text,
+    read_manifest, render_one, render_one_seeded, run,
 };
 pub use textures::{TextureCache, TextureSource, TextureWant};

@@ -239,4 +239,11 @@ pub trait ImageRenderer {
     fn scene_prep(&self) -> Option<super::gpu::ScenePrep> {
         None
     }
+    /// The memory in live buffers and images on the renderer's device (with the
+    /// renderers beside it and a run's preparing context: [`crate::vk::MemoryInUse`]);
+    /// None (the default): it holds none. A run's profile records it after every image
+    /// (the counter "device memory"), so that a leak shows as growth.
+    fn device_memory(&self) -> Option<crate::vk::MemoryInUse> {
+        None
+    }
 }

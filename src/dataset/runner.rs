@@ -1525,6 +1525,10 @@ fn render_stage<'p>(
     if let (Some(p), Some(r)) = (profiler, renderer.last_profile()) {
         p.absorb(r);
     }
+    if let (Some(p), Some(m)) = (profiler, renderer.device_memory()) {
+        p.counter(DEVICE_MEMORY_COUNTER, m.bytes as f64 / (1u64 << 20) as f64);
+        p.counter(DEVICE_ALLOCATIONS_COUNTER, m.allocations as f64);
+    }
     img.check(&req).map_err(fail)?;
     laps.stage("render", &mut stages);
     stages.extend(renderer.last_stages());
@@ -1648,6 +1652,12 @@ fn write_stage(
         stage_seconds: stages,
     })
 }
+
+/// The profile's counter of the renderers' device memory in live buffers and images
+/// ([`ImageRenderer::device_memory`]), recorded after each image's render, MiB.
+pub const DEVICE_MEMORY_COUNTER: &str = "device memory (MiB)";
+/// The same memory's count of live allocations.
+pub const DEVICE_ALLOCATIONS_COUNTER: &str = "device allocations";
 
 /// Records "image <id>" on this thread from `start_us` to now (when profiling).
 fn image_span(profiler: Option<&Profiler>, item: &ItemPlan, start_us: Option<f64>) {

@@ -9,6 +9,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
 use super::VkError;
+use super::memory::{MemoryCounter, MemoryInUse};
 
 /// What the caller needs from the device.
 #[derive(Clone, Debug, Default)]
@@ -218,6 +219,8 @@ pub struct Context {
     pub debug_utils: Option<ash::ext::debug_utils::Device>,
     pub validation: Arc<ValidationLog>,
     pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// The device's live allocations, shared by the contexts beside one another.
+    pub(crate) memory: Arc<MemoryCounter>,
     pub(crate) command_pool: Mutex<vk::CommandPool>,
     /// Names of the pipelines recorded in a dispatch on this context (a warm-up checks
     /// that it ran every pipeline: `render::pipelines::prepare`).
@@ -390,11 +393,18 @@ impl Context {
             debug_utils,
             validation: log,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            memory: Arc::default(),
             command_pool: Mutex::new(command_pool),
             dispatched: Mutex::default(),
             debug_instance,
             messenger,
         }))
+    }
+
+    /// The memory in live buffers and images on this context's device, all the contexts
+    /// beside one another on it together ([`MemoryInUse`]).
+    pub fn memory_in_use(&self) -> MemoryInUse {
+        self.memory.get()
     }
 
     /// A context on the same device with the device's next queue (the queues are taken
@@ -434,6 +444,7 @@ impl Context {
             debug_utils: owner.debug_utils.clone(),
             validation: owner.validation.clone(),
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            memory: owner.memory.clone(),
             command_pool: Mutex::new(command_pool),
             dispatched: Mutex::default(),
             debug_instance: None,

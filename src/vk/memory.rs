@@ -1,6 +1,7 @@
 //! Buffers backed by gpu-allocator, each freeing itself on drop.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use ash::vk;
 use gpu_allocator::MemoryLocation;
@@ -29,6 +30,45 @@ impl MemoryKind {
     }
 }
 
+/// The memory this process holds in live buffers and images on one Vulkan device (every
+/// allocation of every context on it: [`Context::beside`] shares the count), as the
+/// allocator handed it out: what a leak of GPU resources would grow. Read with
+/// [`Context::memory_in_use`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct MemoryInUse {
+    /// Live allocations (one per buffer or image).
+    pub allocations: u64,
+    /// Their sizes summed, bytes.
+    pub bytes: u64,
+}
+
+/// The live allocations' count and bytes of one device, updated by every allocation and
+/// free ([`MemoryInUse`]).
+#[derive(Debug, Default)]
+pub(crate) struct MemoryCounter {
+    allocations: AtomicU64,
+    bytes: AtomicU64,
+}
+
+impl MemoryCounter {
+    pub(crate) fn get(&self) -> MemoryInUse {
+        MemoryInUse {
+            allocations: self.allocations.load(Ordering::Relaxed),
+            bytes: self.bytes.load(Ordering::Relaxed),
+        }
+    }
+
+    fn add(&self, bytes: u64) {
+        self.allocations.fetch_add(1, Ordering::Relaxed);
+        self.bytes.fetch_add(bytes, Ordering::Relaxed);
+    }
+
+    fn sub(&self, bytes: u64) {
+        self.allocations.fetch_sub(1, Ordering::Relaxed);
+        self.bytes.fetch_sub(bytes, Ordering::Relaxed);
+    }
+}
+
 /// Allocates memory for a resource and binds it with `bind`; on a bind failure the
 /// memory is freed again (the caller destroys the resource).
 fn allocate_bound(
@@ -50,6 +90,7 @@ fn allocate_bound(
             linear,
             allocation_scheme: AllocationScheme::GpuAllocatorManaged,
         })?;
+    ctx.memory.add(alloc.size());
     if let Err(e) = bind(&alloc) {
         free_allocation(ctx, alloc);
         return Err(e.into());
@@ -60,6 +101,7 @@ fn allocate_bound(
 /// Returns an allocation to the allocator (a failure there leaks at worst, so it is not
 /// reported from drops and error paths).
 fn free_allocation(ctx: &Context, alloc: Allocation) {
+    ctx.memory.sub(alloc.size());
     let _ = ctx
         .allocator
         .lock()

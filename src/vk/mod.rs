@@ -12,7 +12,7 @@ pub mod profiler;
 pub use accel::{AccelStructure, Blas, Tlas};
 pub use context::{Context, ContextOptions, DeviceInfo, ValidationLog};
 pub use lanes::LaneWidth;
-pub use memory::{Buffer, Image, MemoryKind};
+pub use memory::{Buffer, Image, MemoryInUse, MemoryKind};
 pub use pipeline::{BindingKind, ComputePipeline, TEXEL_BUFFER_FORMAT};
 pub use profiler::{Profiler, Span, timed};
 

@@ -27,10 +27,20 @@ pub fn thread_label() -> String {
     }
 }
 
-/// Collects spans from the whole run; shared by reference.
+/// One value of a counter at a time (a Chrome trace counter event: Perfetto draws each
+/// counter as a track of its own).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CounterValue {
+    pub name: String,
+    pub at_us: f64,
+    pub value: f64,
+}
+
+/// Collects spans (and counter values) from the whole run; shared by reference.
 pub struct Profiler {
     origin: Instant,
     spans: Mutex<Vec<Span>>,
+    counters: Mutex<Vec<CounterValue>>,
 }
 
 impl Default for Profiler {
@@ -38,6 +48,7 @@ impl Default for Profiler {
         Profiler {
             origin: Instant::now(),
             spans: Mutex::new(Vec::new()),
+            counters: Mutex::new(Vec::new()),
         }
     }
 }
@@ -98,6 +109,14 @@ impl Profiler {
             s.start_us += shift;
             self.push(s);
         }
+        let moved = other.counters().into_iter().map(|mut c| {
+            c.at_us += shift;
+            c
+        });
+        self.counters
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .extend(moved);
     }
 
     /// Milliseconds covered by at least one span of `track` (overlaps counted once): for
@@ -138,6 +157,27 @@ impl Profiler {
         self.spans.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
+    /// Records counter `name` at `value` now.
+    pub fn counter(&self, name: &str, value: f64) {
+        let at_us = self.now_us();
+        self.counters
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(CounterValue {
+                name: name.to_string(),
+                at_us,
+                value,
+            });
+    }
+
+    /// Every counter value recorded, in the order recorded.
+    pub fn counters(&self) -> Vec<CounterValue> {
+        self.counters
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
     /// Total duration of the spans with this name (all tracks), in milliseconds.
     pub fn total_ms(&self, name: &str) -> f64 {
         self.spans()
@@ -149,7 +189,8 @@ impl Profiler {
     }
 
     /// The Chrome trace-event JSON (complete events, "X"): GPU passes on thread 1, each
-    /// CPU thread that timed a phase on its own thread (2, 3, ... in order of first use).
+    /// CPU thread that timed a phase on its own thread (2, 3, ... in order of first use);
+    /// each counter's values as counter events ("C").
     pub fn chrome_trace(&self) -> serde_json::Value {
         let spans = self.spans();
         let mut threads: Vec<String> = Vec::new();
@@ -173,6 +214,12 @@ impl Profiler {
                 "name": s.name, "cat": s.track, "ph": "X", "pid": 1,
                 "tid": tid(s),
                 "ts": s.start_us, "dur": s.dur_us,
+            }));
+        }
+        for c in self.counters() {
+            events.push(serde_json::json!({
+                "name": c.name, "ph": "C", "pid": 1, "ts": c.at_us,
+                "args": {"value": c.value},
             }));
         }
         serde_json::json!({"traceEvents": events, "displayTimeUnit": "ms"})
@@ -244,5 +291,27 @@ mod tests {
             .collect();
         assert_eq!(names.len(), 3, "{names:?}");
         assert_eq!(names[0], "GPU passes");
+    }
+
+    #[test]
+    fn counters_are_written_as_counter_events_on_the_run_clock() {
+        let run = Profiler::new();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        let image = Profiler::new();
+        image.counter("device memory (MiB)", 12.5);
+        run.absorb(&image);
+        run.counter("device memory (MiB)", 13.0);
+        let c = run.counters();
+        assert_eq!(c.len(), 2);
+        assert!(c[0].at_us >= 20_000.0, "{}", c[0].at_us);
+        let trace = run.chrome_trace();
+        let values: Vec<f64> = trace["traceEvents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|e| e["ph"] == "C" && e["name"] == "device memory (MiB)")
+            .map(|e| e["args"]["value"].as_f64().unwrap())
+            .collect();
+        assert_eq!(values, [12.5, 13.0]);
     }
 }
