@@ -125,9 +125,9 @@ fn main() {
             let hist = Histogram::of(&img, Some(&ix));
             let mut acc = 0.0;
             for (ri, rp, rh) in &reals {
-                acc += rh.wasserstein(&hist)
-                    + metrics::mae(ri, &img, Some(&ix))
-                    + ssim.mean_prepared(ri, rp, &img, &prep, Some(&mask));
+                // As compare does: MAE and SSIM on the mask's pixels in one pass.
+                let (ss, m) = ssim.mean_and_mae_prepared(ri, rp, &img, &prep, Some(&mask));
+                acc += rh.wasserstein(&hist) + m + ss;
             }
             (acc, reals.len())
         })

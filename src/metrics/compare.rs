@@ -16,8 +16,7 @@ use serde::Serialize;
 
 use super::dataset::{Sample, load_dir, texture_of};
 use super::{
-    Alignment, GrayImage, Histogram, Mask, MetricsError, Moments, Ssim, SsimPrep, mae,
-    paper_defaults,
+    Alignment, GrayImage, Histogram, Mask, MetricsError, Moments, Ssim, SsimPrep, paper_defaults,
 };
 
 /// Which synthetic images are candidates for a real one (always the same viewpoint).
@@ -507,8 +506,14 @@ fn match_viewpoint(
             for ri in wanted {
                 let rp = &real_prep[ri];
                 let wd = rp.hist.wasserstein(&sp.hist);
-                let m = mae(&rp.img, &sp.img, Some(&vd.indices));
-                let ss = ssim.mean_prepared(&rp.img, &rp.prep, &sp.img, &sp.prep, Some(&vd.mask));
+                // The meta-mask's pixels, both metrics from one pass over the pair.
+                let (ss, m) = ssim.mean_and_mae_prepared(
+                    &rp.img,
+                    &rp.prep,
+                    &sp.img,
+                    &sp.prep,
+                    Some(&vd.mask),
+                );
                 out[ri] = Best {
                     wd: (wd, si),
                     mae: (m, si),
