@@ -290,33 +290,31 @@ impl Ssim {
             .step_by(strip)
             .map(|s| s..(s + strip).min(h))
             .collect();
-        let grid = Grid {
-            width,
-            height,
-            rect,
-        };
         let done: Vec<Vec<K::Out>> = strips
             .into_par_iter()
-            .map(|rows| self.blur_strip(src, grid, rows, sink))
+            .map(|rows| {
+                let strip = Strip {
+                    kernel: &self.kernel,
+                    width,
+                    height,
+                    rect,
+                    rows,
+                };
+                self.blur_strip(strip, src, sink)
+            })
             .collect();
         done.into_iter().flatten().collect()
     }
 
     /// One strip of [`Ssim::blur_rows`], on the widest SIMD this CPU has (the same sums
     /// in the same order at any width: the results are the same bits).
-    fn blur_strip<S: RowSource, K: RowSink>(
-        &self,
-        src: &S,
-        grid: Grid,
-        rows: std::ops::Range<usize>,
-        sink: &K,
-    ) -> Vec<K::Out> {
+    fn blur_strip<S: RowSource, K: RowSink>(&self, strip: Strip, src: &S, sink: &K) -> Vec<K::Out> {
         #[cfg(target_arch = "x86_64")]
         if simd_wide() {
             // SAFETY: the CPU has AVX2 (checked at run time just above).
-            return unsafe { blur_strip_avx2(&self.kernel, src, grid, rows, sink) };
+            return unsafe { blur_strip_avx2(strip, src, sink) };
         }
-        blur_strip_core(&self.kernel, src, grid, rows, sink)
+        blur_strip_core(strip, src, sink)
     }
 }
 
@@ -332,12 +330,14 @@ fn ssim_of(mx: f32, my: f32, vx: f32, vy: f32, cov: f32, c1: f32, c2: f32) -> f3
     (a1 * a2) / (b1 * b2)
 }
 
-/// An image's size and the rect a blur is evaluated on.
-#[derive(Clone, Copy)]
-struct Grid {
+/// One strip of a blur: the kernel, the image's size, the rect the blur is evaluated on
+/// and the strip's rows (of the rect).
+struct Strip<'a> {
+    kernel: &'a [f32],
     width: usize,
     height: usize,
     rect: Rect,
+    rows: std::ops::Range<usize>,
 }
 
 /// What a blur filters, read a row segment at a time (contiguous, so the loop vectorises).
@@ -417,31 +417,21 @@ fn simd_wide() -> bool {
 /// fused multiply-add would round differently from the portable build.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn blur_strip_avx2<S: RowSource, K: RowSink>(
-    kernel: &[f32],
-    src: &S,
-    grid: Grid,
-    rows: std::ops::Range<usize>,
-    sink: &K,
-) -> Vec<K::Out> {
-    blur_strip_core(kernel, src, grid, rows, sink)
+fn blur_strip_avx2<S: RowSource, K: RowSink>(strip: Strip, src: &S, sink: &K) -> Vec<K::Out> {
+    blur_strip_core(strip, src, sink)
 }
 
-/// Rows `rows` (of the rect) of the separable blur: the horizontal pass of each source
-/// row once into a ring of `kernel.len()` rows, then the vertical taps of each output row.
+/// The rows of a strip of the separable blur: the horizontal pass of each source row once
+/// into a ring of `kernel.len()` rows, then the vertical taps of each output row.
 /// Every output value is `sum over taps t, in order, of kernel[t] * value`, both passes
 /// starting from 0, whatever the SIMD width.
 #[inline(always)]
-fn blur_strip_core<S: RowSource, K: RowSink>(
-    kernel: &[f32],
-    src: &S,
-    grid: Grid,
-    rows: std::ops::Range<usize>,
-    sink: &K,
-) -> Vec<K::Out> {
+fn blur_strip_core<S: RowSource, K: RowSink>(strip: Strip, src: &S, sink: &K) -> Vec<K::Out> {
+    let kernel = strip.kernel;
+    let rows = strip.rows.clone();
     let taps = kernel.len();
     let r = taps / 2;
-    let rw = grid.rect.width();
+    let rw = strip.rect.width();
     let mut ring = vec![0.0f32; taps * rw];
     let mut pad = vec![0.0f32; rw + 2 * r];
     let mut out = vec![0.0f32; rw];
@@ -449,17 +439,16 @@ fn blur_strip_core<S: RowSource, K: RowSink>(
     // Where tap t's line starts: in `pad` (horizontal pass) and in `ring` (vertical).
     let pad_starts: Vec<usize> = (0..taps).collect();
     let mut ring_starts = vec![0usize; taps];
-    let y_first = (grid.rect.y0 + rows.start) as isize;
+    let y_first = (strip.rect.y0 + rows.start) as isize;
     for v in y_first - r as isize..y_first + r as isize {
-        horizontal(kernel, &pad_starts, src, grid, v, &mut pad, &mut ring);
+        horizontal(&strip, &pad_starts, src, v, &mut pad, &mut ring);
     }
     for ry in rows {
-        let y = (grid.rect.y0 + ry) as isize;
+        let y = (strip.rect.y0 + ry) as isize;
         horizontal(
-            kernel,
+            &strip,
             &pad_starts,
             src,
-            grid,
             y + r as isize,
             &mut pad,
             &mut ring,
@@ -478,28 +467,28 @@ fn blur_strip_core<S: RowSource, K: RowSink>(
 /// reflected at the image's edges).
 #[inline(always)]
 fn horizontal<S: RowSource>(
-    kernel: &[f32],
+    strip: &Strip,
     pad_starts: &[usize],
     src: &S,
-    grid: Grid,
     v: isize,
     pad: &mut [f32],
     ring: &mut [f32],
 ) {
+    let kernel = strip.kernel;
     let taps = kernel.len();
     let r = taps / 2;
-    let rw = grid.rect.width();
-    let y = reflect(v, grid.height);
+    let rw = strip.rect.width();
+    let y = reflect(v, strip.height);
     // The columns whose window stays inside the image read one contiguous segment.
-    let first = grid.rect.x0 as isize - r as isize;
+    let first = strip.rect.x0 as isize - r as isize;
     let c_lo = ((-first).max(0) as usize).min(pad.len());
-    let c_hi = ((grid.width as isize - first).max(0) as usize)
+    let c_hi = ((strip.width as isize - first).max(0) as usize)
         .min(pad.len())
         .max(c_lo);
     for c in (0..c_lo).chain(c_hi..pad.len()) {
         src.fill(
             y,
-            reflect(first + c as isize, grid.width),
+            reflect(first + c as isize, strip.width),
             &mut pad[c..c + 1],
         );
     }
@@ -760,43 +749,47 @@ mod tests {
     #[test]
     fn blur_matches_a_direct_reflected_sum() {
         let s = Ssim::default();
-        let img = image(37, 23, 7);
+        let (img, tiny) = (image(37, 23, 7), image(3, 2, 8));
         let rect = Rect {
             x0: 3,
             y0: 0,
             x1: 37,
             y1: 19,
         };
-        let src = Centred {
-            img: &img,
-            offset: 0.0,
-        };
-        let got = s
-            .blur_rows(&src, img.width, img.height, rect, &CopyRow)
-            .concat();
-        let k: Vec<f64> = s.kernel.iter().map(|&w| f64::from(w)).collect();
-        let r = s.radius as isize;
-        let mut worst = 0.0f64;
-        for y in rect.y0..rect.y1 {
-            for x in rect.x0..rect.x1 {
-                let mut want = 0.0f64;
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        let sy = reflect(y as isize + dy, img.height);
-                        let sx = reflect(x as isize + dx, img.width);
-                        want += k[(dy + r) as usize]
-                            * k[(dx + r) as usize]
-                            * f64::from(img.data[sy * img.width + sx]);
+        // The tiny image is narrower than the window's radius: every window reflects
+        // several times.
+        for (img, rect) in [(&img, rect), (&tiny, Rect::full(3, 2))] {
+            let src = Centred { img, offset: 0.0 };
+            let got = s
+                .blur_rows(&src, img.width, img.height, rect, &CopyRow)
+                .concat();
+            let k: Vec<f64> = s.kernel.iter().map(|&w| f64::from(w)).collect();
+            let r = s.radius as isize;
+            let mut worst = 0.0f64;
+            for y in rect.y0..rect.y1 {
+                for x in rect.x0..rect.x1 {
+                    let mut want = 0.0f64;
+                    for dy in -r..=r {
+                        for dx in -r..=r {
+                            let sy = reflect(y as isize + dy, img.height);
+                            let sx = reflect(x as isize + dx, img.width);
+                            want += k[(dy + r) as usize]
+                                * k[(dx + r) as usize]
+                                * f64::from(img.data[sy * img.width + sx]);
+                        }
                     }
+                    let g = f64::from(got[(y - rect.y0) * rect.width() + (x - rect.x0)]);
+                    worst = worst.max((g - want).abs());
                 }
-                let g = f64::from(got[(y - rect.y0) * rect.width() + (x - rect.x0)]);
-                worst = worst.max((g - want).abs());
             }
+            assert_eq!(got.len(), rect.width() * rect.height());
+            assert!(
+                worst < 1e-3,
+                "{} x {}: largest difference {worst} (values up to 255)",
+                img.width,
+                img.height
+            );
         }
-        assert!(
-            worst < 1e-3,
-            "largest difference {worst} (values up to 255)"
-        );
     }
 
     /// The AVX2 build and the portable one give the same bits (on a CPU without AVX2 there
@@ -816,21 +809,22 @@ mod tests {
             x1: 50,
             y1: 41,
         };
-        let grid = Grid {
-            width: a.width,
-            height: a.height,
-            rect,
-        };
         let src = CentredProduct {
             a: &a,
             oa: 120.0,
             b: &b,
             ob: 97.5,
         };
-        let rows = 0..rect.height();
-        let portable = blur_strip_core(&s.kernel, &src, grid, rows.clone(), &CopyRow);
+        let strip = || Strip {
+            kernel: &s.kernel,
+            width: a.width,
+            height: a.height,
+            rect,
+            rows: 0..rect.height(),
+        };
+        let portable = blur_strip_core(strip(), &src, &CopyRow);
         // SAFETY: AVX2 checked above.
-        let wide = unsafe { blur_strip_avx2(&s.kernel, &src, grid, rows, &CopyRow) };
+        let wide = unsafe { blur_strip_avx2(strip(), &src, &CopyRow) };
         let bits =
             |v: &Vec<Vec<f32>>| -> Vec<u32> { v.concat().iter().map(|f| f.to_bits()).collect() };
         assert_eq!(bits(&portable), bits(&wide));
