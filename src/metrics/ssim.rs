@@ -152,7 +152,7 @@ impl Ssim {
     pub fn prepare(&self, img: &GrayImage, rect: Rect) -> SsimPrep {
         let offset = offset_of(img, rect);
         let (width, height) = (img.width, img.height);
-        let (mean_c, var) = rayon::join(
+        let (mean_c, mut var) = rayon::join(
             || {
                 let src = Centred { img, offset };
                 self.blur_rows(&src, width, height, rect, &CopyRow).concat()
@@ -162,7 +162,6 @@ impl Ssim {
                 self.blur_rows(&src, width, height, rect, &CopyRow).concat()
             },
         );
-        let mut var = var;
         for (v, m) in var.iter_mut().zip(&mean_c) {
             *v -= m * m;
         }
@@ -194,8 +193,6 @@ impl Ssim {
     /// `pa.rect`, or the mask pixels in it) from one pass over the images: the MAE reads
     /// each row while the SSIM pass still has it in cache. The MAE equals
     /// [`super::mae()`] over those pixels to rounding (its sum runs in another order).
-    /// Pixel values must be finite (every loaded image's are): masked-out pixels are
-    /// multiplied by zero, not skipped.
     pub fn mean_and_mae_prepared(
         &self,
         a: &GrayImage,
@@ -590,8 +587,10 @@ impl RowSink for MaskedSum<'_> {
         let ssim = sum4(keep, row);
         let mae = match self.mae {
             Some((a, b)) => {
-                let start = y * a.width + self.rect.x0;
-                let (ra, rb) = (&a.data[start..start + rw], &b.data[start..start + rw]);
+                let (ra, rb) = (
+                    row_of(a, y, self.rect.x0, rw),
+                    row_of(b, y, self.rect.x0, rw),
+                );
                 // The SSIM row is summed: its buffer takes the differences.
                 for ((d, &va), &vb) in row.iter_mut().zip(ra).zip(rb) {
                     *d = (va - vb).abs();
@@ -619,9 +618,10 @@ fn sum4(keep: Option<&[bool]>, values: &[f32]) -> f64 {
             let keep_rest = keep_chunks.remainder();
             for (v, k) in chunks.zip(keep_chunks) {
                 for l in 0..P {
-                    // x * 1 = x and x * 0 = 0 exactly (the values are finite): the
-                    // branch-free form vectorises.
-                    s[l] += f64::from(v[l]) * f64::from(u8::from(k[l]));
+                    // A masked-out value's bits cleared (+0.0, whatever the value, NaN
+                    // included): the same sum as skipping it, and it vectorises.
+                    let bits = f64::from(v[l]).to_bits() & 0u64.wrapping_sub(u64::from(k[l]));
+                    s[l] += f64::from_bits(bits);
                 }
             }
             for (&v, &k) in rest.iter().zip(keep_rest) {
@@ -855,6 +855,12 @@ mod tests {
         let alone_all = super::super::mae(&a, &b, None);
         assert!((mae_all - alone_all).abs() <= 1e-12 * alone_all);
         assert!(mae > 10.0 && mae_all > 10.0, "{mae} {mae_all}");
+        // A pixel outside the mask does not reach the MAE, whatever its value.
+        let mut b_nan = b.clone();
+        assert!(!mask.data[15 * b.width + 10]);
+        b_nan.data[15 * b.width + 10] = f32::NAN;
+        let (_, mae_nan) = s.mean_and_mae_prepared(&a, &pa, &b_nan, &pb, Some(&mask));
+        assert_eq!(mae_nan.to_bits(), mae.to_bits());
     }
 
     /// The mean SSIM is the same bits on one thread and on three (strips, rows summed in
