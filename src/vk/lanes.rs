@@ -4,12 +4,16 @@
 //! bits (8 invocations) by default, also on CPUs with AVX-512, unless the environment
 //! variable `LP_NATIVE_VECTOR_WIDTH` says otherwise; the driver reads it once, when it
 //! loads. On an Intel Xeon with AVX-512 (family 6, model 207) 512-bit lanes traced the
-//! paper job's crops in about 0.8 of the time, the images and labels the same bytes; on
-//! an AMD EPYC with AVX-512 (Zen 4, which splits a 512-bit operation in two) they were
-//! 1.25x to 1.35x slower (docs/benchmarks/dataset.md, "512-bit lanes on an Intel CPU").
-//! So a process asks for 512-bit lanes on an Intel CPU with AVX-512F, unless the user set
-//! the variable (`LP_NATIVE_VECTOR_WIDTH=256` keeps the driver's width), and leaves the
-//! driver's default elsewhere. Other drivers do not read the variable.
+//! paper job's crops in about 0.8 of the time, the images and labels the same bytes
+//! (docs/benchmarks/dataset.md, "512-bit lanes on an Intel CPU"); on an AMD EPYC Zen 5
+//! (family 26, whose AVX-512 units are 512 bits wide) in 0.76 of it (the same file,
+//! "512-bit lanes on an AMD EPYC Zen 5"); on an AMD EPYC Zen 4 (family 25, which splits
+//! a 512-bit operation in two) they were 1.25x to 1.35x slower on 2026-11-27 and gave
+//! no gain on 2026-12-01 (1.045 of the time per sample). So a process asks for 512-bit
+//! lanes on an Intel CPU with AVX-512F and on an AMD one of family 26 or later with
+//! AVX-512F, unless the user set the variable (`LP_NATIVE_VECTOR_WIDTH=256` keeps the
+//! driver's width), and leaves the driver's default elsewhere. Other drivers do not read
+//! the variable.
 //!
 //! **Each width its own shader cache.** Mesa's on-disk shader cache keys lavapipe's
 //! compiled code by the shader and the CPU, not by the vector width, and its texel-fetch
@@ -44,7 +48,8 @@ pub const CACHE_VAR: &str = "MESA_SHADER_CACHE_DIR";
 pub enum LaneWidth {
     /// The user's environment set `LP_NATIVE_VECTOR_WIDTH` (its value).
     User(String),
-    /// 512 bits, set here: an Intel CPU with AVX-512F.
+    /// 512 bits, set here: an Intel CPU with AVX-512F, or an AMD one of family 26 (Zen 5)
+    /// or later with AVX-512F.
     Wide,
     /// Left to the driver (256 bits where the CPU has AVX2 or AVX-512).
     Driver,
@@ -56,44 +61,84 @@ impl LaneWidth {
         match self {
             LaneWidth::User(v) => format!("{v} bits ({WIDTH_VAR} set in the environment)"),
             LaneWidth::Wide => format!(
-                "512 bits (chosen for an Intel CPU with AVX-512F; {WIDTH_VAR}=256 keeps the driver's 256)"
+                "512 bits (chosen for this CPU: AVX-512F, Intel or AMD Zen 5 or later; {WIDTH_VAR}=256 keeps the driver's 256)"
             ),
             LaneWidth::Driver => "the driver's default (256 bits with AVX2)".into(),
         }
     }
 }
 
-/// Whether 512-bit lanes are asked for on a CPU of CPUID vendor `vendor`
-/// ("GenuineIntel", "AuthenticAMD", ...) that has AVX-512F or not.
-pub fn wide_preferred(vendor: &str, avx512f: bool) -> bool {
-    vendor == "GenuineIntel" && avx512f
+/// The first AMD CPU family (Zen 5) whose 512-bit lanes were measured faster; Zen 4
+/// (family 25) runs a 512-bit operation as two 256-bit halves and gained nothing.
+pub const AMD_WIDE_FAMILY: u32 = 26;
+
+/// What [`wide_preferred`] looks at: the CPUID vendor ("GenuineIntel", "AuthenticAMD",
+/// ...), the display family (base family plus, where the base is 15, the extended
+/// family) and whether the CPU has AVX-512F.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Cpu {
+    pub vendor: String,
+    pub family: u32,
+    pub avx512f: bool,
+}
+
+/// Whether 512-bit lanes are asked for on `cpu`: an Intel CPU with AVX-512F, or an AMD
+/// one of family [`AMD_WIDE_FAMILY`] or later with AVX-512F.
+pub fn wide_preferred(cpu: &Cpu) -> bool {
+    cpu.avx512f
+        && match cpu.vendor.as_str() {
+            "GenuineIntel" => true,
+            "AuthenticAMD" => cpu.family >= AMD_WIDE_FAMILY,
+            _ => false,
+        }
 }
 
 /// Whether [`choose`] asks for 512-bit lanes on this CPU where the environment leaves
-/// the width to it ([`wide_preferred`] of this CPU's vendor and AVX-512F).
+/// the width to it ([`wide_preferred`] of this CPU).
 pub fn preferred_here() -> bool {
-    let (vendor, avx512f) = host_cpu();
-    wide_preferred(&vendor, avx512f)
+    wide_preferred(&host_cpu())
 }
 
-/// This CPU's vendor string and whether it has AVX-512F (none and false off x86-64).
-fn host_cpu() -> (String, bool) {
+/// The display family from CPUID leaf 1's eax: bits 8 to 11, plus bits 20 to 27 where
+/// those are 15.
+pub fn display_family(leaf1_eax: u32) -> u32 {
+    let base = (leaf1_eax >> 8) & 0xf;
+    if base == 0xf {
+        base + ((leaf1_eax >> 20) & 0xff)
+    } else {
+        base
+    }
+}
+
+/// This CPU's vendor, family and AVX-512F (an empty vendor, 0 and false off x86-64).
+fn host_cpu() -> Cpu {
     #[cfg(target_arch = "x86_64")]
     {
-        // CPUID leaf 0 names the vendor in ebx, edx, ecx (12 ASCII bytes).
+        // CPUID leaf 0 names the vendor in ebx, edx, ecx (12 ASCII bytes); leaf 1's eax
+        // holds the family.
         let r = std::arch::x86_64::__cpuid(0);
         let mut v = Vec::with_capacity(12);
         for w in [r.ebx, r.edx, r.ecx] {
             v.extend_from_slice(&w.to_le_bytes());
         }
-        (
-            String::from_utf8_lossy(&v).into_owned(),
-            std::arch::is_x86_feature_detected!("avx512f"),
-        )
+        let family = if r.eax >= 1 {
+            display_family(std::arch::x86_64::__cpuid(1).eax)
+        } else {
+            0
+        };
+        Cpu {
+            vendor: String::from_utf8_lossy(&v).into_owned(),
+            family,
+            avx512f: std::arch::is_x86_feature_detected!("avx512f"),
+        }
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        (String::new(), false)
+        Cpu {
+            vendor: String::new(),
+            family: 0,
+            avx512f: false,
+        }
     }
 }
 
@@ -187,11 +232,33 @@ mod tests {
     use super::*;
 
     #[test]
-    fn wide_lanes_only_on_intel_with_avx512() {
-        assert!(wide_preferred("GenuineIntel", true));
-        assert!(!wide_preferred("GenuineIntel", false));
-        assert!(!wide_preferred("AuthenticAMD", true));
-        assert!(!wide_preferred("", false));
+    fn wide_lanes_on_intel_and_amd_zen5_with_avx512() {
+        let cpu = |vendor: &str, family, avx512f| Cpu {
+            vendor: vendor.into(),
+            family,
+            avx512f,
+        };
+        assert!(wide_preferred(&cpu("GenuineIntel", 6, true)));
+        assert!(!wide_preferred(&cpu("GenuineIntel", 6, false)));
+        // Zen 4 (family 25) splits 512-bit operations in two: measured no faster.
+        assert!(!wide_preferred(&cpu("AuthenticAMD", 25, true)));
+        assert!(wide_preferred(&cpu("AuthenticAMD", 26, true)));
+        assert!(wide_preferred(&cpu("AuthenticAMD", 27, true)));
+        assert!(!wide_preferred(&cpu("AuthenticAMD", 26, false)));
+        assert!(!wide_preferred(&cpu("HygonGenuine", 24, true)));
+        assert!(!wide_preferred(&cpu("", 0, false)));
+    }
+
+    #[test]
+    fn display_family_adds_the_extended_family_only_to_family_15() {
+        // CPUID leaf 1 eax of an EPYC 9004 (Zen 4: family 0x19, model 0x11) and of an
+        // EPYC 9005 (Zen 5: family 0x1a, model 0x02), and of an Intel Xeon (family 6,
+        // model 0xcf: extended model 0xc, whose extended family bits are zero).
+        assert_eq!(display_family(0x00a1_0f11), 25);
+        assert_eq!(display_family(0x00b0_0f21), 26);
+        assert_eq!(display_family(0x000c_06f2), 6);
+        // A base family other than 15 ignores the extended family's bits.
+        assert_eq!(display_family(0x0ff0_0600), 6);
     }
 
     #[test]
