@@ -13,7 +13,8 @@
 //! lanes on an Intel CPU with AVX-512F and on an AMD one of family 26 or later with
 //! AVX-512F, unless the user set the variable (`LP_NATIVE_VECTOR_WIDTH=256` keeps the
 //! driver's width), and leaves the driver's default elsewhere. Other drivers do not read
-//! the variable.
+//! the variable. Not measured: family 26's mobile parts, which are said to split 512-bit
+//! operations in two as Zen 4 does (they get 512 bits too; the variable overrides).
 //!
 //! **Each width its own shader cache.** Mesa's on-disk shader cache keys lavapipe's
 //! compiled code by the shader and the CPU, not by the vector width, and its texel-fetch
