@@ -60,10 +60,9 @@ fn lavapipe_runs_at_the_chosen_lane_width() {
 
 // vk::lanes' own choice where the environment leaves the width to it: 512 bits on an
 // Intel CPU with AVX-512F and on an AMD Zen 5 or later with it, the driver's default
-// elsewhere. tools/test runs the suite at
-// the driver's 256 bits (LP_NATIVE_VECTOR_WIDTH=256: half the cold compiles' time), so
-// this test is what checks the choice there: a process without the variable (no
-// pipeline compiled).
+// elsewhere. tools/test runs the suite at the driver's 256 bits
+// (LP_NATIVE_VECTOR_WIDTH=256: half the cold compiles' time), so this test is what
+// checks the choice there: a process without the variable (no pipeline compiled).
 #[test]
 fn lavapipe_runs_at_the_lane_width_chosen_for_this_cpu() {
     if !common::gpu().info.is_cpu {

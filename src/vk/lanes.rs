@@ -71,21 +71,21 @@ impl LaneWidth {
 
 /// The first AMD CPU family (Zen 5) whose 512-bit lanes were measured faster; Zen 4
 /// (family 25) runs a 512-bit operation as two 256-bit halves and gained nothing.
-pub const AMD_WIDE_FAMILY: u32 = 26;
+const AMD_WIDE_FAMILY: u32 = 26;
 
 /// What [`wide_preferred`] looks at: the CPUID vendor ("GenuineIntel", "AuthenticAMD",
 /// ...), the display family (base family plus, where the base is 15, the extended
 /// family) and whether the CPU has AVX-512F.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Cpu {
-    pub vendor: String,
-    pub family: u32,
-    pub avx512f: bool,
+struct Cpu {
+    vendor: String,
+    family: u32,
+    avx512f: bool,
 }
 
 /// Whether 512-bit lanes are asked for on `cpu`: an Intel CPU with AVX-512F, or an AMD
 /// one of family [`AMD_WIDE_FAMILY`] or later with AVX-512F.
-pub fn wide_preferred(cpu: &Cpu) -> bool {
+fn wide_preferred(cpu: &Cpu) -> bool {
     cpu.avx512f
         && match cpu.vendor.as_str() {
             "GenuineIntel" => true,
@@ -95,14 +95,14 @@ pub fn wide_preferred(cpu: &Cpu) -> bool {
 }
 
 /// Whether [`choose`] asks for 512-bit lanes on this CPU where the environment leaves
-/// the width to it ([`wide_preferred`] of this CPU).
+/// the width to it (`wide_preferred` of this CPU).
 pub fn preferred_here() -> bool {
     wide_preferred(&host_cpu())
 }
 
 /// The display family from CPUID leaf 1's eax: bits 8 to 11, plus bits 20 to 27 where
 /// those are 15.
-pub fn display_family(leaf1_eax: u32) -> u32 {
+fn display_family(leaf1_eax: u32) -> u32 {
     let base = (leaf1_eax >> 8) & 0xf;
     if base == 0xf {
         base + ((leaf1_eax >> 20) & 0xff)
@@ -187,7 +187,7 @@ pub fn cache_dir() -> Option<&'static Path> {
 }
 
 /// The process's choice, made at the first call: sets `LP_NATIVE_VECTOR_WIDTH=512` where
-/// [`wide_preferred`] says so and the environment does not set it already, and, where the
+/// `wide_preferred` says so and the environment does not set it already, and, where the
 /// width is set through the environment, `MESA_SHADER_CACHE_DIR` to that width's folder
 /// ([`cache_dir_for`]). Called by `Context::new` before it loads the Vulkan loader (a
 /// driver loaded earlier keeps the width and the folder it read).
