@@ -5,6 +5,7 @@
 //! See docs/dataset.md.
 
 pub mod camera;
+mod coco;
 mod error;
 pub mod files;
 pub mod gpu;

@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::camera::{CameraRecord, Exposed, expose};
+use super::coco;
 use super::error::{DatasetError, Result};
 use super::files;
 use super::gpu::{MapsAhead, ScenePrep};
@@ -1898,7 +1899,7 @@ fn write_post(
     );
     m.insert(
         "coco.json".into(),
-        files::write_json(&dir.join("coco.json"), &coco_fragment(f))?,
+        files::write_json(&dir.join("coco.json"), &coco::fragment(f))?,
     );
     Ok((m, r.defects, r.noise_sigma))
 }
@@ -1937,27 +1938,6 @@ fn labelme_json(f: &Frame, faces: &[u8]) -> serde_json::Value {
         "imageHeight": f.height,
         "imageWidth": f.width,
     })
-}
-
-/// The image's COCO annotations (ids assigned when the split files are built).
-fn coco_fragment(f: &Frame) -> serde_json::Value {
-    let anns: Vec<serde_json::Value> = post::defect_pixels(&f.class, &f.instance)
-        .into_iter()
-        .map(|(id, class, area)| {
-            let mask: Vec<bool> = f.instance.iter().map(|&i| i == id).collect();
-            let counts = labels::rle_counts(&mask, f.width, f.height);
-            let [x, y, w, h] = labels::bbox(&mask, f.width).unwrap_or([0; 4]);
-            json!({
-                "instance": id,
-                "category_id": class,
-                "segmentation": {"size": [f.height, f.width], "counts": labels::rle_encode_string(&counts)},
-                "area": area,
-                "bbox": [x, y, w, h],
-                "iscrowd": 0,
-            })
-        })
-        .collect();
-    json!({ "annotations": anns })
 }
 
 /// Appends one line and syncs; the line is complete before the call returns.
@@ -2098,8 +2078,19 @@ fn finish_locked(dir: &Path) -> Result<usize> {
     let entries: Vec<ManifestEntry> = by_index.into_values().collect();
     std::fs::create_dir_all(dir.join("coco")).map_err(|e| DatasetError::io(dir, e))?;
     for split in Split::ALL {
-        let v = coco_split(dir, &entries, split)?;
-        files::write_json(&dir.join("coco").join(format!("{}.json", split.name())), &v)?;
+        let images: Vec<coco::SplitImage<'_>> = entries
+            .iter()
+            .filter(|e| e.split == split)
+            .map(|e| coco::SplitImage {
+                index: e.index,
+                id: &e.id,
+                file_name: &e.image,
+                width: e.width,
+                height: e.height,
+            })
+            .collect();
+        let path = dir.join("coco").join(format!("{}.json", split.name()));
+        coco::write_split(dir, split.name(), &images, &path)?;
     }
     write_manifest(&dir.join("manifest.jsonl"), &entries)?;
     Ok(entries.len())
@@ -2158,39 +2149,6 @@ fn missing_error(dir: &Path, plan: &Plan, missing: &[usize]) -> Result<DatasetEr
             first.join(", ")
         ),
     ))
-}
-
-fn coco_split(dir: &Path, entries: &[ManifestEntry], split: Split) -> Result<serde_json::Value> {
-    let mut images = Vec::new();
-    let mut anns = Vec::new();
-    for e in entries.iter().filter(|e| e.split == split) {
-        images.push(
-            json!({"id": e.index, "file_name": e.image, "width": e.width, "height": e.height}),
-        );
-        let path = dir.join("images").join(&e.id).join("coco.json");
-        let text = std::fs::read_to_string(&path).map_err(|err| DatasetError::io(&path, err))?;
-        let frag: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|err| DatasetError::io(&path, std::io::Error::other(err)))?;
-        if let Some(list) = frag.get("annotations").and_then(|a| a.as_array()) {
-            for a in list {
-                let mut a = a.clone();
-                if let Some(o) = a.as_object_mut() {
-                    o.insert("id".into(), json!(anns.len() + 1));
-                    o.insert("image_id".into(), json!(e.index));
-                }
-                anns.push(a);
-            }
-        }
-    }
-    Ok(json!({
-        "info": {"description": format!("synosis synthetic dataset, {} split", split.name()), "version": "1"},
-        "images": images,
-        "annotations": anns,
-        "categories": [
-            {"id": 1, "name": "dent", "supercategory": "defect"},
-            {"id": 2, "name": "scratch", "supercategory": "defect"},
-        ],
-    }))
 }
 
 /// Merges shard outputs: the first folder is the target; the image folders and manifest
