@@ -21,7 +21,7 @@ pub struct Job {
     /// The one seed every random choice is split from (see `seed.rs`).
     pub seed: u64,
     pub render: RenderSettings,
-    /// Viewpoint names "<face><degrees>", e.g. "A20". Default: [`PAPER_VIEWS`].
+    /// Viewpoint names `"<face><degrees>"`, e.g. "A20". Default: [`PAPER_VIEWS`].
     #[serde(default = "default_views")]
     pub views: Vec<String>,
     /// Free camera poses (`[[pose]]`), after the views and the plan's views.

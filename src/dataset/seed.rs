@@ -1,5 +1,5 @@
 //! Deterministic seed splitting: every random choice of a job flows from its one `u64`
-//! seed through [`derive`], keyed by what the choice is for, so any image (or texture, or
+//! seed through [`derive()`], keyed by what the choice is for, so any image (or texture, or
 //! defect set) can be re-made alone, independent of the order or sharding of the run.
 //!
 //! The hash (documented in docs/dataset.md, stable across versions of this crate):

@@ -7,11 +7,11 @@
 //! of writes is the order of declaration, checked by the borrow checker.
 //!
 //! `execute` is a composition of four parts, the first two pure (no GPU, unit-tested):
-//! - [`schedule`]: declared accesses -> dependencies -> culling -> execution order;
-//! - [`barriers`]: declared accesses along that order -> barriers as plain data, then
+//! - `schedule`: declared accesses -> dependencies -> culling -> execution order;
+//! - `barriers`: declared accesses along that order -> barriers as plain data, then
 //!   the `vkCmdPipelineBarrier` calls;
-//! - [`record`]: misuse checks, descriptor pool and sets, the commands of each pass;
-//! - [`timestamps`]: a query pool (only where the device supports timestamps) and the
+//! - `record`: misuse checks, descriptor pool and sets, the commands of each pass;
+//! - `timestamps`: a query pool (only where the device supports timestamps) and the
 //!   readback into per-pass GPU times.
 
 mod barriers;

@@ -199,7 +199,7 @@ impl Conductor<'_> {
         (1.0 - p) * vndf_reflect_pdf(self.alpha, wo, wi) + p * wi.z / PI
     }
 
-    /// Samples wi from three uniform numbers: u[0] picks the lobe.
+    /// Samples wi from three uniform numbers: `u[0]` picks the lobe.
     pub fn sample(&self, wo: Vec3, u: [f32; 3]) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;

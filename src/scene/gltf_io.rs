@@ -71,7 +71,7 @@ pub struct Imported {
     pub mesh: Mesh,
     pub dropped_degenerate: usize,
     /// glTF `asset.generator` (None for other formats or when absent): files synosis
-    /// wrote say "synosis <version>" and are in millimetres (docs/mesh-format.md).
+    /// wrote say `"synosis <version>"` and are in millimetres (docs/mesh-format.md).
     pub generator: Option<String>,
     /// glTF only: each triangle's material name (`[[material.region]]` selects by it).
     pub materials: Option<crate::scene::materials::GltfMaterials>,

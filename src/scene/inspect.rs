@@ -23,7 +23,7 @@ pub const DEFAULT_NORMAL_TOLERANCE_DEG: f64 = 5.0;
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(untagged)]
 pub enum InspectEntry {
-    /// "A", "B", "C" or "region:<id>".
+    /// "A", "B", "C" or `"region:<id>"`.
     Name(String),
     /// `{ normal = [0, 0, 1], tolerance_deg = 5 }`.
     Normal(NormalSelector),

@@ -111,7 +111,7 @@ pub enum Finish {
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(untagged)]
 pub enum MaterialSelector {
-    /// "A", "B", "C" (the inspected faces) or "region:<id>".
+    /// "A", "B", "C" (the inspected faces) or `"region:<id>"`.
     Name(String),
     /// `{ normal = [0, 0, 1], tolerance_deg = 5 }`.
     Normal(NormalSelector),
