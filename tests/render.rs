@@ -649,6 +649,114 @@ fn texture_file_becomes_face_maps() {
     assert!(e.contains("texture.path"), "{e}");
 }
 
+/// `[[texture.map]]`: faces with a height map of their own (each its own spacing), the
+/// others `path`'s; without `path` every face A, B, C needs an entry; bad entries are
+/// named by index and field.
+#[test]
+fn texture_maps_per_face_from_the_scene_file() {
+    use synosis::texture::{HeightMap, write_exr_height};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ridges = |period_mm: f32, spacing_um: f32| {
+        let mut h = HeightMap::new(120, 120, spacing_um as f64);
+        for y in 0..120 {
+            for x in 0..120 {
+                let t = x as f32 * spacing_um / 1000.0 / period_mm;
+                h.data[y * 120 + x] = 30.0 * (t * std::f32::consts::TAU).sin();
+            }
+        }
+        h
+    };
+    let (shared, own) = (ridges(2.0, 100.0), ridges(0.5, 50.0));
+    write_exr_height(&shared, &dir.path().join("shared.exr")).expect("exr");
+    write_exr_height(&own, &dir.path().join("own.exr")).expect("exr");
+    let load = |text: &str| {
+        let f = dir.path().join("scene.toml");
+        std::fs::write(&f, text).expect("scene");
+        SceneConfig::load(&f)
+    };
+    let head = "[texture]\nkind = \"file\"\nspacing_um = 100.0\n";
+    let entry = |face: &str| {
+        format!("[[texture.map]]\nface = \"{face}\"\npath = \"own.exr\"\nspacing_um = 50.0\n")
+    };
+    let cfg = load(&format!("{head}path = \"shared.exr\"\n{}", entry("B"))).expect("scene file");
+    let object = load_object(&cfg).expect("object");
+    let scene = RenderScene::assemble(&object, &cfg).expect("assemble");
+    let by_face: Vec<(u8, &SlopeMap)> = scene
+        .face_maps
+        .iter()
+        .map(|m| (m.face, &*m.slopes))
+        .collect();
+    assert_eq!(by_face.len(), 3);
+    for (face, slopes) in by_face {
+        let want = if face == 2 {
+            own.slopes()
+        } else {
+            shared.slopes()
+        };
+        assert_eq!(*slopes, want, "face {face}");
+    }
+    // Every face its own map, no `path`.
+    let all = format!("{head}{}{}{}", entry("A"), entry("B"), entry("C"));
+    let cfg = load(&all).expect("three entries");
+    let scene = RenderScene::assemble(&object, &cfg).expect("assemble");
+    assert!(scene.face_maps.iter().all(|m| *m.slopes == own.slopes()));
+
+    let err = |text: String| load(&text).expect_err(&text).to_string();
+    let e = err(format!("{head}{}{}", entry("A"), entry("B")));
+    assert!(
+        e.contains("texture.map") && e.contains("face C has no map"),
+        "{e}"
+    );
+    let e = err(format!("{head}{}", entry("D")));
+    assert!(
+        e.contains("texture.map[0].face") && e.contains("\"A\", \"B\" or \"C\""),
+        "{e}"
+    );
+    let e = err(format!(
+        "{head}path = \"shared.exr\"\n{}{}",
+        entry("C"),
+        entry("C")
+    ));
+    assert!(
+        e.contains("texture.map[1].face") && e.contains("two entries"),
+        "{e}"
+    );
+    let e = err(format!(
+        "{head}path = \"shared.exr\"\n{}",
+        entry("A").replace("50.0", "0.5")
+    ));
+    assert!(
+        e.contains("texture.map[0].spacing_um") && e.contains("[1, 1000]"),
+        "{e}"
+    );
+    let e = err(format!(
+        "[texture]\nkind = \"test-grooves\"\n{}",
+        entry("A")
+    ));
+    assert!(
+        e.contains("texture.map") && e.contains("kind = \"file\""),
+        "{e}"
+    );
+    let e = err(format!(
+        "{head}path = \"shared.exr\"\n{}",
+        entry("A").replace("spacing_um", "spacing")
+    ));
+    assert!(e.contains("spacing"), "{e}");
+    // A file that cannot be read is named with its entry when the scene is assembled.
+    let cfg = load(&format!(
+        "{head}path = \"shared.exr\"\n{}",
+        entry("A").replace("own.exr", "nope.exr")
+    ))
+    .expect("loads");
+    let e = RenderScene::assemble(&object, &cfg)
+        .expect_err("missing map")
+        .to_string();
+    assert!(
+        e.contains("texture.map[0].path") && e.contains("nope.exr"),
+        "{e}"
+    );
+}
+
 /// The sample generators are stateless in (pixel, sample index, seed): the same image for
 /// any batch size, with both samplers.
 #[test]

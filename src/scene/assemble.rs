@@ -842,7 +842,8 @@ fn object_gltf_materials(cfg: &ObjectConfig) -> Result<Option<GltfMaterials>, As
 
 /// The maps `[texture]` asks for: none for "flat"; for "test-grooves" one groove map,
 /// shared by faces A, B and C, large enough to cover each face at any rotation; for
-/// "file" the slopes (central differences) of an EXR height map in µm, on all three faces.
+/// "file" the slopes (central differences) of EXR height maps in µm: each face's
+/// `[[texture.map]]` entry's, the others `path`'s.
 pub fn texture_maps(
     t: &TextureConfig,
     frames: &[FaceFrame],
@@ -850,27 +851,62 @@ pub fn texture_maps(
     if t.kind == "flat" || frames.is_empty() {
         return Ok(Vec::new());
     }
-    let place = |map: Arc<SlopeMap>| -> Vec<FaceMap> {
+    // Each face's map: its `[[texture.map]]` entry's, else the shared one.
+    let place = |own: &[(FaceId, Arc<SlopeMap>)], shared: Option<Arc<SlopeMap>>| -> Vec<FaceMap> {
         frames
             .iter()
-            .map(|f| {
+            .filter_map(|f| {
                 let i = (f.face as usize).clamp(1, 3) - 1;
-                FaceMap {
+                let slopes = own
+                    .iter()
+                    .find(|(face, _)| *face == f.face)
+                    .map(|(_, m)| m.clone())
+                    .or_else(|| shared.clone())?;
+                Some(FaceMap {
                     face: f.face,
-                    slopes: map.clone(),
+                    slopes,
                     rotation_deg: t.rotation_deg[i],
                     offset_mm: t.offset_mm[i],
-                }
+                })
             })
             .collect()
     };
     if t.kind == "file" {
-        let path = t.path.as_ref().ok_or(ConfigError::Invalid {
-            field: "texture.path",
-            message: "kind = \"file\" needs `path` (an EXR height map in µm)".into(),
-        })?;
-        let height = crate::texture::read_exr(path, t.spacing_um as f64)?;
-        return Ok(place(Arc::new(height.slopes())));
+        if t.path.is_none() && t.map.is_empty() {
+            return Err(ConfigError::Invalid {
+                field: "texture.path",
+                message: "kind = \"file\" needs `path` (an EXR height map in µm) or `[[texture.map]]` entries".into(),
+            }
+            .into());
+        }
+        let shared = match &t.path {
+            Some(path) => Some(Arc::new(
+                crate::texture::read_exr(path, t.spacing_um as f64)?.slopes(),
+            )),
+            None => None,
+        };
+        let mut own = Vec::new();
+        for (index, m) in t.map.iter().enumerate() {
+            let bad = |field, message: String| ConfigError::TextureMap {
+                index,
+                field,
+                message,
+            };
+            let face = m.face_id().ok_or_else(|| {
+                bad(
+                    "face",
+                    format!("{:?}: allowed \"A\", \"B\" or \"C\"", m.face),
+                )
+            })?;
+            if !frames.iter().any(|f| f.face == face) {
+                return Err(bad("face", format!("the mesh has no face {}", m.face)).into());
+            }
+            let spacing = m.spacing_um.unwrap_or(t.spacing_um);
+            let height = crate::texture::read_exr(&m.path, spacing as f64)
+                .map_err(|e| bad("path", e.to_string()))?;
+            own.push((face, Arc::new(height.slopes())));
+        }
+        return Ok(place(&own, shared));
     }
     let extent = frames
         .iter()
@@ -880,10 +916,13 @@ pub fn texture_maps(
             2.0 * (f.half_size.length() + (o[0] * o[0] + o[1] * o[1]).sqrt())
         })
         .fold(0.0f32, f32::max);
-    Ok(place(Arc::new(SlopeMap::test_grooves(
-        extent,
-        t.spacing_um as f64,
-        t.groove_period_mm,
-        t.groove_max_slope_deg,
-    ))))
+    Ok(place(
+        &[],
+        Some(Arc::new(SlopeMap::test_grooves(
+            extent,
+            t.spacing_um as f64,
+            t.groove_period_mm,
+            t.groove_max_slope_deg,
+        ))),
+    ))
 }

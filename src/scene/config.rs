@@ -40,6 +40,13 @@ pub enum ConfigError {
         field: &'static str,
         message: String,
     },
+    /// A `[[texture.map]]` entry (index from 0) has a bad field.
+    #[error("texture.map[{index}].{field}: {message}")]
+    TextureMap {
+        index: usize,
+        field: &'static str,
+        message: String,
+    },
     #[error(transparent)]
     Calibration(#[from] crate::scene::calibration::CalibrationError),
 }
@@ -1096,6 +1103,26 @@ pub enum DefectSurface {
     Burnished,
 }
 
+/// One inspected face's own height map (`[[texture.map]]`, docs/scene-format.md).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaceMapFile {
+    /// "A", "B" or "C".
+    pub face: String,
+    /// EXR height map in µm (one channel; `Y` if several), relative to the scene file.
+    pub path: PathBuf,
+    /// Its texel spacing, µm, [1, 1000]; default `texture.spacing_um`.
+    #[serde(default)]
+    pub spacing_um: Option<f32>,
+}
+
+impl FaceMapFile {
+    /// The face id (after [`SceneConfig::validate`]: 1, 2 or 3).
+    pub fn face_id(&self) -> Option<crate::scene::mesh::FaceId> {
+        crate::scene::mesh::face_from_name(&self.face).filter(|f| (1..=3).contains(f))
+    }
+}
+
 /// Slope maps on the inspected faces (docs/scene-format.md, `[texture]`).
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -1104,8 +1131,11 @@ pub struct TextureConfig {
     /// sinusoidal grooves on faces A, B and C, a test pattern) or "file" (`path`).
     pub kind: String,
     /// EXR height map in µm (one channel; `Y` if several), relative to the scene file;
-    /// its slopes go on faces A, B and C. Needed by kind = "file".
+    /// its slopes go on faces A, B and C (those without a `map` entry of their own).
+    /// Kind = "file" needs it, or a `map` entry for each of A, B and C.
     pub path: Option<PathBuf>,
+    /// `[[texture.map]]`: faces with a height map of their own (kind = "file").
+    pub map: Vec<FaceMapFile>,
     /// Texel spacing of generated maps and of the `path` map, µm, [1, 1000].
     pub spacing_um: f32,
     /// Groove period, mm, (0, 100].
@@ -1130,6 +1160,7 @@ impl Default for TextureConfig {
         TextureConfig {
             kind: "flat".into(),
             path: None,
+            map: Vec::new(),
             spacing_um: 20.0,
             groove_period_mm: 1.0,
             groove_max_slope_deg: 30.0,
@@ -1442,6 +1473,12 @@ impl SceneConfig {
             let base = path.parent().unwrap_or(Path::new("."));
             cfg.texture.path = Some(base.join(t));
         }
+        for m in &mut cfg.texture.map {
+            if m.path.is_relative() {
+                let base = path.parent().unwrap_or(Path::new("."));
+                m.path = base.join(&m.path);
+            }
+        }
         if let Some(c) = &cfg.camera.calibration
             && c.is_relative()
         {
@@ -1703,11 +1740,58 @@ impl SceneConfig {
                 ),
             });
         }
-        if t.kind == "file" && t.path.is_none() {
+        if t.kind == "file" && t.path.is_none() && t.map.is_empty() {
             return Err(ConfigError::Invalid {
                 field: "texture.path",
-                message: "kind = \"file\" needs `path` (an EXR height map in µm)".into(),
+                message: "kind = \"file\" needs `path` (an EXR height map in µm) or a `[[texture.map]]` entry for each of faces A, B and C".into(),
             });
+        }
+        if t.kind != "file" && !t.map.is_empty() {
+            return Err(ConfigError::Invalid {
+                field: "texture.map",
+                message: format!("maps of their own need kind = \"file\", not {:?}", t.kind),
+            });
+        }
+        let mut seen = Vec::new();
+        for (index, m) in t.map.iter().enumerate() {
+            let bad = |field, message: String| ConfigError::TextureMap {
+                index,
+                field,
+                message,
+            };
+            let Some(face) = m.face_id() else {
+                return Err(bad(
+                    "face",
+                    format!("{:?}: allowed \"A\", \"B\" or \"C\"", m.face),
+                ));
+            };
+            if seen.contains(&face) {
+                return Err(bad(
+                    "face",
+                    format!("face {} has two entries; one map a face", m.face),
+                ));
+            }
+            seen.push(face);
+            if let Some(s) = m.spacing_um
+                && !(s.is_finite() && (1.0..=1000.0).contains(&s))
+            {
+                return Err(bad(
+                    "spacing_um",
+                    format!("{s} is out of range: allowed [1, 1000] µm"),
+                ));
+            }
+        }
+        if t.kind == "file" && t.path.is_none() {
+            for name in ["A", "B", "C"] {
+                if !t.map.iter().any(|m| m.face == name) {
+                    return Err(ConfigError::Invalid {
+                        field: "texture.map",
+                        message: format!(
+                            "face {name} has no map: give it a `[[texture.map]]` entry, or give `path`, the map of the faces without one"
+                        ),
+                    });
+                }
+            }
         }
         range_f(
             "texture.spacing_um",
