@@ -757,6 +757,35 @@ fn texture_maps_per_face_from_the_scene_file() {
     );
 }
 
+/// A map on a mesh without faces A, B, C (nothing labelled, no `inspect`) is an error
+/// naming `texture.kind`, not a bare render.
+#[test]
+fn texture_without_faces_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let stl = "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 10 0 0\nvertex 0 10 0\nendloop\nendfacet\nendsolid t\n";
+    std::fs::write(dir.path().join("t.stl"), stl).expect("stl");
+    let scene = |texture: &str| {
+        let f = dir.path().join("scene.toml");
+        std::fs::write(
+            &f,
+            format!("[object]\npath = \"t.stl\"\nunit = \"mm\"\n[camera]\nlook_at = {{ eye = [0, 0, 100], target = [3, 3, 0] }}\n[texture]\n{texture}"),
+        )
+        .expect("scene");
+        let cfg = SceneConfig::load(&f).expect("scene file");
+        let object = load_object(&cfg).expect("object");
+        RenderScene::assemble(&object, &cfg)
+    };
+    let e = scene("kind = \"test-grooves\"\n")
+        .expect_err("no faces")
+        .to_string();
+    assert!(
+        e.contains("texture.kind") && e.contains("no faces A, B or C") && e.contains("inspect"),
+        "{e}"
+    );
+    let flat = scene("kind = \"flat\"\n").expect("a flat scene needs no faces");
+    assert!(flat.face_maps.is_empty());
+}
+
 /// The sample generators are stateless in (pixel, sample index, seed): the same image for
 /// any batch size, with both samplers.
 #[test]

@@ -848,8 +848,20 @@ pub fn texture_maps(
     t: &TextureConfig,
     frames: &[FaceFrame],
 ) -> Result<Vec<FaceMap>, AssembleError> {
-    if t.kind == "flat" || frames.is_empty() {
+    if t.kind == "flat" {
         return Ok(Vec::new());
+    }
+    if frames.is_empty() {
+        // Every map is placed from a face's frame (other regions and curved patches take
+        // one of the faces' maps): without faces the object would render bare, silently.
+        return Err(ConfigError::Invalid {
+            field: "texture.kind",
+            message: format!(
+                "{:?}: the mesh has no faces A, B or C to place the map on; label them in the mesh (docs/mesh-format.md) or choose them with `[object] inspect`, or use kind = \"flat\"",
+                t.kind
+            ),
+        }
+        .into());
     }
     // Each face's map: its `[[texture.map]]` entry's, else the shared one.
     let place = |own: &[(FaceId, Arc<SlopeMap>)], shared: Option<Arc<SlopeMap>>| -> Vec<FaceMap> {
@@ -892,12 +904,7 @@ pub fn texture_maps(
                 field,
                 message,
             };
-            let face = m.face_id().ok_or_else(|| {
-                bad(
-                    "face",
-                    format!("{:?}: allowed \"A\", \"B\" or \"C\"", m.face),
-                )
-            })?;
+            let face = m.face_id(index)?;
             if !frames.iter().any(|f| f.face == face) {
                 return Err(bad("face", format!("the mesh has no face {}", m.face)).into());
             }

@@ -1117,9 +1117,15 @@ pub struct FaceMapFile {
 }
 
 impl FaceMapFile {
-    /// The face id (after [`SceneConfig::validate`]: 1, 2 or 3).
-    pub fn face_id(&self) -> Option<crate::scene::mesh::FaceId> {
-        crate::scene::mesh::face_from_name(&self.face).filter(|f| (1..=3).contains(f))
+    /// The face id (1, 2 or 3), or the error naming entry `index`'s `face`.
+    pub fn face_id(&self, index: usize) -> Result<crate::scene::mesh::FaceId, ConfigError> {
+        crate::scene::mesh::face_from_name(&self.face)
+            .filter(|f| (1..=3).contains(f))
+            .ok_or_else(|| ConfigError::TextureMap {
+                index,
+                field: "face",
+                message: format!("{:?}: allowed \"A\", \"B\" or \"C\"", self.face),
+            })
     }
 }
 
@@ -1759,12 +1765,7 @@ impl SceneConfig {
                 field,
                 message,
             };
-            let Some(face) = m.face_id() else {
-                return Err(bad(
-                    "face",
-                    format!("{:?}: allowed \"A\", \"B\" or \"C\"", m.face),
-                ));
-            };
+            let face = m.face_id(index)?;
             if seen.contains(&face) {
                 return Err(bad(
                     "face",
