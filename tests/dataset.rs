@@ -1102,6 +1102,30 @@ fn output_is_readable_by_compare_and_standard_label_formats() {
     assert_eq!(images, samples.len());
 }
 
+/// `dataset merge`'s progress: (entries verified, entries to verify), rising to the whole
+/// job; the same files as a merge without it.
+#[test]
+fn merge_reports_its_verification_progress() {
+    let f = fixture(2, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let n = f.prep.plan.items.len();
+    let before = tree(&out);
+    let mut calls: Vec<(usize, usize)> = Vec::new();
+    let mut progress = |done: usize, total: usize| calls.push((done, total));
+    let merged =
+        dataset::merge_with_progress(std::slice::from_ref(&out), Some(&mut progress)).unwrap();
+    assert_eq!(merged, n);
+    assert_eq!(calls.last(), Some(&(n, n)), "{calls:?}");
+    assert!(
+        calls
+            .windows(2)
+            .all(|w| w[0].0 < w[1].0 && w[0].1 == w[1].1),
+        "{calls:?}"
+    );
+    assert_eq!(tree(&out), before);
+}
+
 #[test]
 fn postprocess_reruns_from_raw_files() {
     let f = fixture(1, 1);

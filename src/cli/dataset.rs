@@ -293,7 +293,18 @@ pub fn run(a: DatasetArgs) -> Result<()> {
     match a.cmd {
         Cmd::Run(r) => run_job(r),
         Cmd::Merge { dirs } => {
-            let n = dataset::merge(&dirs).context("merge")?;
+            // Verifying every file of every image is what takes the time.
+            let bar = indicatif::ProgressBar::new(0);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "verifying {bar:40} {pos}/{len} images' files, {elapsed} elapsed, ETA {eta}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            let mut progress = bar_progress(&bar);
+            let n = dataset::merge_with_progress(&dirs, Some(&mut progress));
+            bar.finish_and_clear();
+            let n = n.context("merge")?;
             println!(
                 "{}: {n} images, manifest.jsonl and coco/*.json written",
                 dirs[0].display()

@@ -569,7 +569,7 @@ fn run_locked(
         .filter(|i| opts.shard.owns(i))
         .collect();
     let wanted: BTreeSet<usize> = mine.iter().map(|i| i.index).collect();
-    let done = verified_entries(out, &prep.plan, &wanted, Some(&manifest_path))?;
+    let done = verified_entries(out, &prep.plan, &wanted, Some(&manifest_path), None)?;
     let mut stray = 0;
     if exclusive {
         stray += sweep_temps(out, None)?;
@@ -626,7 +626,7 @@ fn run_locked(
     }
     let finished = exclusive && left == 0;
     if finished {
-        finish_locked(out)?;
+        finish_locked(out, None)?;
     }
     Ok(RunReport {
         shard_items: mine.len(),
@@ -980,6 +980,9 @@ pub fn verify_entry(dir: &Path, e: &ManifestEntry) -> std::result::Result<(), St
     Ok(())
 }
 
+/// Manifest entries verified between two calls of a verification's progress callback.
+const VERIFY_CHUNK: usize = 64;
+
 /// The entries of every shard manifest in `dir` whose files verify, one per image index
 /// in `wanted` (the first that verifies, in file name order). `own`, this run's manifest,
 /// is repaired (half last line) and rewritten without the entries that fail.
@@ -988,6 +991,7 @@ fn verified_entries(
     plan: &Plan,
     wanted: &BTreeSet<usize>,
     own: Option<&Path>,
+    mut progress: Option<&mut dyn FnMut(usize, usize)>,
 ) -> Result<BTreeMap<usize, ManifestEntry>> {
     use rayon::prelude::*;
     let mut candidates: Vec<(usize, ManifestEntry)> = Vec::new();
@@ -1020,10 +1024,18 @@ fn verified_entries(
             }
         }
     }
-    let ok: Vec<bool> = candidates
-        .par_iter()
-        .map(|(_, e)| verify_entry(dir, e).is_ok())
-        .collect();
+    // In chunks on all cores, so that `progress` moves while the files are read.
+    let mut ok: Vec<bool> = Vec::with_capacity(candidates.len());
+    for chunk in candidates.chunks(VERIFY_CHUNK) {
+        let part: Vec<bool> = chunk
+            .par_iter()
+            .map(|(_, e)| verify_entry(dir, e).is_ok())
+            .collect();
+        ok.extend(part);
+        if let Some(p) = progress.as_deref_mut() {
+            p(ok.len(), candidates.len());
+        }
+    }
     let mut out = BTreeMap::new();
     let mut own_bad = false;
     for ((mi, e), ok) in candidates.iter().zip(&ok) {
@@ -2060,14 +2072,16 @@ fn stored_job(dir: &Path) -> Result<(String, Job)> {
 /// naming the missing shards if any image of the job is missing.
 pub fn finish(dir: &Path) -> Result<usize> {
     let _lock = lock::lock(dir, lock::Access::Exclusive)?;
-    finish_locked(dir)
+    finish_locked(dir, None)
 }
 
-fn finish_locked(dir: &Path) -> Result<usize> {
+/// `progress`: (manifest entries verified, entries to verify) as the images' files are
+/// read and hashed, the step that takes the time (every file of every image).
+fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> Result<usize> {
     let (_, job) = stored_job(dir)?;
     let plan = plan::expand(&job);
     let all: BTreeSet<usize> = (0..plan.items.len()).collect();
-    let by_index = verified_entries(dir, &plan, &all, None)?;
+    let by_index = verified_entries(dir, &plan, &all, None, progress)?;
     let missing: Vec<usize> = (0..plan.items.len())
         .filter(|i| !by_index.contains_key(i))
         .collect();
@@ -2155,6 +2169,15 @@ fn missing_error(dir: &Path, plan: &Plan, missing: &[usize]) -> Result<DatasetEr
 /// lines of the others whose files match their manifest are moved into it (replacing a
 /// target image that is missing or differs); then the dataset is finished.
 pub fn merge(dirs: &[PathBuf]) -> Result<usize> {
+    merge_with_progress(dirs, None)
+}
+
+/// [`merge`], calling `progress` with (entries verified, entries to verify) while the
+/// finish step verifies the merged dataset's files.
+pub fn merge_with_progress(
+    dirs: &[PathBuf],
+    progress: Option<&mut dyn FnMut(usize, usize)>,
+) -> Result<usize> {
     let Some((target, others)) = dirs.split_first() else {
         return Err(DatasetError::layout(".", "merge needs at least one folder"));
     };
@@ -2202,7 +2225,7 @@ pub fn merge(dirs: &[PathBuf]) -> Result<usize> {
         }
     }
     drop(locks);
-    finish_locked(target)
+    finish_locked(target, progress)
 }
 
 fn move_dir(from: &Path, to: &Path) -> Result<()> {
@@ -2298,7 +2321,7 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
         write_manifest(&m, &updated)?;
     }
     if dir.join("manifest.jsonl").exists() {
-        finish_locked(dir)?;
+        finish_locked(dir, None)?;
     }
     Ok(n)
 }
