@@ -899,11 +899,7 @@ pub fn texture_maps(
         };
         let mut own = Vec::new();
         for (index, m) in t.map.iter().enumerate() {
-            let bad = |field, message: String| ConfigError::TextureMap {
-                index,
-                field,
-                message,
-            };
+            let bad = |field, message| m.error(index, field, message);
             let face = m.face_id(index)?;
             if !frames.iter().any(|f| f.face == face) {
                 return Err(bad("face", format!("the mesh has no face {}", m.face)).into());

@@ -1121,11 +1121,19 @@ impl FaceMapFile {
     pub fn face_id(&self, index: usize) -> Result<crate::scene::mesh::FaceId, ConfigError> {
         crate::scene::mesh::face_from_name(&self.face)
             .filter(|f| (1..=3).contains(f))
-            .ok_or_else(|| ConfigError::TextureMap {
-                index,
-                field: "face",
-                message: format!("{:?}: allowed \"A\", \"B\" or \"C\"", self.face),
+            .ok_or_else(|| {
+                let allowed = format!("{:?}: allowed \"A\", \"B\" or \"C\"", self.face);
+                self.error(index, "face", allowed)
             })
+    }
+
+    /// The error naming `field` of this entry, `texture.map[index]`.
+    pub fn error(&self, index: usize, field: &'static str, message: String) -> ConfigError {
+        ConfigError::TextureMap {
+            index,
+            field,
+            message,
+        }
     }
 }
 
@@ -1760,11 +1768,7 @@ impl SceneConfig {
         }
         let mut seen = Vec::new();
         for (index, m) in t.map.iter().enumerate() {
-            let bad = |field, message: String| ConfigError::TextureMap {
-                index,
-                field,
-                message,
-            };
+            let bad = |field, message| m.error(index, field, message);
             let face = m.face_id(index)?;
             if seen.contains(&face) {
                 return Err(bad(
