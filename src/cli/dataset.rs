@@ -251,6 +251,21 @@ pub(super) fn renderer_refs(
         .collect()
 }
 
+/// A progress bar on stderr drawn with `template` (indicatif's; the default style if it
+/// does not parse); `hidden`: one that draws nothing.
+pub(super) fn styled_bar(template: &str, hidden: bool) -> indicatif::ProgressBar {
+    let bar = if hidden {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(0)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(template)
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar
+}
+
 /// A `RunOptions::progress` callback that moves `bar` to (done, total).
 pub(super) fn bar_progress(bar: &indicatif::ProgressBar) -> impl FnMut(usize, usize) + '_ {
     |done, total| {
@@ -294,12 +309,9 @@ pub fn run(a: DatasetArgs) -> Result<()> {
         Cmd::Run(r) => run_job(r),
         Cmd::Merge { dirs } => {
             // Verifying every file of every image is what takes the time.
-            let bar = indicatif::ProgressBar::new(0);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "verifying {bar:40} {pos}/{len} images' files, {elapsed} elapsed, ETA {eta}",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            let bar = styled_bar(
+                "verifying {bar:40} {pos}/{len} images' files, {elapsed} elapsed, ETA {eta}",
+                false,
             );
             let mut progress = bar_progress(&bar);
             let n = dataset::merge_with_progress(&dirs, Some(&mut progress));
@@ -423,16 +435,9 @@ fn run_job(a: RunArgs) -> Result<()> {
         .with_context(|| format!("job {}", a.job.display()))?;
     super::accel_from_env()?;
     let mut renderer = profiler.cpu("Vulkan init, pipelines, energy tables", gpu_renderer)?;
-    let bar = if a.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(0)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta} ({per_sec})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    let bar = styled_bar(
+        "{bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta} ({per_sec})",
+        a.quiet,
     );
     bar.enable_steady_tick(Duration::from_millis(500));
     let mut progress = bar_progress(&bar);

@@ -131,12 +131,9 @@ pub fn run_compare(a: CompareArgs) -> anyhow::Result<()> {
         AlignMode::Table(table)
     };
     // A bar on stderr (hidden where stderr is not a terminal), one pass at a time.
-    let bar = indicatif::ProgressBar::new(0);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{msg:14} {bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    let bar = super::dataset::styled_bar(
+        "{msg:14} {bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta}",
+        false,
     );
     let progress = |phase: metrics::compare::ComparePhase, done: usize, total: usize| {
         // Each pass starts at 0; its images finish on several threads, in any order.

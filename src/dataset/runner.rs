@@ -1024,9 +1024,14 @@ fn verified_entries(
             }
         }
     }
-    // In chunks on all cores, so that `progress` moves while the files are read.
+    // On all cores; in chunks only where `progress` is watched, so that it moves while
+    // the files are read (each chunk ends when its slowest image does).
+    let chunk_len = match progress {
+        Some(_) => VERIFY_CHUNK,
+        None => candidates.len().max(1),
+    };
     let mut ok: Vec<bool> = Vec::with_capacity(candidates.len());
-    for chunk in candidates.chunks(VERIFY_CHUNK) {
+    for chunk in candidates.chunks(chunk_len) {
         let part: Vec<bool> = chunk
             .par_iter()
             .map(|(_, e)| verify_entry(dir, e).is_ok())
