@@ -117,11 +117,8 @@ fn main() {
     let mut shaders: Vec<PathBuf> = Vec::new();
     collect(&glsl, &mut shaders);
     shaders.sort();
-    let compiler = shaderc::Compiler::new().expect("shaderc compiler");
-    let mut table = String::from(
-        "/// (name, SPIR-V) of every compiled shader variant.\npub static SHADERS: &[(&str, &[u8])] = &[\n",
-    );
-    let mut failed = false;
+    // Every (shader, variant) in name order; the table lists them in this order.
+    let mut jobs: Vec<Job> = Vec::new();
     for path in &shaders {
         println!("cargo:rerun-if-changed={}", path.display());
         let source =
@@ -136,53 +133,101 @@ fn main() {
                 Some(v) => format!("{stem}.{v}"),
                 None => stem.clone(),
             };
-            let spv_path = out.join(format!("{name}.spv"));
-            let hash_path = out.join(format!("{name}.hash"));
-            let old = std::fs::read_to_string(&hash_path).unwrap_or_default();
-            if let Some((h, deps)) = old.split_once('\n')
-                && spv_path.exists()
-                && h == input_hash(&source, deps.lines(), define.as_deref()).to_string()
-            {
-                table.push_str(&format!(
-                    "    ({name:?}, include_bytes!({:?})),\n",
-                    spv_path.display().to_string()
-                ));
-                for d in deps.lines() {
-                    println!("cargo:rerun-if-changed={d}");
-                }
-                continue;
-            }
-            match compile(
-                &compiler,
-                &glsl,
-                &interface,
-                path,
-                &source,
-                define.as_deref(),
-            ) {
-                Ok((words, deps)) => {
-                    std::fs::write(&spv_path, &words).expect("write SPIR-V");
-                    let deps: Vec<String> = deps.into_iter().collect();
-                    let h = input_hash(&source, deps.iter().map(|s| s.as_str()), define.as_deref());
-                    std::fs::write(&hash_path, format!("{h}\n{}", deps.join("\n")))
-                        .expect("write hash");
-                    for d in &deps {
-                        println!("cargo:rerun-if-changed={d}");
+            jobs.push(Job {
+                name,
+                path: path.clone(),
+                source: source.clone(),
+                define,
+            });
+        }
+    }
+    // The stale ones compiled on as many threads as cargo gives the build script
+    // (NUM_JOBS): spirv-opt takes about 9 s for each path tracer variant, which in one
+    // thread kept the build script alone on the critical path of a clean build for
+    // over a minute on 2 cores.
+    let stale: Vec<usize> = (0..jobs.len())
+        .filter(|&k| up_to_date(&jobs[k], &out).is_none())
+        .collect();
+    let threads = std::env::var("NUM_JOBS")
+        .ok()
+        .and_then(|n| n.parse::<usize>().ok())
+        .unwrap_or(1)
+        .clamp(1, stale.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut results: Vec<Option<Result<BTreeSet<String>, String>>> = vec![None; jobs.len()];
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let compiler = shaderc::Compiler::new().expect("shaderc compiler");
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&k) = stale.get(i) else { break };
+                        let job = &jobs[k];
+                        let result = compile(
+                            &compiler,
+                            &glsl,
+                            &interface,
+                            &job.path,
+                            &job.source,
+                            job.define.as_deref(),
+                        )
+                        .map(|(words, deps)| {
+                            std::fs::write(out.join(format!("{}.spv", job.name)), &words)
+                                .expect("write SPIR-V");
+                            let h = input_hash(
+                                &job.source,
+                                deps.iter().map(|s| s.as_str()),
+                                job.define.as_deref(),
+                            );
+                            let list: Vec<&str> = deps.iter().map(|s| s.as_str()).collect();
+                            std::fs::write(
+                                out.join(format!("{}.hash", job.name)),
+                                format!("{h}\n{}", list.join("\n")),
+                            )
+                            .expect("write hash");
+                            deps
+                        });
+                        done.push((k, result));
                     }
-                    table.push_str(&format!(
-                        "    ({name:?}, include_bytes!({:?})),\n",
-                        spv_path.display().to_string()
-                    ));
-                }
-                Err(msg) => {
-                    failed = true;
-                    for line in msg.lines() {
-                        println!("cargo:warning={line}");
-                    }
-                    eprintln!("{msg}");
-                }
+                    done
+                })
+            })
+            .collect();
+        for h in handles {
+            for (k, r) in h.join().expect("a shader compile thread panicked") {
+                results[k] = Some(r);
             }
         }
+    });
+
+    let mut table = String::from(
+        "/// (name, SPIR-V) of every compiled shader variant.\npub static SHADERS: &[(&str, &[u8])] = &[\n",
+    );
+    let mut failed = false;
+    for (job, result) in jobs.iter().zip(results) {
+        let deps = match result {
+            None => up_to_date(job, &out).expect("checked above"),
+            Some(Ok(deps)) => deps,
+            Some(Err(msg)) => {
+                failed = true;
+                for line in msg.lines() {
+                    println!("cargo:warning={line}");
+                }
+                eprintln!("{msg}");
+                continue;
+            }
+        };
+        for d in &deps {
+            println!("cargo:rerun-if-changed={d}");
+        }
+        let spv_path = out.join(format!("{}.spv", job.name));
+        table.push_str(&format!(
+            "    ({:?}, include_bytes!({:?})),\n",
+            job.name,
+            spv_path.display().to_string()
+        ));
     }
     if failed {
         eprintln!("shader compilation failed (see the file:line messages above)");
@@ -190,6 +235,24 @@ fn main() {
     }
     table.push_str("];\n");
     std::fs::write(out.join("shaders.rs"), table).expect("write shaders.rs");
+}
+
+/// One shader variant to compile: `<name>.spv` in OUT_DIR.
+struct Job {
+    name: String,
+    path: PathBuf,
+    source: String,
+    define: Option<String>,
+}
+
+/// The includes of `job`'s SPIR-V in OUT_DIR when it was compiled from the same source,
+/// defines and includes (by the hash recorded beside it); None when it must be compiled.
+fn up_to_date(job: &Job, out: &Path) -> Option<BTreeSet<String>> {
+    let old = std::fs::read_to_string(out.join(format!("{}.hash", job.name))).ok()?;
+    let (h, deps) = old.split_once('\n')?;
+    let fresh = out.join(format!("{}.spv", job.name)).exists()
+        && h == input_hash(&job.source, deps.lines(), job.define.as_deref()).to_string();
+    fresh.then(|| deps.lines().map(str::to_string).collect())
 }
 
 fn collect(dir: &Path, out: &mut Vec<PathBuf>) {
