@@ -145,8 +145,18 @@ fn main() {
     // (NUM_JOBS): spirv-opt takes about 9 s for each path tracer variant, which in one
     // thread kept the build script alone on the critical path of a clean build for
     // over a minute on 2 cores.
+    // A variant compiled by another run of this build script (clippy's, when the test
+    // build runs it again with other fingerprints) is copied from the cache beside the
+    // OUT_DIRs.
+    let shared = shared_cache(&out);
     let stale: Vec<usize> = (0..jobs.len())
-        .filter(|&k| up_to_date(&jobs[k], &out).is_none())
+        .filter(|&k| {
+            let job = &jobs[k];
+            up_to_date(job, &out, &interface).is_none()
+                && !shared
+                    .as_deref()
+                    .is_some_and(|dir| copy_recorded(job, dir, &out, &interface))
+        })
         .collect();
     let threads = std::env::var("NUM_JOBS")
         .ok()
@@ -174,19 +184,10 @@ fn main() {
                             job.define.as_deref(),
                         )
                         .map(|(words, deps)| {
-                            std::fs::write(out.join(format!("{}.spv", job.name)), &words)
-                                .expect("write SPIR-V");
-                            let h = input_hash(
-                                &job.source,
-                                deps.iter().map(|s| s.as_str()),
-                                job.define.as_deref(),
-                            );
-                            let list: Vec<&str> = deps.iter().map(|s| s.as_str()).collect();
-                            std::fs::write(
-                                out.join(format!("{}.hash", job.name)),
-                                format!("{h}\n{}", list.join("\n")),
-                            )
-                            .expect("write hash");
+                            for dir in std::iter::once(out.as_path()).chain(shared.as_deref()) {
+                                record(job, dir, &words, &deps, &interface)
+                                    .unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+                            }
                             deps
                         });
                         done.push((k, result));
@@ -208,7 +209,7 @@ fn main() {
     let mut failed = false;
     for (job, result) in jobs.iter().zip(results) {
         let deps = match result {
-            None => up_to_date(job, &out).expect("checked above"),
+            None => up_to_date(job, &out, &interface).expect("checked or copied above"),
             Some(Ok(deps)) => deps,
             Some(Err(msg)) => {
                 failed = true;
@@ -245,14 +246,72 @@ struct Job {
     define: Option<String>,
 }
 
-/// The includes of `job`'s SPIR-V in OUT_DIR when it was compiled from the same source,
+/// How the generated `interface.glsl` is named in a recorded include list: each run of
+/// the build script writes its own copy into its OUT_DIR.
+const INTERFACE: &str = "$OUT_DIR/interface.glsl";
+
+/// The cache of compiled variants shared by this profile's runs of the build script
+/// (`<target>/<profile>/build/synosis-spirv`, beside their OUT_DIRs), when OUT_DIR has
+/// cargo's layout.
+fn shared_cache(out: &Path) -> Option<PathBuf> {
+    let build = out.parent()?.parent()?;
+    let layout = out.file_name()? == "out" && build.file_name()? == "build";
+    let dir = build.join("synosis-spirv");
+    (layout && std::fs::create_dir_all(&dir).is_ok()).then_some(dir)
+}
+
+/// The includes of `job`'s SPIR-V in `dir` when it was compiled from the same source,
 /// defines and includes (by the hash recorded beside it); None when it must be compiled.
-fn up_to_date(job: &Job, out: &Path) -> Option<BTreeSet<String>> {
-    let old = std::fs::read_to_string(out.join(format!("{}.hash", job.name))).ok()?;
+fn up_to_date(job: &Job, dir: &Path, interface: &Path) -> Option<BTreeSet<String>> {
+    let old = std::fs::read_to_string(dir.join(format!("{}.hash", job.name))).ok()?;
     let (h, deps) = old.split_once('\n')?;
-    let fresh = out.join(format!("{}.spv", job.name)).exists()
-        && h == input_hash(&job.source, deps.lines(), job.define.as_deref()).to_string();
-    fresh.then(|| deps.lines().map(str::to_string).collect())
+    let deps: Vec<&str> = deps.lines().collect();
+    let fresh = dir.join(format!("{}.spv", job.name)).exists()
+        && h == input_hash(&job.source, &deps, job.define.as_deref(), interface).to_string();
+    fresh.then(|| deps.iter().map(|d| real_path(d, interface)).collect())
+}
+
+/// Copies `job`'s SPIR-V and its record from `from` to `to` when they are up to date.
+fn copy_recorded(job: &Job, from: &Path, to: &Path, interface: &Path) -> bool {
+    up_to_date(job, from, interface).is_some()
+        && ["spv", "hash"].iter().all(|ext| {
+            let name = format!("{}.{ext}", job.name);
+            std::fs::copy(from.join(&name), to.join(&name)).is_ok()
+        })
+        && up_to_date(job, to, interface).is_some()
+}
+
+/// Writes `job`'s SPIR-V and then its record (input hash and includes) into `dir`, each
+/// through a temporary file renamed into place, so that a record names whole files only.
+fn record(
+    job: &Job,
+    dir: &Path,
+    words: &[u8],
+    deps: &BTreeSet<String>,
+    interface: &Path,
+) -> std::io::Result<()> {
+    let interface_name = interface.display().to_string();
+    let deps: Vec<&str> = deps
+        .iter()
+        .map(|d| if *d == interface_name { INTERFACE } else { d })
+        .collect();
+    let h = input_hash(&job.source, &deps, job.define.as_deref(), interface);
+    let write = |ext: &str, bytes: &[u8]| {
+        let tmp = dir.join(format!("{}.{ext}.{}.tmp", job.name, std::process::id()));
+        std::fs::write(&tmp, bytes)?;
+        std::fs::rename(&tmp, dir.join(format!("{}.{ext}", job.name)))
+    };
+    write("spv", words)?;
+    write("hash", format!("{h}\n{}", deps.join("\n")).as_bytes())
+}
+
+/// A recorded include's path in this run.
+fn real_path(recorded: &str, interface: &Path) -> String {
+    if recorded == INTERFACE {
+        interface.display().to_string()
+    } else {
+        recorded.to_string()
+    }
 }
 
 fn collect(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -282,13 +341,17 @@ fn variants(source: &str) -> Vec<(Option<String>, Option<String>)> {
     vec![(None, None)]
 }
 
-fn input_hash<'a>(source: &str, deps: impl Iterator<Item = &'a str>, define: Option<&str>) -> u64 {
+/// A hash of a variant's source, defines and includes (their recorded names and their
+/// contents now).
+fn input_hash(source: &str, deps: &[&str], define: Option<&str>, interface: &Path) -> u64 {
     let mut h = DefaultHasher::new();
     source.hash(&mut h);
     define.hash(&mut h);
     for d in deps {
         d.hash(&mut h);
-        std::fs::read(d).unwrap_or_default().hash(&mut h);
+        std::fs::read(real_path(d, interface))
+            .unwrap_or_default()
+            .hash(&mut h);
     }
     h.finish()
 }
