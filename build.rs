@@ -7,7 +7,9 @@
 //!   variant may set several defines joined by `+` (`as=DEFINE_A+DEFINE_S`).
 //! - A shader error fails the build with the file:line glslang reports.
 //! - Each output records a hash of its source, includes and defines; unchanged shaders
-//!   are not recompiled.
+//!   are not recompiled, and a variant another run of this script compiled (clippy's,
+//!   in another OUT_DIR) is copied from `<target>/<profile>/build/synosis-spirv`.
+//! - The stale variants compile on `NUM_JOBS` threads.
 
 use std::cell::RefCell;
 use std::collections::BTreeSet;
@@ -141,10 +143,6 @@ fn main() {
             });
         }
     }
-    // The stale ones compiled on as many threads as cargo gives the build script
-    // (NUM_JOBS): spirv-opt takes about 9 s for each path tracer variant, which in one
-    // thread kept the build script alone on the critical path of a clean build for
-    // over a minute on 2 cores.
     // A variant compiled by another run of this build script (clippy's, when the test
     // build runs it again with other fingerprints) is copied from the cache beside the
     // OUT_DIRs.
@@ -158,6 +156,10 @@ fn main() {
                     .is_some_and(|dir| copy_recorded(job, dir, &out, &interface))
         })
         .collect();
+    // The stale ones compiled on as many threads as cargo gives the build script
+    // (NUM_JOBS): spirv-opt takes about 9 s for each path tracer variant, which in one
+    // thread kept the build script alone on the critical path of a clean build for
+    // over a minute on 2 cores.
     let threads = std::env::var("NUM_JOBS")
         .ok()
         .and_then(|n| n.parse::<usize>().ok())
