@@ -147,15 +147,20 @@ fn main() {
     // build runs it again with other fingerprints) is copied from the cache beside the
     // OUT_DIRs.
     let shared = shared_cache(&out);
-    let stale: Vec<usize> = (0..jobs.len())
-        .filter(|&k| {
-            let job = &jobs[k];
-            up_to_date(job, &out, &interface).is_none()
-                && !shared
-                    .as_deref()
-                    .is_some_and(|dir| copy_recorded(job, dir, &out, &interface))
+    // Each variant's includes where its SPIR-V in OUT_DIR is up to date (or compiled
+    // below, or its error).
+    let mut results: Vec<Option<Result<BTreeSet<String>, String>>> = jobs
+        .iter()
+        .map(|job| {
+            up_to_date(job, &out, &interface)
+                .or_else(|| {
+                    let dir = shared.as_deref()?;
+                    copy_recorded(job, dir, &out, &interface)
+                })
+                .map(Ok)
         })
         .collect();
+    let stale: Vec<usize> = (0..jobs.len()).filter(|&k| results[k].is_none()).collect();
     // The stale ones compiled on as many threads as cargo gives the build script
     // (NUM_JOBS): spirv-opt takes about 9 s for each path tracer variant, which in one
     // thread kept the build script alone on the critical path of a clean build for
@@ -166,7 +171,6 @@ fn main() {
         .unwrap_or(1)
         .clamp(1, stale.len().max(1));
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut results: Vec<Option<Result<BTreeSet<String>, String>>> = vec![None; jobs.len()];
     std::thread::scope(|scope| {
         let handles: Vec<_> = (0..threads)
             .map(|_| {
@@ -210,10 +214,9 @@ fn main() {
     );
     let mut failed = false;
     for (job, result) in jobs.iter().zip(results) {
-        let deps = match result {
-            None => up_to_date(job, &out, &interface).expect("checked or copied above"),
-            Some(Ok(deps)) => deps,
-            Some(Err(msg)) => {
+        let deps = match result.expect("every variant up to date, copied or compiled") {
+            Ok(deps) => deps,
+            Err(msg) => {
                 failed = true;
                 for line in msg.lines() {
                     println!("cargo:warning={line}");
@@ -273,14 +276,15 @@ fn up_to_date(job: &Job, dir: &Path, interface: &Path) -> Option<BTreeSet<String
     fresh.then(|| deps.iter().map(|d| real_path(d, interface)).collect())
 }
 
-/// Copies `job`'s SPIR-V and its record from `from` to `to` when they are up to date.
-fn copy_recorded(job: &Job, from: &Path, to: &Path, interface: &Path) -> bool {
-    up_to_date(job, from, interface).is_some()
-        && ["spv", "hash"].iter().all(|ext| {
-            let name = format!("{}.{ext}", job.name);
-            std::fs::copy(from.join(&name), to.join(&name)).is_ok()
-        })
-        && up_to_date(job, to, interface).is_some()
+/// Copies `job`'s SPIR-V and its record from `from` to `to` when they are up to date;
+/// their includes, as [`up_to_date`].
+fn copy_recorded(job: &Job, from: &Path, to: &Path, interface: &Path) -> Option<BTreeSet<String>> {
+    let deps = up_to_date(job, from, interface)?;
+    for ext in ["spv", "hash"] {
+        let name = format!("{}.{ext}", job.name);
+        std::fs::copy(from.join(&name), to.join(&name)).ok()?;
+    }
+    Some(deps)
 }
 
 /// Writes `job`'s SPIR-V and then its record (input hash and includes) into `dir`, each
