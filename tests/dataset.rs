@@ -1126,6 +1126,60 @@ fn merge_reports_its_verification_progress() {
     assert_eq!(tree(&out), before);
 }
 
+/// `dataset run`'s checks of the files already written report their progress (every
+/// file of every image is read and hashed): a resumed run's check of the images the
+/// killed one listed, then the finish's of the whole job, each rising to (n, n).
+#[test]
+fn a_resumed_run_reports_its_verification_progress() {
+    use dataset::Verifying;
+    let f = fixture(2, 1);
+    let total = f.prep.plan.items.len();
+    let out = f.root.join("out");
+    match run_all(&f, &out, Shard::ALL, Some(5)) {
+        Err(DatasetError::Interrupted { done: 5 }) => {}
+        other => panic!("expected an interruption after 5 images, got {other:?}"),
+    }
+    let mut calls: Vec<(Verifying, usize, usize)> = Vec::new();
+    let mut verifying = |v, done, of| calls.push((v, done, of));
+    let r = dataset::run(
+        &f.prep,
+        &out,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+        RunOptions {
+            verifying: Some(&mut verifying),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        (r.already_done, r.rendered, r.finished),
+        (5, total - 5, true)
+    );
+    let step = |which: Verifying| -> Vec<(usize, usize)> {
+        calls
+            .iter()
+            .filter(|c| c.0 == which)
+            .map(|c| (c.1, c.2))
+            .collect()
+    };
+    for (which, n) in [(Verifying::Resume, 5), (Verifying::Finish, total)] {
+        let seen = step(which);
+        assert_eq!(seen.last(), Some(&(n, n)), "{which:?}: {calls:?}");
+        assert!(
+            seen.windows(2).all(|w| w[0].0 < w[1].0 && w[0].1 == w[1].1),
+            "{which:?}: {calls:?}"
+        );
+    }
+    let first_finish = calls.iter().position(|c| c.0 == Verifying::Finish);
+    assert!(
+        calls[..first_finish.unwrap()]
+            .iter()
+            .all(|c| c.0 == Verifying::Resume),
+        "the resume check comes before the finish: {calls:?}"
+    );
+}
+
 #[test]
 fn postprocess_reruns_from_raw_files() {
     let f = fixture(1, 1);

@@ -259,11 +259,62 @@ pub(super) fn styled_bar(template: &str, hidden: bool) -> indicatif::ProgressBar
     } else {
         indicatif::ProgressBar::new(0)
     };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(template)
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    bar.set_style(bar_style(template));
     bar
+}
+
+fn bar_style(template: &str) -> indicatif::ProgressStyle {
+    indicatif::ProgressStyle::with_template(template)
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+}
+
+/// `dataset run`'s bar through a run's steps: checking the images earlier runs wrote,
+/// rendering, verifying every image at the finish; each step after the first starts the
+/// bar (and its elapsed time and ETA) afresh with its own words (the first keeps the time
+/// since the run started: the renderer's start-up and the first image).
+struct RunBar {
+    bar: indicatif::ProgressBar,
+    step: std::cell::Cell<Option<RunStep>>,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum RunStep {
+    Verifying(dataset::Verifying),
+    Rendering,
+}
+
+const RENDERING_BAR: &str = "{bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta} ({per_sec})";
+
+impl RunBar {
+    fn new(hidden: bool) -> Self {
+        let bar = styled_bar(RENDERING_BAR, hidden);
+        bar.enable_steady_tick(Duration::from_millis(500));
+        RunBar {
+            bar,
+            step: std::cell::Cell::new(None),
+        }
+    }
+
+    /// The bar at `step`, (done, total).
+    fn show(&self, step: RunStep, done: usize, total: usize) {
+        let before = self.step.get();
+        if before != Some(step) {
+            let style = match step {
+                RunStep::Rendering => bar_style(RENDERING_BAR),
+                RunStep::Verifying(v) => bar_style(&format!(
+                    "{}: {{bar:24}} {{pos}}/{{len}}, {{elapsed}} elapsed, ETA {{eta}}",
+                    v.describe()
+                )),
+            };
+            self.bar.set_style(style);
+            if before.is_some() {
+                self.bar.reset();
+            }
+            self.step.set(Some(step));
+        }
+        self.bar.set_length(total as u64);
+        self.bar.set_position(done as u64);
+    }
 }
 
 /// A `RunOptions::progress` callback that moves `bar` to (done, total).
@@ -435,12 +486,9 @@ fn run_job(a: RunArgs) -> Result<()> {
         .with_context(|| format!("job {}", a.job.display()))?;
     super::accel_from_env()?;
     let mut renderer = profiler.cpu("Vulkan init, pipelines, energy tables", gpu_renderer)?;
-    let bar = styled_bar(
-        "{bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta} ({per_sec})",
-        a.quiet,
-    );
-    bar.enable_steady_tick(Duration::from_millis(500));
-    let mut progress = bar_progress(&bar);
+    let bar = RunBar::new(a.quiet);
+    let mut progress = |done, total| bar.show(RunStep::Rendering, done, total);
+    let mut verifying = |v, done, total| bar.show(RunStep::Verifying(v), done, total);
     let Started {
         renderers,
         in_flight,
@@ -457,13 +505,14 @@ fn run_job(a: RunArgs) -> Result<()> {
             shard,
             fail_after: None,
             progress: Some(&mut progress),
+            verifying: Some(&mut verifying),
             profiler: a.profile.as_ref().map(|_| &profiler),
             in_flight,
             more_renderers: renderer_refs(&mut more),
             limit: None,
         },
     );
-    bar.finish_and_clear();
+    bar.bar.finish_and_clear();
     // The profile is written even when the run stopped on an error (up to the error).
     if let Some(p) = &a.profile {
         profiler

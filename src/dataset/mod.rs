@@ -29,7 +29,7 @@ pub use post::{Frame, PostStep};
 pub use renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage, TextureMap};
 pub use runner::{
     DEFAULT_IN_FLIGHT, DEVICE_ALLOCATIONS_COUNTER, DEVICE_MEMORY_COUNTER, ManifestEntry, Prepared,
-    RunOptions, RunReport, Shard, finish, merge, merge_with_progress, postprocess_dir, prepare,
-    prepare_text, read_manifest, render_one, render_one_seeded, run,
+    RunOptions, RunReport, Shard, Verifying, finish, merge, merge_with_progress, postprocess_dir,
+    prepare, prepare_text, read_manifest, render_one, render_one_seeded, run,
 };
 pub use textures::{TextureCache, TextureSource, TextureWant};

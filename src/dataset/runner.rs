@@ -395,6 +395,10 @@ pub struct RunOptions<'a> {
     pub fail_after: Option<usize>,
     /// Called after each image: (done in this shard, total in this shard).
     pub progress: Option<&'a mut dyn FnMut(usize, usize)>,
+    /// Called while a run reads and hashes the files of images already written (every
+    /// file of every image: what takes the time on a large dataset): (which check,
+    /// entries verified, entries to verify), rising to (n, n).
+    pub verifying: Option<&'a mut dyn FnMut(Verifying, usize, usize)>,
     /// Collects the run's timeline (`dataset run --profile`): each image and its stages
     /// on the thread that ran them, the renderer's CPU phases and GPU passes.
     pub profiler: Option<&'a Profiler>,
@@ -419,6 +423,27 @@ pub struct RunOptions<'a> {
     pub limit: Option<usize>,
 }
 
+/// Which of a run's checks of the files already written [`RunOptions::verifying`] reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verifying {
+    /// Before rendering: the images earlier runs listed in the folder's shard manifests,
+    /// so that a resumed run renders only what is missing or differs.
+    Resume,
+    /// After the last image of a whole-job run: every image's files, before
+    /// `manifest.jsonl` and `coco/` are written.
+    Finish,
+}
+
+impl Verifying {
+    /// A few words for a progress bar.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Verifying::Resume => "checking earlier images",
+            Verifying::Finish => "verifying all images",
+        }
+    }
+}
+
 /// Images in flight by default: one rendering, two being written.
 pub const DEFAULT_IN_FLIGHT: usize = 3;
 
@@ -428,6 +453,7 @@ impl Default for RunOptions<'_> {
             shard: Shard::ALL,
             fail_after: None,
             progress: None,
+            verifying: None,
             profiler: None,
             in_flight: DEFAULT_IN_FLIGHT,
             more_renderers: Vec::new(),
@@ -569,7 +595,21 @@ fn run_locked(
         .filter(|i| opts.shard.owns(i))
         .collect();
     let wanted: BTreeSet<usize> = mine.iter().map(|i| i.index).collect();
-    let done = verified_entries(out, &prep.plan, &wanted, Some(&manifest_path), None)?;
+    let mut verifying = opts.verifying.take();
+    let done = {
+        let mut resume_progress = verifying
+            .as_deref_mut()
+            .map(|v| move |done: usize, total: usize| v(Verifying::Resume, done, total));
+        verified_entries(
+            out,
+            &prep.plan,
+            &wanted,
+            Some(&manifest_path),
+            resume_progress
+                .as_mut()
+                .map(|p| p as &mut dyn FnMut(usize, usize)),
+        )?
+    };
     let mut stray = 0;
     if exclusive {
         stray += sweep_temps(out, None)?;
@@ -626,7 +666,14 @@ fn run_locked(
     }
     let finished = exclusive && left == 0;
     if finished {
-        finish_locked(out, None)?;
+        let mut finish_progress =
+            verifying.map(|v| move |done: usize, total: usize| v(Verifying::Finish, done, total));
+        finish_locked(
+            out,
+            finish_progress
+                .as_mut()
+                .map(|p| p as &mut dyn FnMut(usize, usize)),
+        )?;
     }
     Ok(RunReport {
         shard_items: mine.len(),
