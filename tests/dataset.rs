@@ -1355,6 +1355,54 @@ fn resume_and_merge_verify_files_and_redo_what_differs() {
     assert_same_dataset(&full, &dirs[0]);
 }
 
+/// The finish reads the shard manifests line by line (docs/dataset.md, "Memory at
+/// scale"): a line naming an image outside the job, or one that is not an entry, is an
+/// error naming its manifest and line, and leaves the finished files as they were.
+#[test]
+fn a_bad_manifest_line_is_named_by_its_number_and_the_finish_writes_nothing() {
+    let f = fixture(2, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let finished = || {
+        let mut t = tree(&out);
+        t.insert(
+            "manifest.jsonl".into(),
+            std::fs::read(out.join("manifest.jsonl")).unwrap(),
+        );
+        t
+    };
+    let before = finished();
+    let path = out.join("manifests/shard-0-of-1.jsonl");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines.len() >= 4, "{} lines", lines.len());
+    let cases = [
+        ("outside", {
+            let mut v: serde_json::Value = serde_json::from_str(lines[2]).unwrap();
+            v["index"] = serde_json::json!(999);
+            v.to_string()
+        }),
+        ("malformed", "{\"index\": ".to_string()),
+    ];
+    for (what, bad) in cases {
+        let mut edited: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+        edited[2] = bad;
+        std::fs::write(&path, edited.join("\n") + "\n").unwrap();
+        let err = dataset::merge(std::slice::from_ref(&out))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("shard-0-of-1.jsonl, line 3"), "{what}: {err}");
+        if what == "outside" {
+            assert!(err.contains("image 999 is not in the job"), "{err}");
+        }
+        assert!(finished() == before, "{what}: the finish wrote something");
+        std::fs::write(&path, &text).unwrap();
+    }
+    // Restored, the finish writes the same files again.
+    dataset::merge(std::slice::from_ref(&out)).unwrap();
+    assert!(finished() == before);
+}
+
 #[test]
 fn a_resubmitted_array_task_renders_only_what_is_missing() {
     // Slurm array of 4 into one folder; task 2 dies after one image; resubmitted alone

@@ -609,6 +609,7 @@ fn run_locked(
                 .as_mut()
                 .map(|p| p as &mut dyn FnMut(usize, usize)),
         )?
+        .by_index
     };
     let mut stray = 0;
     if exclusive {
@@ -1029,19 +1030,147 @@ pub fn verify_entry(dir: &Path, e: &ManifestEntry) -> std::result::Result<(), St
 
 /// Manifest entries verified between two calls of a verification's progress callback.
 const VERIFY_CHUNK: usize = 64;
+/// Manifest entries read and verified at once where no progress is watched: what a
+/// verification holds of the entries besides their [`Listed`] records.
+const VERIFY_BATCH: usize = 1024;
 
-/// The entries of every shard manifest in `dir` whose files verify, one per image index
-/// in `wanted` (the first that verifies, in file name order). `own`, this run's manifest,
-/// is repaired (half last line) and rewritten without the entries that fail.
+/// Where a manifest line is: its file (an index into [`Verified::manifests`]) and bytes
+/// (the newline not included).
+#[derive(Clone, Copy, Debug)]
+struct LineAt {
+    manifest: usize,
+    offset: u64,
+    len: usize,
+}
+
+/// A manifest line whose image's files verified: where the line is, and what the finish's
+/// COCO files need of its entry. The entry itself is read again from its line when
+/// `manifest.jsonl` is written, so that a whole job's entries (about 10 KiB an image in
+/// memory) are never held at once (docs/dataset.md, "Memory at scale").
+#[derive(Debug)]
+struct Listed {
+    at: LineAt,
+    split: Split,
+    id: String,
+    image: String,
+    width: u32,
+    height: u32,
+}
+
+/// What [`verified_entries`] found: the manifests it read, and one verified line per
+/// image index.
+struct Verified {
+    manifests: Vec<PathBuf>,
+    by_index: BTreeMap<usize, Listed>,
+}
+
+impl Verified {
+    /// Reads the manifest entries of `lines` from their files.
+    fn read(manifests: &[PathBuf], lines: &[LineAt]) -> Result<Vec<ManifestEntry>> {
+        let mut open: Option<(usize, std::fs::File)> = None;
+        let mut buf = Vec::new();
+        lines
+            .iter()
+            .map(|at| {
+                use std::io::{Read, Seek, SeekFrom};
+                let path = &manifests[at.manifest];
+                if open.as_ref().is_none_or(|(mi, _)| *mi != at.manifest) {
+                    let f = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
+                    open = Some((at.manifest, f));
+                }
+                let (_, f) = open.as_mut().expect("opened above");
+                buf.resize(at.len, 0);
+                f.seek(SeekFrom::Start(at.offset))
+                    .and_then(|_| f.read_exact(&mut buf))
+                    .map_err(|e| DatasetError::io(path, e))?;
+                serde_json::from_slice(&buf).map_err(|e| DatasetError::Manifest {
+                    path: path.clone(),
+                    line: 0,
+                    message: format!("changed while it was read: {e}"),
+                })
+            })
+            .collect()
+    }
+}
+
+/// Calls `each(line number, offset, line)` for every complete, non-blank line of the
+/// manifest at `path` (none when it does not exist), reading it line by line; a half last
+/// line is handled by `mode`.
+fn manifest_lines(
+    path: &Path,
+    mode: ReadMode,
+    mut each: impl FnMut(usize, u64, &str) -> Result<()>,
+) -> Result<()> {
+    use std::io::BufRead;
+    let f = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(DatasetError::io(path, e)),
+    };
+    let mut reader = std::io::BufReader::new(f);
+    let mut line = String::new();
+    let (mut offset, mut n) = (0u64, 0usize);
+    loop {
+        line.clear();
+        let read = reader
+            .read_line(&mut line)
+            .map_err(|e| DatasetError::io(path, e))?;
+        if read == 0 {
+            return Ok(());
+        }
+        n += 1;
+        if !line.ends_with('\n') {
+            // A kill during an append.
+            return match mode {
+                ReadMode::Strict => Err(DatasetError::Manifest {
+                    path: path.into(),
+                    line: n,
+                    message: "incomplete last line (an interrupted run); run the shard again"
+                        .into(),
+                }),
+                ReadMode::Repair => {
+                    let f = std::fs::OpenOptions::new()
+                        .write(true)
+                        .open(path)
+                        .map_err(|e| DatasetError::io(path, e))?;
+                    f.set_len(offset)
+                        .and_then(|_| f.sync_all())
+                        .map_err(|e| DatasetError::io(path, e))
+                }
+                ReadMode::DropPartial => Ok(()),
+            };
+        }
+        let text = line.trim_end_matches('\n');
+        if !text.trim().is_empty() {
+            each(n, offset, text)?;
+        }
+        offset += read as u64;
+    }
+}
+
+/// Parses manifest line `n` of `path`.
+fn parse_entry(path: &Path, n: usize, line: &str) -> Result<ManifestEntry> {
+    serde_json::from_str(line).map_err(|e| DatasetError::Manifest {
+        path: path.into(),
+        line: n,
+        message: e.to_string(),
+    })
+}
+
+/// The lines of every shard manifest in `dir` whose files verify, one per image index in
+/// `wanted` (the first that verifies, in file name order). `own`, this run's manifest, is
+/// repaired (half last line) and rewritten without the entries that fail. Every line is
+/// parsed (a malformed one is an error) and its image's files read and hashed, a batch of
+/// entries at a time.
 fn verified_entries(
     dir: &Path,
     plan: &Plan,
     wanted: &BTreeSet<usize>,
     own: Option<&Path>,
     mut progress: Option<&mut dyn FnMut(usize, usize)>,
-) -> Result<BTreeMap<usize, ManifestEntry>> {
+) -> Result<Verified> {
     use rayon::prelude::*;
-    let mut candidates: Vec<(usize, ManifestEntry)> = Vec::new();
+    let mut candidates: Vec<LineAt> = Vec::new();
     let mut manifests = shard_manifests(dir)?;
     if let Some(o) = own
         && !manifests.iter().any(|m| m == o)
@@ -1054,11 +1183,12 @@ fn verified_entries(
         } else {
             ReadMode::DropPartial
         };
-        for e in read_manifest_mode(m, mode)? {
+        manifest_lines(m, mode, |n, offset, line| {
+            let e = parse_entry(m, n, line)?;
             if e.index >= plan.items.len() {
                 return Err(DatasetError::Manifest {
                     path: m.clone(),
-                    line: 0,
+                    line: n,
                     message: format!(
                         "image {} is not in the job ({} images)",
                         e.index,
@@ -1067,52 +1197,92 @@ fn verified_entries(
                 });
             }
             if wanted.contains(&e.index) {
-                candidates.push((mi, e));
+                candidates.push(LineAt {
+                    manifest: mi,
+                    offset,
+                    len: line.len(),
+                });
+            }
+            Ok(())
+        })?;
+    }
+    // On all cores, a batch at a time; in smaller chunks where `progress` is watched, so
+    // that it moves while the files are read (each chunk ends when its slowest image
+    // does).
+    let chunk_len = match progress {
+        Some(_) => VERIFY_CHUNK,
+        None => VERIFY_BATCH,
+    };
+    let mut by_index: BTreeMap<usize, Listed> = BTreeMap::new();
+    let mut own_failed: BTreeSet<u64> = BTreeSet::new();
+    let own_index = own.and_then(|o| manifests.iter().position(|m| m == o));
+    let mut done = 0;
+    for chunk in candidates.chunks(chunk_len) {
+        let entries = Verified::read(&manifests, chunk)?;
+        let ok: Vec<bool> = entries
+            .par_iter()
+            .map(|e| verify_entry(dir, e).is_ok())
+            .collect();
+        for ((at, e), ok) in chunk.iter().zip(entries).zip(ok) {
+            if ok {
+                by_index.entry(e.index).or_insert_with(|| Listed {
+                    at: *at,
+                    split: e.split,
+                    id: e.id,
+                    image: e.image,
+                    width: e.width,
+                    height: e.height,
+                });
+            } else if Some(at.manifest) == own_index {
+                own_failed.insert(at.offset);
+            }
+        }
+        done += chunk.len();
+        if let Some(p) = progress.as_deref_mut() {
+            p(done, candidates.len());
+        }
+    }
+    if !own_failed.is_empty()
+        && let Some(o) = own
+    {
+        // The entries that failed are dropped (entries outside `wanted` are kept as they
+        // are), the rest sorted by image. Only this shard's manifest is held, and only
+        // here, where a run found files missing or changed.
+        let mut all = Vec::new();
+        manifest_lines(o, ReadMode::Strict, |n, offset, line| {
+            if !own_failed.contains(&offset) {
+                all.push(parse_entry(o, n, line)?);
+            }
+            Ok(())
+        })?;
+        all.sort_by_key(|e| e.index);
+        write_manifest(o, &all)?;
+        // The lines moved: the verified ones are found again in the rewritten file.
+        let mut at_index: BTreeMap<usize, LineAt> = BTreeMap::new();
+        let oi = own_index.expect("own is among the manifests");
+        manifest_lines(o, ReadMode::Strict, |n, offset, line| {
+            let e = parse_entry(o, n, line)?;
+            at_index.entry(e.index).or_insert(LineAt {
+                manifest: oi,
+                offset,
+                len: line.len(),
+            });
+            Ok(())
+        })?;
+        for (index, listed) in by_index.iter_mut() {
+            if listed.at.manifest == oi
+                && let Some(at) = at_index.get(index)
+            {
+                // Each image's first verified line there is its first line now: the
+                // failed ones before it are gone and the order within an image kept.
+                listed.at = *at;
             }
         }
     }
-    // On all cores; in chunks only where `progress` is watched, so that it moves while
-    // the files are read (each chunk ends when its slowest image does).
-    let chunk_len = match progress {
-        Some(_) => VERIFY_CHUNK,
-        None => candidates.len().max(1),
-    };
-    let mut ok: Vec<bool> = Vec::with_capacity(candidates.len());
-    for chunk in candidates.chunks(chunk_len) {
-        let part: Vec<bool> = chunk
-            .par_iter()
-            .map(|(_, e)| verify_entry(dir, e).is_ok())
-            .collect();
-        ok.extend(part);
-        if let Some(p) = progress.as_deref_mut() {
-            p(ok.len(), candidates.len());
-        }
-    }
-    let mut out = BTreeMap::new();
-    let mut own_bad = false;
-    for ((mi, e), ok) in candidates.iter().zip(&ok) {
-        if *ok {
-            out.entry(e.index).or_insert_with(|| e.clone());
-        } else if Some(manifests[*mi].as_path()) == own {
-            own_bad = true;
-        }
-    }
-    if own_bad && let Some(o) = own {
-        let oi = manifests.iter().position(|m| m == o).unwrap_or(usize::MAX);
-        let keep: Vec<ManifestEntry> = candidates
-            .iter()
-            .zip(&ok)
-            .filter(|((mi, _), ok)| *mi == oi && **ok)
-            .map(|((_, e), _)| e.clone())
-            .collect();
-        // Entries outside `wanted` are kept as they are.
-        let mut all = read_manifest_mode(o, ReadMode::Strict)?;
-        all.retain(|e| !wanted.contains(&e.index));
-        all.extend(keep);
-        all.sort_by_key(|e| e.index);
-        write_manifest(o, &all)?;
-    }
-    Ok(out)
+    Ok(Verified {
+        manifests,
+        by_index,
+    })
 }
 
 /// Removes temporary files a killed run left: with `only`, in those images' folders;
@@ -2133,7 +2303,8 @@ fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> 
     let (_, job) = stored_job(dir)?;
     let plan = plan::expand(&job);
     let all: BTreeSet<usize> = (0..plan.items.len()).collect();
-    let by_index = verified_entries(dir, &plan, &all, None, progress)?;
+    let verified = verified_entries(dir, &plan, &all, None, progress)?;
+    let by_index = &verified.by_index;
     let missing: Vec<usize> = (0..plan.items.len())
         .filter(|i| !by_index.contains_key(i))
         .collect();
@@ -2141,25 +2312,45 @@ fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> 
         return Err(missing_error(dir, &plan, &missing)?);
     }
     sweep_temps(dir, None)?;
-    let entries: Vec<ManifestEntry> = by_index.into_values().collect();
     std::fs::create_dir_all(dir.join("coco")).map_err(|e| DatasetError::io(dir, e))?;
     for split in Split::ALL {
-        let images: Vec<coco::SplitImage<'_>> = entries
+        let images: Vec<coco::SplitImage<'_>> = by_index
             .iter()
-            .filter(|e| e.split == split)
-            .map(|e| coco::SplitImage {
-                index: e.index,
-                id: &e.id,
-                file_name: &e.image,
-                width: e.width,
-                height: e.height,
+            .filter(|(_, l)| l.split == split)
+            .map(|(&index, l)| coco::SplitImage {
+                index,
+                id: &l.id,
+                file_name: &l.image,
+                width: l.width,
+                height: l.height,
             })
             .collect();
         let path = dir.join("coco").join(format!("{}.json", split.name()));
         coco::write_split(dir, split.name(), &images, &path)?;
     }
-    write_manifest(&dir.join("manifest.jsonl"), &entries)?;
-    Ok(entries.len())
+    // The entries read again from their lines, a batch at a time, as they are written.
+    let lines: Vec<LineAt> = by_index.values().map(|l| l.at).collect();
+    let path = dir.join("manifest.jsonl");
+    let mut failed = None;
+    crate::util::write_atomic_with(&path, |f| {
+        let mut w = std::io::BufWriter::new(f);
+        for batch in lines.chunks(VERIFY_BATCH) {
+            let entries = match Verified::read(&verified.manifests, batch) {
+                Ok(e) => e,
+                Err(e) => {
+                    failed = Some(e);
+                    return Err(std::io::Error::other("a manifest line could not be read"));
+                }
+            };
+            for e in &entries {
+                serde_json::to_writer(&mut w, e)?;
+                w.write_all(b"\n")?;
+            }
+        }
+        w.flush()
+    })
+    .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(&path, e)))?;
+    Ok(lines.len())
 }
 
 /// "k of n images not finished", naming the shards that own them (by the layout of the
