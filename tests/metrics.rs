@@ -178,13 +178,88 @@ fn bad_inputs_error_cleanly() {
         "{e}"
     );
 
+    // A colour image: refused, naming the first pixel whose channels disagree.
     let rgb = dir.path().join("rgb.png");
-    image::RgbImage::new(4, 4).save(&rgb).unwrap();
+    let mut colour = image::RgbImage::from_pixel(4, 4, image::Rgb([90, 90, 90]));
+    colour.put_pixel(1, 2, image::Rgb([90, 93, 90]));
+    colour.save(&rgb).unwrap();
     let e = GrayImage::load(&rgb).unwrap_err();
     assert!(
-        matches!(e, MetricsError::NotGrayscale { .. }) && e.to_string().contains("rgb.png"),
+        matches!(e, MetricsError::NotGrayscale { .. })
+            && e.to_string().contains("rgb.png")
+            && e.to_string().contains("pixel (1, 2)"),
         "{e}"
     );
+}
+
+/// Real images come as the camera software writes them: 8- and 16-bit grey in PNG,
+/// TIFF, BMP or JPEG, or a grey image stored as colour (its channels within
+/// `GREY_CHANNEL_TOLERANCE`, read as their mean). Each reads as the same values as the
+/// grey PNG (JPEG within its compression error).
+#[test]
+fn grey_images_load_from_every_format_the_camera_software_writes() {
+    let (w, h) = (24u32, 16u32);
+    let code = |x: u32, y: u32| ((x * 37 + y * 11) % 251) as u8;
+    let grey8 = image::GrayImage::from_fn(w, h, |x, y| image::Luma([code(x, y)]));
+    let grey16 = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(w, h, |x, y| {
+        image::Luma([u16::from(code(x, y)) * 257])
+    });
+    let luma8 = || image::DynamicImage::ImageLuma8(grey8.clone());
+    let want: Vec<f32> = grey8.pixels().map(|p| f32::from(p.0[0])).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let load = |name: &str, save: &dyn Fn(&Path)| {
+        let p = dir.path().join(name);
+        save(&p);
+        let img = GrayImage::load(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(img.size(), (w as usize, h as usize), "{name}");
+        img.data
+    };
+    type Save<'a> = Box<dyn Fn(&Path) + 'a>;
+    let cases: Vec<(&str, Save)> = vec![
+        ("a.png", Box::new(|p| grey8.save(p).unwrap())),
+        ("a.tif", Box::new(|p| grey8.save(p).unwrap())),
+        ("a16.tif", Box::new(|p| grey16.save(p).unwrap())),
+        ("a16.png", Box::new(|p| grey16.save(p).unwrap())),
+        ("a.bmp", Box::new(|p| grey8.save(p).unwrap())),
+        // Grey stored as colour.
+        ("rgb.bmp", Box::new(|p| luma8().to_rgb8().save(p).unwrap())),
+        (
+            "rgba.tif",
+            Box::new(|p| luma8().to_rgba8().save(p).unwrap()),
+        ),
+        (
+            "rgb16.png",
+            Box::new(|p| {
+                image::DynamicImage::ImageLuma16(grey16.clone())
+                    .to_rgb16()
+                    .save(p)
+                    .unwrap()
+            }),
+        ),
+    ];
+    for (name, save) in &cases {
+        assert_eq!(load(name, save.as_ref()), want, "{name}");
+    }
+    // Channels one code apart (within the tolerance): their mean.
+    let near = load("near.png", &|p: &Path| {
+        image::RgbImage::from_fn(w, h, |x, y| {
+            let c = code(x, y).min(250);
+            image::Rgb([c, c + 1, c])
+        })
+        .save(p)
+        .unwrap()
+    });
+    let first = f32::from(code(0, 0).min(250));
+    assert_eq!(near[0], first + 1.0 / 3.0);
+    // JPEG: a smooth grey ramp, within its compression error.
+    let ramp = image::GrayImage::from_fn(w, h, |x, y| image::Luma([(40 + 4 * x + 2 * y) as u8]));
+    let jpg = load("ramp.jpg", &|p: &Path| ramp.save(p).unwrap());
+    let worst = jpg
+        .iter()
+        .zip(ramp.pixels())
+        .map(|(a, p)| (a - f32::from(p.0[0])).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 6.0, "JPEG off by {worst}");
 }
 
 // ---- compare, end to end on a tiny generated set --------------------------------------
@@ -454,6 +529,33 @@ fn compare_picks_the_closest_sample_and_builds_the_table() {
     let rp = report.results.iter().find(|r| r.id == "r_par").unwrap();
     assert_eq!(rp.mae_match, "s_decoy");
     assert_eq!(rp.mae, 0.0);
+}
+
+/// The real images in the formats camera software writes (16-bit TIFF, BMP, grey stored
+/// as colour in TIFF), their LabelMe files pointing at them: the same comparison as with
+/// the grey PNGs.
+#[test]
+fn compare_reads_real_images_in_tiff_and_bmp() {
+    let set = make_set();
+    let before = serde_json::to_value(compare(&config(&set)).unwrap()).unwrap();
+    for (stem, ext) in [("r_sand", "tif"), ("r_par", "bmp"), ("r_b", "tiff")] {
+        let png = set.real.join(format!("{stem}.png"));
+        let img = image::open(&png).unwrap().to_luma8();
+        let out = set.real.join(format!("{stem}.{ext}"));
+        match ext {
+            "tif" => image::DynamicImage::ImageLuma8(img).to_luma16().save(&out),
+            "bmp" => img.save(&out),
+            _ => image::DynamicImage::ImageLuma8(img).to_rgb8().save(&out),
+        }
+        .unwrap();
+        std::fs::remove_file(&png).unwrap();
+        let json = set.real.join(format!("{stem}.json"));
+        let text = std::fs::read_to_string(&json).unwrap();
+        let text = text.replace(&format!("{stem}.png"), &format!("{stem}.{ext}"));
+        std::fs::write(&json, text).unwrap();
+    }
+    let after = serde_json::to_value(compare(&config(&set)).unwrap()).unwrap();
+    assert_eq!(before, after);
 }
 
 #[test]

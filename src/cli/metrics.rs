@@ -12,7 +12,8 @@ use synosis::metrics::{
 
 #[derive(Args)]
 pub struct MetricsArgs {
-    /// First image (8- or 16-bit grayscale PNG).
+    /// First image (8- or 16-bit grey PNG, TIFF, BMP or JPEG; a grey image stored as colour
+    /// is read as grey).
     pub a: PathBuf,
     /// Second image, same size.
     pub b: PathBuf,

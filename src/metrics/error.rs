@@ -16,7 +16,9 @@ pub enum MetricsError {
         #[source]
         source: image::ImageError,
     },
-    #[error("{path}: expected a grayscale (8- or 16-bit) PNG, found {color}")]
+    #[error(
+        "{path}: expected a grayscale (8- or 16-bit) image (PNG, TIFF, BMP, JPEG), found {color}"
+    )]
     NotGrayscale { path: PathBuf, color: String },
     #[error("size mismatch: {a} is {a_size:?} but {b} is {b_size:?} (width, height)")]
     SizeMismatch {

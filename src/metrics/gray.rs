@@ -42,14 +42,16 @@ impl GrayImage {
         (self.width, self.height)
     }
 
-    /// Decodes an 8- or 16-bit grayscale PNG (an alpha channel is ignored).
+    /// Decodes an 8- or 16-bit grayscale image (PNG, TIFF, BMP or JPEG; an alpha channel
+    /// is ignored); a colour one is read only where it holds a grey image (its channels
+    /// within [`GREY_CHANNEL_TOLERANCE`]).
     pub fn load(path: &Path) -> Result<Self, MetricsError> {
         Self::load_codes(path, None)
     }
 
-    /// As [`Self::load`], but the codes of a 16-bit PNG have `bit_depth` bits (10, 12: a
+    /// As [`Self::load`], but the codes of a 16-bit image have `bit_depth` bits (10, 12: a
     /// deep sensor's codes written unscaled) and are scaled by 255 / (2^bit_depth - 1), so
-    /// the top code is 255. `None` or 16: 1 / 257. 8-bit PNGs are read as they are.
+    /// the top code is 255. `None` or 16: 1 / 257. 8-bit images are read as they are.
     pub fn load_codes(path: &Path, bit_depth: Option<u32>) -> Result<Self, MetricsError> {
         let img = open(path)?;
         let (width, height) = (img.width() as usize, img.height() as usize);
@@ -66,6 +68,26 @@ impl GrayImage {
             DynamicImage::ImageLumaA8(b) => b.pixels().map(|p| f32::from(p.0[0])).collect(),
             DynamicImage::ImageLuma16(b) => b.into_raw().into_iter().map(from16).collect(),
             DynamicImage::ImageLumaA16(b) => b.pixels().map(|p| from16(p.0[0])).collect(),
+            // A grey image stored as colour (a mono camera's frames saved as RGB, or
+            // JPEG's rounding of one): its channels' mean, where they agree.
+            DynamicImage::ImageRgb8(b) => {
+                grey_of_colour(path, "Rgb8", width, b.pixels().map(|p| p.0.map(f32::from)))?
+            }
+            DynamicImage::ImageRgba8(b) => grey_of_colour(
+                path,
+                "Rgba8",
+                width,
+                b.pixels().map(|p| [p.0[0], p.0[1], p.0[2]].map(f32::from)),
+            )?,
+            DynamicImage::ImageRgb16(b) => {
+                grey_of_colour(path, "Rgb16", width, b.pixels().map(|p| p.0.map(from16)))?
+            }
+            DynamicImage::ImageRgba16(b) => grey_of_colour(
+                path,
+                "Rgba16",
+                width,
+                b.pixels().map(|p| [p.0[0], p.0[1], p.0[2]].map(from16)),
+            )?,
             other => {
                 return Err(MetricsError::NotGrayscale {
                     path: path.to_path_buf(),
@@ -88,6 +110,41 @@ impl GrayImage {
             data: self.data.iter().map(|&v| align.apply(v)).collect(),
         }
     }
+}
+
+/// How far (8-bit units) a colour image's channels may differ at a pixel for it to be
+/// read as a grey image stored as colour ("grey stored as colour" in docs/metrics.md):
+/// a mono camera's frames saved as RGB agree exactly, a JPEG of them within a code or
+/// two; a colour image is refused, not converted by a weighting of its channels.
+pub const GREY_CHANNEL_TOLERANCE: f32 = 2.0;
+
+/// The grey values of a colour image's pixels (`rgb`, in 8-bit units, row-major, rows of
+/// `width`): each pixel's mean of its three channels, or an error naming the first pixel
+/// whose channels differ by more than [`GREY_CHANNEL_TOLERANCE`].
+fn grey_of_colour(
+    path: &Path,
+    color: &str,
+    width: usize,
+    rgb: impl Iterator<Item = [f32; 3]>,
+) -> Result<Vec<f32>, MetricsError> {
+    rgb.enumerate()
+        .map(|(i, [r, g, b])| {
+            let spread = r.max(g).max(b) - r.min(g).min(b);
+            if spread > GREY_CHANNEL_TOLERANCE {
+                return Err(MetricsError::NotGrayscale {
+                    path: path.to_path_buf(),
+                    color: format!(
+                        "{color} whose channels differ by {spread:.1} of 255 at pixel ({}, {}) \
+                         (a grey image stored as colour is read where they differ by at most \
+                         {GREY_CHANNEL_TOLERANCE}; convert a colour image to grey first)",
+                        i % width.max(1),
+                        i / width.max(1)
+                    ),
+                });
+            }
+            Ok((r + g + b) / 3.0)
+        })
+        .collect()
 }
 
 fn from16(v: u16) -> f32 {

@@ -18,7 +18,7 @@ mod ssim;
 
 pub use align::{Alignment, Moments, paper_defaults};
 pub use error::MetricsError;
-pub use gray::{DATA_RANGE, GrayImage};
+pub use gray::{DATA_RANGE, GREY_CHANNEL_TOLERANCE, GrayImage};
 pub use histogram::Histogram;
 pub use mae::mae;
 pub use masks::{Mask, Rect, face_mask};
