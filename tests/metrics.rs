@@ -558,6 +558,86 @@ fn compare_reads_real_images_in_tiff_and_bmp() {
     assert_eq!(before, after);
 }
 
+/// A 12-bit camera's frames in 16-bit TIFFs: `index.csv`'s optional `bit_depth` column
+/// scales their codes by 255 / 4095, so they compare as the 8-bit PNGs did (within the
+/// codes' rounding); without it they read as 16-bit codes, 16 times too dark. A code over
+/// the stated depth, a depth on an 8-bit image and a depth out of range are errors.
+#[test]
+fn a_real_images_bit_depth_comes_from_index_csv() {
+    let set = make_set();
+    let before = compare(&config(&set)).unwrap();
+    let png = set.real.join("r_sand.png");
+    let img = image::open(&png).unwrap().to_luma8();
+    let deep = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(
+        img.width(),
+        img.height(),
+        |x, y| image::Luma([(f64::from(img.get_pixel(x, y).0[0]) * 4095.0 / 255.0).round() as u16]),
+    );
+    deep.save(set.real.join("r_sand.tif")).unwrap();
+    std::fs::remove_file(&png).unwrap();
+    let json = set.real.join("r_sand.json");
+    let text = std::fs::read_to_string(&json).unwrap();
+    std::fs::write(&json, text.replace("r_sand.png", "r_sand.tif")).unwrap();
+    let index = set.real.join("index.csv");
+    let rows = "r_sand,A0,sandblasted-2.5bar,12\nr_par.json,A0,parallel-d4-ae0.5,\nr_b,B10,sandblasted-6bar,8\n";
+    std::fs::write(&index, format!("file,viewpoint,finish,bit_depth\n{rows}")).unwrap();
+    let after = compare(&config(&set)).unwrap();
+    let sand = |r: &metrics::compare::CompareReport| {
+        r.results.iter().find(|x| x.id == "r_sand").unwrap().clone()
+    };
+    let (b, a) = (sand(&before), sand(&after));
+    assert_eq!(a.mae_match, b.mae_match);
+    assert!((a.mae - b.mae).abs() < 0.5, "mae {} vs {}", a.mae, b.mae);
+    assert!(
+        (a.ssim - b.ssim).abs() < 0.01,
+        "ssim {} vs {}",
+        a.ssim,
+        b.ssim
+    );
+    for (r, o) in after.results.iter().zip(&before.results) {
+        if r.id != "r_sand" {
+            assert_eq!((r.mae, r.ssim), (o.mae, o.ssim), "{}", r.id);
+        }
+    }
+    // Without the column: 16-bit codes, the image 16 times darker.
+    std::fs::write(
+        &index,
+        format!(
+            "file,viewpoint,finish\n{}",
+            rows.replace(",12\n", "\n")
+                .replace(",\n", "\n")
+                .replace(",8\n", "\n")
+        ),
+    )
+    .unwrap();
+    let dark = sand(&compare(&config(&set)).unwrap());
+    assert!(
+        dark.mae > 10.0 * b.mae.max(1.0),
+        "mae {} without the bit depth",
+        dark.mae
+    );
+
+    let err = |rows: &str| {
+        std::fs::write(&index, format!("file,viewpoint,finish,bit_depth\n{rows}")).unwrap();
+        compare(&config(&set)).unwrap_err().to_string()
+    };
+    let e = err("r_sand,A0,sandblasted-2.5bar,17\n");
+    assert!(
+        e.contains("index.csv line 2") && e.contains("from 8 to 16"),
+        "{e}"
+    );
+    let e = err("r_sand,A0,sandblasted-2.5bar,10\n");
+    assert!(
+        e.contains("r_sand.tif") && e.contains("bit_depth") && e.contains("at pixel ("),
+        "{e}"
+    );
+    let e = err("r_b,B10,sandblasted-6bar,12\n");
+    assert!(e.contains("r_b.png") && e.contains("8-bit image"), "{e}");
+    std::fs::write(&index, "file,viewpoint,bits\nr_b,B10,x\n").unwrap();
+    let e = compare(&config(&set)).unwrap_err().to_string();
+    assert!(e.contains("file,viewpoint,finish,bit_depth"), "{e}");
+}
+
 #[test]
 fn compare_synthetic_against_itself_skips_self() {
     let set = make_set();
@@ -731,6 +811,35 @@ fn cli_metrics_prints_json() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent.png"));
+
+    // A 12-bit camera's frame in a 16-bit TIFF against the same frame as an 8-bit PNG.
+    let dir = tempfile::tempdir().unwrap();
+    let a = image::open(fixture("tex_a.png")).unwrap().to_luma8();
+    let deep = dir.path().join("tex_a_12bit.tif");
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(a.width(), a.height(), |x, y| {
+        image::Luma([(f64::from(a.get_pixel(x, y).0[0]) * 4095.0 / 255.0).round() as u16])
+    })
+    .save(&deep)
+    .unwrap();
+    let run = |depth: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+            .args(["metrics", "--json", "--bit-depth-a", depth])
+            .arg(&deep)
+            .arg(fixture("tex_a.png"))
+            .output()
+            .unwrap()
+    };
+    let out = run("12");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["mae"].as_f64().unwrap() < 0.3, "{v}");
+    let out = run("17");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--bit-depth-a"));
 }
 
 #[test]

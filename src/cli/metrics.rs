@@ -20,6 +20,13 @@ pub struct MetricsArgs {
     /// Mask PNG: metrics only where it is non-zero.
     #[arg(long)]
     pub mask: Option<PathBuf>,
+    /// Significant bits of the first image's 16-bit codes (8 to 16; e.g. 12 for a 12-bit
+    /// camera's frames saved as 16-bit): codes scaled by 255 / (2^N - 1). Default 16.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(8..=16))]
+    pub bit_depth_a: Option<u32>,
+    /// As --bit-depth-a, for the second image.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(8..=16))]
+    pub bit_depth_b: Option<u32>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -70,8 +77,8 @@ pub struct CompareArgs {
 }
 
 pub fn run_metrics(a: MetricsArgs) -> anyhow::Result<()> {
-    let ia = GrayImage::load(&a.a)?;
-    let ib = GrayImage::load(&a.b)?;
+    let ia = GrayImage::load_codes(&a.a, a.bit_depth_a)?;
+    let ib = GrayImage::load_codes(&a.b, a.bit_depth_b)?;
     let mask = a.mask.as_deref().map(Mask::load).transpose()?;
     let m = metrics::pair_metrics(&ia, &ib, mask.as_ref())
         .with_context(|| format!("comparing {} and {}", a.a.display(), a.b.display()))?;

@@ -17,9 +17,9 @@ pub struct Sample {
     pub viewpoint: String,
     pub finish: String,
     pub faces: FaceSource,
-    /// The bit depth of a 16-bit PNG's codes when it is not 16 (a synthetic dataset of a
-    /// 10- or 12-bit sensor records it as `bit_depth`): codes are scaled by
-    /// 255 / (2^bit_depth - 1) instead of 1 / 257.
+    /// The bit depth of a 16-bit image's codes when it is not 16 (a synthetic dataset of a
+    /// 10- or 12-bit sensor records it as `bit_depth`; a real one's `index.csv` may give
+    /// it): codes are scaled by 255 / (2^bit_depth - 1) instead of 1 / 257.
     pub bit_depth: Option<u32>,
 }
 
@@ -156,6 +156,7 @@ fn load_real(dir: &Path, index: &Path) -> Result<Vec<Sample>, MetricsError> {
     let text = read(index)?;
     let mut out = Vec::new();
     let mut header_seen = false;
+    let mut with_depth = false;
     for (n, line) in text.lines().enumerate() {
         let line_no = n + 1;
         let line = line.trim();
@@ -169,20 +170,44 @@ fn load_real(dir: &Path, index: &Path) -> Result<Vec<Sample>, MetricsError> {
         };
         let cols: Vec<&str> = line.split(',').map(str::trim).collect();
         if !header_seen {
-            if cols != ["file", "viewpoint", "finish"] {
-                return Err(err(format!(
-                    "header must be `file,viewpoint,finish`, found `{line}`"
-                )));
-            }
+            with_depth = match cols[..] {
+                ["file", "viewpoint", "finish"] => false,
+                ["file", "viewpoint", "finish", "bit_depth"] => true,
+                _ => {
+                    return Err(err(format!(
+                        "header must be `file,viewpoint,finish` or `file,viewpoint,finish,bit_depth`, found `{line}`"
+                    )));
+                }
+            };
             header_seen = true;
             continue;
         }
-        let [file, viewpoint, finish] = cols[..] else {
-            return Err(err(format!("expected 3 columns, found {}", cols.len())));
+        let (file, viewpoint, finish, depth) = match (with_depth, &cols[..]) {
+            (false, &[f, v, fi]) => (f, v, fi, ""),
+            (true, &[f, v, fi]) => (f, v, fi, ""),
+            (true, &[f, v, fi, d]) => (f, v, fi, d),
+            _ => {
+                return Err(err(format!(
+                    "expected {} columns, found {}",
+                    if with_depth { "3 or 4" } else { "3" },
+                    cols.len()
+                )));
+            }
         };
         if file.is_empty() || viewpoint.is_empty() || finish.is_empty() {
             return Err(err("file, viewpoint and finish must not be empty".into()));
         }
+        let bit_depth = match depth {
+            "" => None,
+            d => match d.parse::<u32>() {
+                Ok(b @ 8..=16) => Some(b),
+                _ => {
+                    return Err(err(format!(
+                        "bit_depth must be an integer from 8 to 16 (the significant bits of a 16-bit image's codes; empty: 16), found `{d}`"
+                    )));
+                }
+            },
+        };
         let json = if file.ends_with(".json") {
             dir.join(file)
         } else {
@@ -198,7 +223,7 @@ fn load_real(dir: &Path, index: &Path) -> Result<Vec<Sample>, MetricsError> {
             viewpoint: viewpoint.to_string(),
             finish: finish.to_string(),
             faces: FaceSource::LabelMe { json, labels },
-            bit_depth: None,
+            bit_depth,
         });
     }
     if out.is_empty() {

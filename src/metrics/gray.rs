@@ -51,7 +51,8 @@ impl GrayImage {
 
     /// As [`Self::load`], but the codes of a 16-bit image have `bit_depth` bits (10, 12: a
     /// deep sensor's codes written unscaled) and are scaled by 255 / (2^bit_depth - 1), so
-    /// the top code is 255. `None` or 16: 1 / 257. 8-bit images are read as they are.
+    /// the top code is 255. `None` or 16: 1 / 257. 8-bit images are read as they are. A
+    /// code over 2^bit_depth - 1 is an error naming its pixel.
     pub fn load_codes(path: &Path, bit_depth: Option<u32>) -> Result<Self, MetricsError> {
         let img = open(path)?;
         let (width, height) = (img.width() as usize, img.height() as usize);
@@ -59,6 +60,9 @@ impl GrayImage {
             Some(b @ 1..=15) => Some(((1u32 << b) - 1) as f64),
             _ => None,
         };
+        if let Some(b) = bit_depth {
+            check_codes(path, &img, b)?;
+        }
         let from16 = |v: u16| match top {
             Some(t) => (f64::from(v) * 255.0 / t) as f32,
             None => from16(v),
@@ -108,6 +112,51 @@ impl GrayImage {
             width: self.width,
             height: self.height,
             data: self.data.iter().map(|&v| align.apply(v)).collect(),
+        }
+    }
+}
+
+/// With a stated bit depth b, a 16-bit image's codes must be at most 2^b - 1: a higher
+/// one means the depth is wrong (a full-range 16-bit image read as 12-bit codes would
+/// reach 16 times the data range). The error names the pixel. An 8-bit image cannot hold
+/// codes of more than 8 bits.
+fn check_codes(path: &Path, img: &DynamicImage, bits: u32) -> Result<(), MetricsError> {
+    let codes: &[u16] = match img {
+        DynamicImage::ImageLuma16(b) => b.as_raw(),
+        DynamicImage::ImageLumaA16(b) => b.as_raw(),
+        DynamicImage::ImageRgb16(b) => b.as_raw(),
+        DynamicImage::ImageRgba16(b) => b.as_raw(),
+        _ if bits > 8 => {
+            return Err(MetricsError::field(
+                path,
+                "bit_depth",
+                format!("{bits} bits given for an 8-bit image (its codes are read as 8-bit)"),
+            ));
+        }
+        _ => return Ok(()),
+    };
+    let top = ((1u64 << bits.min(16)) - 1) as f64;
+    let channels = img.color().channel_count() as usize;
+    let alpha = img.color().has_alpha();
+    let over = codes.iter().enumerate().find(|&(i, &c)| {
+        let is_alpha = alpha && i % channels == channels - 1;
+        !is_alpha && f64::from(c) > top
+    });
+    match over {
+        None => Ok(()),
+        Some((i, &c)) => {
+            let px = i / channels;
+            let w = img.width() as usize;
+            Err(MetricsError::field(
+                path,
+                "bit_depth",
+                format!(
+                    "code {c} at pixel ({}, {}) is over {top} (2^{bits} - 1): the image's codes \
+                     have more than {bits} significant bits; give its real bit depth (9 to 16)",
+                    px % w,
+                    px / w
+                ),
+            ))
         }
     }
 }
