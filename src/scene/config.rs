@@ -657,6 +657,13 @@ pub struct SensorConfig {
     pub dsnu_electrons: f64,
     /// Seed of the DSNU pattern (fixed per camera, not per image), any u64.
     pub dsnu_seed: u64,
+    /// Photo-response non-uniformity (rms of a fixed per-pixel gain on the signal), % of
+    /// the signal, [0, 50].
+    pub prnu_percent: f64,
+    /// Seed of the PRNU pattern (fixed per camera, not per image), any u64.
+    pub prnu_seed: u64,
+    /// Dark current, electrons per second (mean dark signal I_d t, Poisson), [0, 1e7].
+    pub dark_current_electrons_per_s: f64,
     /// The camera's wavelength (photon energy), nm, [200, 2000].
     pub wavelength_nm: f64,
 }
@@ -677,6 +684,9 @@ impl Default for SensorConfig {
             black_level_dn: 0.0,
             dsnu_electrons: 0.0,
             dsnu_seed: 0,
+            prnu_percent: 0.0,
+            prnu_seed: 0,
+            dark_current_electrons_per_s: 0.0,
             wavelength_nm: 550.0,
         }
     }
@@ -762,6 +772,22 @@ impl SensorConfig {
             1e5,
             false,
             "[0, 1e5] e-",
+        )?;
+        f(
+            "sensor.prnu_percent",
+            self.prnu_percent,
+            0.0,
+            50.0,
+            false,
+            "[0, 50] %",
+        )?;
+        f(
+            "sensor.dark_current_electrons_per_s",
+            self.dark_current_electrons_per_s,
+            0.0,
+            1e7,
+            false,
+            "[0, 1e7] e-/s",
         )?;
         f(
             "sensor.wavelength_nm",
@@ -2141,6 +2167,14 @@ mod tests {
             (
                 "[camera]\nf_number = 8\n[sensor]\nquantum_efficiency = 1.5\n",
                 "sensor.quantum_efficiency",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\nprnu_percent = 60\n",
+                "sensor.prnu_percent",
+            ),
+            (
+                "[camera]\nf_number = 8\n[sensor]\ndark_current_electrons_per_s = -1\n",
+                "sensor.dark_current_electrons_per_s",
             ),
             ("[camera]\nf_number = \"wide\"\n", "camera.f_number"),
         ] {
