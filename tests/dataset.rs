@@ -2227,6 +2227,78 @@ fn deep_sensor_writes_16_bit_codes() {
     assert!(top > 0, "the report read 12-bit codes as 8-bit values");
 }
 
+/// `[sensor] diffraction = true` in a job: the written image is the sensor step on the
+/// radiance convolved with the lens's Airy pattern (`expose` with the job gives it back
+/// from radiance.exr; without diffraction the same seed gives another image), the labels
+/// are the geometry's, and `postprocess` reproduces the run bit for bit.
+#[test]
+fn diffraction_blurs_what_the_sensor_sees() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
+    let text = job_text(1, 1)
+        .split("[[postprocess]]")
+        .next()
+        .unwrap()
+        .replace(
+            "[texture]",
+            "[camera]\nf_number = 16.0\n[sensor]\nexposure = \"auto\"\ndiffraction = true\n[texture]",
+        );
+    std::fs::write(root.join("job.toml"), &text).unwrap();
+    let prep = dataset::prepare(&root.join("job.toml")).unwrap();
+    let mut plain = prep.job.clone();
+    match &mut plain.sensor.model {
+        dataset::job::SensorModel::Emva(s) => {
+            assert!(s.diffraction);
+            s.diffraction = false;
+        }
+        m => panic!("{m:?}"),
+    }
+    let out = root.join("out");
+    dataset::run(
+        &prep,
+        &out,
+        &mut OrthoLabelTestDouble { calls: 0 },
+        &mut FlatTexturesTestDouble { made: 0 },
+        RunOptions::default(),
+    )
+    .unwrap();
+    let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
+    assert!(!entries.is_empty());
+    for e in &entries {
+        let dir = out.join("images").join(&e.id);
+        let codes = image::open(out.join(&e.image))
+            .unwrap()
+            .into_luma8()
+            .into_raw();
+        let (_, _, rad) = synosis::image_io::read_exr_f32(&dir.join("radiance.exr")).unwrap();
+        let faces = image::open(dir.join("faces.png"))
+            .unwrap()
+            .into_luma8()
+            .into_raw();
+        let expose = |job: &dataset::job::Job| {
+            dataset::camera::expose(
+                job,
+                &e.finish,
+                e.seed,
+                e.camera.as_ref().unwrap(),
+                &rad,
+                &faces,
+            )
+            .unwrap()
+        };
+        let (on, off) = (expose(&prep.job), expose(&plain));
+        assert_eq!(on.exposure_ms, e.exposure_ms);
+        for (&c, &u) in codes.iter().zip(&on.image) {
+            assert!((c as f32 - u).abs() < 1e-3, "code {c} vs {u}");
+        }
+        assert_ne!(on.image, off.image, "{}: diffraction changed nothing", e.id);
+    }
+    let before = tree(&out);
+    dataset::postprocess_dir(&out, None).unwrap();
+    assert_eq!(before, tree(&out));
+}
+
 /// Runs the whole job with `in_flight` images in flight (1: one after the other); the
 /// progress calls it made.
 fn run_in_flight(

@@ -206,9 +206,21 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 .annotation
                 .as_ref()
                 .map(|a| a.face.iter().map(|&f| is_inspected(f)).collect());
-            let t = exposure_time_s(&resp, &img.data, mask.as_deref(), s).context("[sensor]")?;
-            let cap =
-                capture(&resp, &img.data, t, s, cfg.render.seed as u64).context("[sensor]")?;
+            // The lens's diffraction on the radiance the sensor sees (radiance.exr stays
+            // the path tracer's).
+            let seen = match s.diffraction {
+                true => std::borrow::Cow::Owned(synosis::render::optics::diffract(
+                    &img.data,
+                    w as usize,
+                    h as usize,
+                    cfg.camera.pixel_um as f64,
+                    n,
+                    s.wavelength_nm,
+                )),
+                false => std::borrow::Cow::Borrowed(&img.data[..]),
+            };
+            let t = exposure_time_s(&resp, &seen, mask.as_deref(), s).context("[sensor]")?;
+            let cap = capture(&resp, &seen, t, s, cfg.render.seed as u64).context("[sensor]")?;
             eprintln!(
                 "sensor: exposure {:.6} ms, {} bit",
                 cap.exposure_s * 1e3,

@@ -170,7 +170,8 @@ fn lens_f_number(camera: &CameraRecord) -> Result<f64, String> {
 ///
 /// Linear model: `255 * exposure * finish exposure * 2^ev * L` (without jitter exactly
 /// the factor of before). EMVA 1288: exposure time (fixed or auto) times the finish's
-/// factor and 2^ev, then `render::sensor::capture`; codes scaled to 8-bit units by
+/// factor and 2^ev, then `render::sensor::capture` (with `diffraction`, on the radiance
+/// convolved with the lens's Airy pattern, `render::optics`); codes scaled to 8-bit units by
 /// `255 / (2^bit_depth - 1)` (8 bit: the codes themselves).
 pub fn expose(
     job: &Job,
@@ -198,6 +199,22 @@ pub fn expose(
             let resp =
                 Responsivity::new(&camera.sensor_camera(), camera.focal_mm as f64, n, sensor);
             let mask: Vec<bool> = faces.iter().map(|&f| is_inspected(f)).collect();
+            // The lens's diffraction on the radiance the sensor sees.
+            let diffracted;
+            let radiance = match sensor.diffraction {
+                true => {
+                    diffracted = crate::render::optics::diffract(
+                        radiance,
+                        camera.width as usize,
+                        camera.height as usize,
+                        camera.pixel_um as f64,
+                        n,
+                        sensor.wavelength_nm,
+                    );
+                    &diffracted[..]
+                }
+                false => radiance,
+            };
             let t = exposure_time_s(&resp, radiance, Some(&mask), sensor)
                 .map_err(|e| e.to_string())?
                 * finish_factor

@@ -10,6 +10,7 @@ pub mod device_maps;
 pub mod energy;
 pub mod gpu_scene;
 pub mod noise;
+pub mod optics;
 pub mod path_trace;
 pub mod pipelines;
 pub mod pixels;

@@ -657,6 +657,11 @@ pub struct SensorConfig {
     pub dsnu_electrons: f64,
     /// Seed of the DSNU pattern (fixed per camera, not per image), any u64.
     pub dsnu_seed: u64,
+    /// Column DSNU: rms of a fixed offset shared by each column's pixels (a CMOS
+    /// sensor's column amplifiers), electrons, [0, 1e5].
+    pub dsnu_column_electrons: f64,
+    /// Row DSNU: rms of a fixed offset shared by each row's pixels, electrons, [0, 1e5].
+    pub dsnu_row_electrons: f64,
     /// Photo-response non-uniformity (rms of a fixed per-pixel gain on the signal), % of
     /// the signal, [0, 50].
     pub prnu_percent: f64,
@@ -666,6 +671,9 @@ pub struct SensorConfig {
     pub dark_current_electrons_per_s: f64,
     /// The camera's wavelength (photon energy), nm, [200, 2000].
     pub wavelength_nm: f64,
+    /// The lens's diffraction: the radiance convolved with the Airy pattern of the working
+    /// f-number at `wavelength_nm` before the sensor step (`render::optics`).
+    pub diffraction: bool,
 }
 
 impl Default for SensorConfig {
@@ -684,10 +692,13 @@ impl Default for SensorConfig {
             black_level_dn: 0.0,
             dsnu_electrons: 0.0,
             dsnu_seed: 0,
+            dsnu_column_electrons: 0.0,
+            dsnu_row_electrons: 0.0,
             prnu_percent: 0.0,
             prnu_seed: 0,
             dark_current_electrons_per_s: 0.0,
             wavelength_nm: 550.0,
+            diffraction: false,
         }
     }
 }
@@ -768,6 +779,22 @@ impl SensorConfig {
         f(
             "sensor.dsnu_electrons",
             self.dsnu_electrons,
+            0.0,
+            1e5,
+            false,
+            "[0, 1e5] e-",
+        )?;
+        f(
+            "sensor.dsnu_column_electrons",
+            self.dsnu_column_electrons,
+            0.0,
+            1e5,
+            false,
+            "[0, 1e5] e-",
+        )?;
+        f(
+            "sensor.dsnu_row_electrons",
+            self.dsnu_row_electrons,
             0.0,
             1e5,
             false,
