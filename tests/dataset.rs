@@ -2138,24 +2138,16 @@ fn emva_sensor_and_random_exposure_rerun_from_raw_files() {
     }
 }
 
-/// A sensor deeper than 8 bit writes its codes unscaled into a 16-bit image.png (as
-/// `synosis render` does), records `bit_depth` in the manifest, and `postprocess`,
-/// the realism report and `compare`'s reader read it back at the right scale.
-#[test]
-fn deep_sensor_writes_16_bit_codes() {
-    use synosis::dataset::report::{folder_entries, write_report};
-    let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path();
+/// Runs the test job (one defective and one defect-free instance, no post-processing
+/// steps: image.png is the sensor's image) with `sensor` (TOML lines of `[camera]` and
+/// `[sensor]`) on the CPU test doubles, into `root`/out.
+fn run_sensor_job(root: &Path, sensor: &str) -> (dataset::Prepared, PathBuf) {
     std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
-    // No post-processing steps: image.png is the sensor's image.
     let text = job_text(1, 1)
         .split("[[postprocess]]")
         .next()
         .unwrap()
-        .replace(
-            "[texture]",
-            "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\nbit_depth = 12\ngain_dn_per_electron = 0.4\n[texture]",
-        );
+        .replace("[texture]", &format!("{sensor}\n[texture]"));
     std::fs::write(root.join("job.toml"), &text).unwrap();
     let prep = dataset::prepare(&root.join("job.toml")).unwrap();
     let out = root.join("out");
@@ -2167,6 +2159,31 @@ fn deep_sensor_writes_16_bit_codes() {
         RunOptions::default(),
     )
     .unwrap();
+    (prep, out)
+}
+
+/// An image's stored radiance.exr and faces.png, what the sensor step reads.
+fn stored_radiance_and_faces(out: &Path, e: &dataset::ManifestEntry) -> (Vec<f32>, Vec<u8>) {
+    let dir = out.join("images").join(&e.id);
+    let (_, _, rad) = synosis::image_io::read_exr_f32(&dir.join("radiance.exr")).unwrap();
+    let faces = image::open(dir.join("faces.png"))
+        .unwrap()
+        .into_luma8()
+        .into_raw();
+    (rad, faces)
+}
+
+/// A sensor deeper than 8 bit writes its codes unscaled into a 16-bit image.png (as
+/// `synosis render` does), records `bit_depth` in the manifest, and `postprocess`,
+/// the realism report and `compare`'s reader read it back at the right scale.
+#[test]
+fn deep_sensor_writes_16_bit_codes() {
+    use synosis::dataset::report::{folder_entries, write_report};
+    let tmp = tempfile::tempdir().unwrap();
+    let (prep, out) = run_sensor_job(
+        tmp.path(),
+        "[camera]\nf_number = 8.0\n[sensor]\nexposure = \"auto\"\nbit_depth = 12\ngain_dn_per_electron = 0.4",
+    );
     let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
     let mut fine = 0usize;
     for e in &entries {
@@ -2182,12 +2199,7 @@ fn deep_sensor_writes_16_bit_codes() {
             .into_raw();
         // The sensor's own image, recomputed from the stored radiance and faces: its
         // 8-bit units are code * 255 / 4095, so every pixel is a whole code.
-        let dir = out.join("images").join(&e.id);
-        let (_, _, rad) = synosis::image_io::read_exr_f32(&dir.join("radiance.exr")).unwrap();
-        let faces = image::open(dir.join("faces.png"))
-            .unwrap()
-            .into_luma8()
-            .into_raw();
+        let (rad, faces) = stored_radiance_and_faces(&out, e);
         let exposed = dataset::camera::expose(
             &prep.job,
             &e.finish,
@@ -2234,18 +2246,10 @@ fn deep_sensor_writes_16_bit_codes() {
 #[test]
 fn diffraction_blurs_what_the_sensor_sees() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path();
-    std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
-    let text = job_text(1, 1)
-        .split("[[postprocess]]")
-        .next()
-        .unwrap()
-        .replace(
-            "[texture]",
-            "[camera]\nf_number = 16.0\n[sensor]\nexposure = \"auto\"\ndiffraction = true\n[texture]",
-        );
-    std::fs::write(root.join("job.toml"), &text).unwrap();
-    let prep = dataset::prepare(&root.join("job.toml")).unwrap();
+    let (prep, out) = run_sensor_job(
+        tmp.path(),
+        "[camera]\nf_number = 16.0\n[sensor]\nexposure = \"auto\"\ndiffraction = true",
+    );
     let mut plain = prep.job.clone();
     match &mut plain.sensor.model {
         dataset::job::SensorModel::Emva(s) => {
@@ -2254,28 +2258,14 @@ fn diffraction_blurs_what_the_sensor_sees() {
         }
         m => panic!("{m:?}"),
     }
-    let out = root.join("out");
-    dataset::run(
-        &prep,
-        &out,
-        &mut OrthoLabelTestDouble { calls: 0 },
-        &mut FlatTexturesTestDouble { made: 0 },
-        RunOptions::default(),
-    )
-    .unwrap();
     let entries = dataset::read_manifest(&out.join("manifest.jsonl"), false).unwrap();
     assert!(!entries.is_empty());
     for e in &entries {
-        let dir = out.join("images").join(&e.id);
         let codes = image::open(out.join(&e.image))
             .unwrap()
             .into_luma8()
             .into_raw();
-        let (_, _, rad) = synosis::image_io::read_exr_f32(&dir.join("radiance.exr")).unwrap();
-        let faces = image::open(dir.join("faces.png"))
-            .unwrap()
-            .into_luma8()
-            .into_raw();
+        let (rad, faces) = stored_radiance_and_faces(&out, e);
         let expose = |job: &dataset::job::Job| {
             dataset::camera::expose(
                 job,

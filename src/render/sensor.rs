@@ -474,12 +474,16 @@ mod tests {
         };
         let resp = Responsivity::uniform(w as u32, h as u32, 1.0e6);
         let dark = vec![0.0f32; n];
-        let e: Vec<f64> = capture(&resp, &dark, 1e-3, &s, 5)
-            .unwrap()
-            .codes
-            .iter()
-            .map(|&c| c as f64 - 200.0)
-            .collect();
+        // A dark image's electrons (K = 1) above the black level.
+        let electrons = |s: &SensorConfig| -> Vec<f64> {
+            capture(&resp, &dark, 1e-3, s, 5)
+                .unwrap()
+                .codes
+                .iter()
+                .map(|&c| c as f64 - 200.0)
+                .collect()
+        };
+        let e = electrons(&s);
         let var = |v: &[f64]| {
             let m = v.iter().sum::<f64>() / v.len() as f64;
             v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0)
@@ -504,12 +508,7 @@ mod tests {
             dsnu_row_electrons: 0.0,
             ..s.clone()
         };
-        let p: Vec<f64> = capture(&resp, &dark, 1e-3, &plain, 5)
-            .unwrap()
-            .codes
-            .iter()
-            .map(|&c| c as f64 - 200.0)
-            .collect();
+        let p = electrons(&plain);
         let lines: Vec<f64> = e.iter().zip(&p).map(|(a, b)| a - b).collect();
         // What the line parts added is constant along each column up to rounding to codes.
         let resid: Vec<f64> = (0..n)
