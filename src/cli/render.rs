@@ -209,14 +209,16 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             // The lens's diffraction on the radiance the sensor sees (radiance.exr stays
             // the path tracer's).
             let seen = match s.diffraction {
-                true => std::borrow::Cow::Owned(synosis::render::optics::diffract(
-                    &img.data,
-                    w as usize,
-                    h as usize,
-                    cfg.camera.pixel_um as f64,
-                    n,
-                    s.wavelength_nm,
-                )),
+                true => std::borrow::Cow::Owned(profiler.cpu("lens diffraction", || {
+                    synosis::render::optics::diffract(
+                        &img.data,
+                        w as usize,
+                        h as usize,
+                        cfg.camera.pixel_um as f64,
+                        n,
+                        s.wavelength_nm,
+                    )
+                })),
                 false => std::borrow::Cow::Borrowed(&img.data[..]),
             };
             let t = exposure_time_s(&resp, &seen, mask.as_deref(), s).context("[sensor]")?;
