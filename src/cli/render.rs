@@ -208,19 +208,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 .map(|a| a.face.iter().map(|&f| is_inspected(f)).collect());
             // The lens's diffraction on the radiance the sensor sees (radiance.exr stays
             // the path tracer's).
-            let seen = match s.diffraction {
-                true => std::borrow::Cow::Owned(profiler.cpu("lens diffraction", || {
-                    synosis::render::optics::diffract(
-                        &img.data,
-                        w as usize,
-                        h as usize,
-                        cfg.camera.pixel_um as f64,
-                        n,
-                        s.wavelength_nm,
-                    )
-                })),
-                false => std::borrow::Cow::Borrowed(&img.data[..]),
-            };
+            let seen = synosis::render::optics::seen_by_sensor(
+                &img.data,
+                w as usize,
+                h as usize,
+                cfg.camera.pixel_um as f64,
+                n,
+                s,
+                Some(&profiler),
+            );
             let t = exposure_time_s(&resp, &seen, mask.as_deref(), s).context("[sensor]")?;
             let cap = capture(&resp, &seen, t, s, cfg.render.seed as u64).context("[sensor]")?;
             eprintln!(

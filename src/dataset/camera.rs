@@ -200,21 +200,16 @@ pub fn expose(
                 Responsivity::new(&camera.sensor_camera(), camera.focal_mm as f64, n, sensor);
             let mask: Vec<bool> = faces.iter().map(|&f| is_inspected(f)).collect();
             // The lens's diffraction on the radiance the sensor sees.
-            let diffracted;
-            let radiance = match sensor.diffraction {
-                true => {
-                    diffracted = crate::render::optics::diffract(
-                        radiance,
-                        camera.width as usize,
-                        camera.height as usize,
-                        camera.pixel_um as f64,
-                        n,
-                        sensor.wavelength_nm,
-                    );
-                    &diffracted[..]
-                }
-                false => radiance,
-            };
+            let seen = crate::render::optics::seen_by_sensor(
+                radiance,
+                camera.width as usize,
+                camera.height as usize,
+                camera.pixel_um as f64,
+                n,
+                sensor,
+                None,
+            );
+            let radiance = &seen[..];
             let t = exposure_time_s(&resp, radiance, Some(&mask), sensor)
                 .map_err(|e| e.to_string())?
                 * finish_factor

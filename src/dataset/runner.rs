@@ -1256,19 +1256,17 @@ fn verified_entries(
             Ok(())
         })?;
         all.sort_by_key(|e| e.index);
-        write_manifest(o, &all)?;
-        // The lines moved: the verified ones are found again in the rewritten file.
+        let written = write_manifest(o, &all)?;
+        // The lines moved: each image's first line in the rewritten file.
         let mut at_index: BTreeMap<usize, LineAt> = BTreeMap::new();
         let oi = own_index.expect("own is among the manifests");
-        manifest_lines(o, ReadMode::Strict, |n, offset, line| {
-            let e = parse_entry(o, n, line)?;
+        for (e, &(offset, len)) in all.iter().zip(&written) {
             at_index.entry(e.index).or_insert(LineAt {
                 manifest: oi,
                 offset,
-                len: line.len(),
+                len,
             });
-            Ok(())
-        })?;
+        }
         for (index, listed) in by_index.iter_mut() {
             if listed.at.manifest == oi
                 && let Some(at) = at_index.get(index)
@@ -2254,16 +2252,20 @@ fn read_manifest_mode(path: &Path, mode: ReadMode) -> Result<Vec<ManifestEntry>>
     Ok(out)
 }
 
-fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<()> {
+/// Writes `entries` as the manifest at `path`, a line each; returns where each entry's
+/// line is in it (offset, length without the newline).
+fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<Vec<(u64, usize)>> {
     let mut text = String::new();
+    let mut lines = Vec::with_capacity(entries.len());
     for e in entries {
-        text.push_str(
-            &serde_json::to_string(e)
-                .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?,
-        );
+        let line = serde_json::to_string(e)
+            .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?;
+        lines.push((text.len() as u64, line.len()));
+        text.push_str(&line);
         text.push('\n');
     }
-    crate::util::write_atomic(path, text.as_bytes()).map_err(|e| DatasetError::io(path, e))
+    crate::util::write_atomic(path, text.as_bytes()).map_err(|e| DatasetError::io(path, e))?;
+    Ok(lines)
 }
 
 fn shard_manifests(dir: &Path) -> Result<Vec<PathBuf>> {

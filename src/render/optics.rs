@@ -3,7 +3,12 @@
 //! step. Model, parameters and approximations: docs/rendering.md ("Sensor",
 //! *Diffraction*).
 
+use std::borrow::Cow;
+
 use rayon::prelude::*;
+
+use crate::scene::config::SensorConfig;
+use crate::vk::Profiler;
 
 /// The kernel reaches out to this many times lambda N from its centre (the Airy
 /// pattern's first dark ring is at 1.22 lambda N); the rings beyond, about 2 % of the
@@ -131,6 +136,38 @@ pub fn diffract(
         height,
         &airy_kernel(pixel_um, f_number, wavelength_nm),
     )
+}
+
+/// The radiance `sensor` sees: with `sensor.diffraction`, `radiance` through the lens
+/// ([`diffract`] at `sensor.wavelength_nm`, timed as "lens diffraction" on `profiler`);
+/// without, `radiance` itself. The one place `synosis render` and a dataset job's sensor
+/// step decide it.
+pub fn seen_by_sensor<'a>(
+    radiance: &'a [f32],
+    width: usize,
+    height: usize,
+    pixel_um: f64,
+    f_number: f64,
+    sensor: &SensorConfig,
+    profiler: Option<&Profiler>,
+) -> Cow<'a, [f32]> {
+    if !sensor.diffraction {
+        return Cow::Borrowed(radiance);
+    }
+    let run = || {
+        diffract(
+            radiance,
+            width,
+            height,
+            pixel_um,
+            f_number,
+            sensor.wavelength_nm,
+        )
+    };
+    Cow::Owned(match profiler {
+        Some(p) => p.cpu("lens diffraction", run),
+        None => run(),
+    })
 }
 
 #[cfg(test)]
