@@ -2172,18 +2172,25 @@ fn labelme_json(f: &Frame, faces: &[u8]) -> serde_json::Value {
     })
 }
 
+/// Writes one manifest line (the entry's JSON and its newline), the one line format of
+/// every manifest writer; returns the line's length without the newline.
+fn write_manifest_line(w: &mut impl Write, entry: &ManifestEntry) -> std::io::Result<usize> {
+    let line = serde_json::to_vec(entry).map_err(std::io::Error::other)?;
+    w.write_all(&line)?;
+    w.write_all(b"\n")?;
+    Ok(line.len())
+}
+
 /// Appends one line and syncs; the line is complete before the call returns.
 fn append_line(path: &Path, entry: &ManifestEntry) -> Result<()> {
-    let mut line = serde_json::to_string(entry)
-        .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?;
-    line.push('\n');
+    let mut line = Vec::new();
+    write_manifest_line(&mut line, entry).map_err(|e| DatasetError::io(path, e))?;
     let mut f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
         .open(path)
         .map_err(|e| DatasetError::io(path, e))?;
-    f.write_all(line.as_bytes())
-        .map_err(|e| DatasetError::io(path, e))?;
+    f.write_all(&line).map_err(|e| DatasetError::io(path, e))?;
     f.sync_all().map_err(|e| DatasetError::io(path, e))
 }
 
@@ -2255,16 +2262,14 @@ fn read_manifest_mode(path: &Path, mode: ReadMode) -> Result<Vec<ManifestEntry>>
 /// Writes `entries` as the manifest at `path`, a line each; returns where each entry's
 /// line is in it (offset, length without the newline).
 fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<Vec<(u64, usize)>> {
-    let mut text = String::new();
+    let mut text = Vec::new();
     let mut lines = Vec::with_capacity(entries.len());
     for e in entries {
-        let line = serde_json::to_string(e)
-            .map_err(|e| DatasetError::io(path, std::io::Error::other(e)))?;
-        lines.push((text.len() as u64, line.len()));
-        text.push_str(&line);
-        text.push('\n');
+        let at = text.len() as u64;
+        let len = write_manifest_line(&mut text, e).map_err(|e| DatasetError::io(path, e))?;
+        lines.push((at, len));
     }
-    crate::util::write_atomic(path, text.as_bytes()).map_err(|e| DatasetError::io(path, e))?;
+    crate::util::write_atomic(path, &text).map_err(|e| DatasetError::io(path, e))?;
     Ok(lines)
 }
 
@@ -2345,8 +2350,7 @@ fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> 
                 }
             };
             for e in &entries {
-                serde_json::to_writer(&mut w, e)?;
-                w.write_all(b"\n")?;
+                write_manifest_line(&mut w, e)?;
             }
         }
         w.flush()
