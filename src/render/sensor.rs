@@ -205,6 +205,14 @@ const PRNU_STREAM: u64 = 0x9e37_79b9_7f4a_7c15;
 const COLUMN_STREAM: u64 = 0xbf58_476d_1ce4_e5b9;
 const ROW_STREAM: u64 = 0x94d0_49bb_1331_11eb;
 
+/// A fixed pattern of the camera (not of the image): `n` draws of Normal(0, `rms`), in
+/// order, from the stream of `seed`. The PRNU gains and the pixel, column and row DSNU
+/// offsets each take one, from their own seeds.
+fn fixed_pattern(seed: u64, n: usize, rms: f64) -> impl Iterator<Item = f64> {
+    let mut fixed = Pcg64Mcg::seed_from_u64(seed);
+    (0..n).map(move |_| rms * fixed.sample::<f64, _>(rand_distr::StandardNormal))
+}
+
 /// Exposes the sensor: per pixel electrons = Poisson(mean * PRNU gain + dark current *
 /// t) (shot noise of the signal and of the dark current) + DSNU offsets (per pixel, per
 /// column, per row) + Normal(0, dark noise); full-well clipping with the excess spilled along the column
@@ -232,11 +240,10 @@ pub fn capture(
         // A fixed gain per pixel, 1 + (prnu / 100) g with g ~ Normal(0, 1) from the
         // camera's PRNU seed (its own stream: equal DSNU and PRNU seeds give independent
         // patterns), not below 0.
-        let mut fixed = Pcg64Mcg::seed_from_u64(sensor.prnu_seed ^ PRNU_STREAM);
         let rel = sensor.prnu_percent / 100.0;
-        for m in &mut mean {
-            let g: f64 = fixed.sample(rand_distr::StandardNormal);
-            *m *= (1.0 + rel * g).max(0.0);
+        let gains = fixed_pattern(sensor.prnu_seed ^ PRNU_STREAM, mean.len(), rel);
+        for (m, g) in mean.iter_mut().zip(gains) {
+            *m *= (1.0 + g).max(0.0);
         }
     }
     if sensor.dark_current_electrons_per_s > 0.0 {
@@ -263,23 +270,21 @@ pub fn capture(
         })
         .collect();
     if sensor.dsnu_electrons > 0.0 {
-        let mut fixed = Pcg64Mcg::seed_from_u64(sensor.dsnu_seed);
-        let n = Normal::new(0.0, sensor.dsnu_electrons)
-            .map_err(|e| SensorError::Invalid(format!("dsnu_electrons: {e}")))?;
-        for v in &mut e {
-            *v += n.sample(&mut fixed);
+        let offsets = fixed_pattern(sensor.dsnu_seed, e.len(), sensor.dsnu_electrons);
+        for (v, o) in e.iter_mut().zip(offsets) {
+            *v += o;
         }
     }
     if sensor.dsnu_column_electrons > 0.0 || sensor.dsnu_row_electrons > 0.0 {
         // An offset per column and one per row, each from the DSNU seed's own stream.
-        let offsets = |stream: u64, n: usize, rms: f64| -> Vec<f64> {
-            let mut fixed = Pcg64Mcg::seed_from_u64(sensor.dsnu_seed ^ stream);
-            (0..n)
-                .map(|_| rms * fixed.sample::<f64, _>(rand_distr::StandardNormal))
-                .collect()
-        };
-        let col = offsets(COLUMN_STREAM, w, sensor.dsnu_column_electrons);
-        let row = offsets(ROW_STREAM, h, sensor.dsnu_row_electrons);
+        let col: Vec<f64> = fixed_pattern(
+            sensor.dsnu_seed ^ COLUMN_STREAM,
+            w,
+            sensor.dsnu_column_electrons,
+        )
+        .collect();
+        let row: Vec<f64> =
+            fixed_pattern(sensor.dsnu_seed ^ ROW_STREAM, h, sensor.dsnu_row_electrons).collect();
         for (i, v) in e.iter_mut().enumerate() {
             *v += col[i % w] + row[i / w];
         }
