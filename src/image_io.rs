@@ -149,6 +149,13 @@ pub fn write_png_rgba8(path: &Path, width: u32, height: u32, rgba: &[u32]) -> st
     encode_png(image::DynamicImage::ImageRgba8(img), path)
 }
 
+/// 8-bit RGB PNG from interleaved R, G, B bytes.
+pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> std::io::Result<()> {
+    let img = image::RgbImage::from_raw(width, height, rgb.to_vec())
+        .ok_or_else(|| std::io::Error::other("size mismatch"))?;
+    encode_png(image::DynamicImage::ImageRgb8(img), path)
+}
+
 /// 8-bit grayscale PNG.
 pub fn write_png_gray8(path: &Path, width: u32, height: u32, data: &[u8]) -> std::io::Result<()> {
     crate::util::write_atomic(path, &png_gray8(width, height, data)?)

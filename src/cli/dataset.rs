@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use synosis::dataset::{self, RunOptions, Shard, gpu::GpuRenderer, texture_bridge::ModuleTextures};
 
@@ -405,12 +405,22 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             let text = std::fs::read_to_string(&job_path)
                 .with_context(|| format!("reading {}", job_path.display()))?;
             let job = dataset::Job::parse_stored(&text, &job_path.display().to_string())?;
-            let entries = dataset::report::folder_entries(&dir)?;
-            if entries.is_empty() {
-                bail!("{}: no finished images (no manifest lines)", dir.display());
-            }
             let out = out.unwrap_or_else(|| dir.join("report"));
-            let reports = dataset::report::write_report(&dir, &job, &entries, examples, &out)?;
+            // Reading every image's files is what takes the time.
+            let bar = styled_bar(
+                "reading {bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta}",
+                false,
+            );
+            let mut progress = bar_progress(&bar);
+            let reports = dataset::report::write_folder_report(
+                &dir,
+                &job,
+                examples,
+                &out,
+                Some(&mut progress),
+            );
+            bar.finish_and_clear();
+            let reports = reports?;
             print_report(&reports, &out);
             Ok(())
         }

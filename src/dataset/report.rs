@@ -15,7 +15,7 @@ use rustfft::num_complex::Complex32;
 use super::error::{DatasetError, Result};
 use super::job::{FinishKind, Job};
 use super::post::PostStep;
-use super::runner::ManifestEntry;
+use super::runner::{self, LineAt, ManifestEntry, ReadMode};
 use crate::scene::config::CameraConfig;
 
 /// Visibility histogram: bins of this width (visibility units, fraction of 255).
@@ -232,110 +232,238 @@ pub fn write_report(
     examples_per_finish: usize,
     out_dir: &Path,
 ) -> Result<Vec<FinishReport>> {
+    let keyed = entries
+        .iter()
+        .enumerate()
+        .filter_map(|(k, e)| keyed_item(job, k, e))
+        .collect();
+    let items = ordered(keyed, job.finishes.len(), examples_per_finish);
+    let fetch = |batch: &[Item<usize>]| Ok(batch.iter().map(|i| entries[i.src].clone()).collect());
+    report_items(dir, job, &items, fetch, out_dir, None)
+}
+
+/// [`write_report`] of a dataset folder's images (those of [`folder_entries`]), read from
+/// their manifest lines a batch at a time so that a whole job's entries (about 10 KiB an
+/// image in memory) are never held at once; the images' files are read on all cores.
+/// `progress`: (images read, images to read). An error if the folder lists no image.
+pub fn write_folder_report(
+    dir: &Path,
+    job: &Job,
+    examples_per_finish: usize,
+    out_dir: &Path,
+    progress: Option<&mut dyn FnMut(usize, usize)>,
+) -> Result<Vec<FinishReport>> {
+    let (mut keyed, mut listed) = (Vec::new(), 0);
+    let manifests = folder_lines(dir, |at, e| {
+        listed += 1;
+        keyed.extend(keyed_item(job, at, &e));
+        Ok(())
+    })?;
+    if listed == 0 {
+        return Err(DatasetError::layout(
+            dir,
+            "no finished images (no manifest lines)",
+        ));
+    }
+    let items = ordered(keyed, job.finishes.len(), examples_per_finish);
+    let fetch = |batch: &[Item<LineAt>]| {
+        let lines: Vec<LineAt> = batch.iter().map(|i| i.src).collect();
+        runner::read_lines(&manifests, &lines)
+    };
+    report_items(dir, job, &items, fetch, out_dir, progress)
+}
+
+/// An image of the report, in the report's order, and where its entry is (`src`).
+struct Item<S> {
+    src: S,
+    /// Its finish's position in the job.
+    finish: usize,
+    /// One of its finish's example images.
+    example: bool,
+}
+
+/// The report's place of entry `e` (defective images first, then by index) and its
+/// item; None for a finish the job does not have (left out of the report).
+fn keyed_item<S>(job: &Job, src: S, e: &ManifestEntry) -> Option<((bool, usize), Item<S>)> {
+    let finish = job.finishes.iter().position(|f| f.name == e.finish)?;
+    Some((
+        (e.defects.is_empty(), e.index),
+        Item {
+            src,
+            finish,
+            example: false,
+        },
+    ))
+}
+
+/// The report's images in its order (the order that picks the examples: the first
+/// `examples_per_finish` of each of the `finishes`).
+fn ordered<S>(
+    mut keyed: Vec<((bool, usize), Item<S>)>,
+    finishes: usize,
+    examples_per_finish: usize,
+) -> Vec<Item<S>> {
+    keyed.sort_by_key(|(k, _)| *k);
+    let mut shown = vec![0usize; finishes];
+    keyed
+        .into_iter()
+        .map(|(_, mut item)| {
+            item.example = shown[item.finish] < examples_per_finish;
+            shown[item.finish] += item.example as usize;
+            item
+        })
+        .collect()
+}
+
+/// What the report takes from one image's files.
+struct ImageStats {
+    /// The object's pixels per grey level.
+    histogram: Vec<u64>,
+    texture: Option<TextureVisibility>,
+    /// The example PNG's name, if the image is one.
+    example: Option<String>,
+}
+
+/// The report of `items` (in order), their entries fetched a batch at a time, each
+/// batch's images read on all cores.
+fn report_items<S: Sync>(
+    dir: &Path,
+    job: &Job,
+    items: &[Item<S>],
+    mut fetch: impl FnMut(&[Item<S>]) -> Result<Vec<ManifestEntry>>,
+    out_dir: &Path,
+    mut progress: Option<&mut dyn FnMut(usize, usize)>,
+) -> Result<Vec<FinishReport>> {
+    use rayon::prelude::*;
     std::fs::create_dir_all(out_dir).map_err(|e| DatasetError::io(out_dir, e))?;
     let threshold = job.postprocess.iter().find_map(|s| match s {
         PostStep::VisibilityFilter { threshold } => Some(*threshold),
         _ => None,
     });
-    let mut by_finish: BTreeMap<String, FinishReport> = BTreeMap::new();
-    for f in &job.finishes {
-        by_finish.insert(
-            f.name.clone(),
-            FinishReport {
-                name: f.name.clone(),
-                kind: Some(f.kind),
-                histogram: vec![0; 256],
-                ..Default::default()
-            },
-        );
-    }
-    let mut sorted: Vec<&ManifestEntry> = entries.iter().collect();
-    // Defective images first as examples.
-    sorted.sort_by_key(|e| (e.defects.is_empty(), e.index));
-    for e in sorted {
-        let Some(fr) = by_finish.get_mut(&e.finish) else {
-            continue;
-        };
-        let base = Path::new(&e.image).parent().unwrap_or(Path::new("."));
-        let (w, h, img) = read_image8(dir, &e.image, e.bit_depth)?;
-        let (_, _, object) = read_gray(dir, &base.join("object.png").to_string_lossy())?;
-        let (_, _, faces) = read_gray(dir, &e.faces)?;
-        let (_, _, mask) = read_gray(dir, &base.join("mask.png").to_string_lossy())?;
-        fr.images += 1;
-        for (v, o) in img.iter().zip(&object) {
-            if *o > 0 {
-                fr.histogram[*v as usize] += 1;
-            }
-        }
-        for d in &e.defects {
-            fr.defects.push((d.class, d.visibility, d.kept));
-            if let Some(k) = &d.kind {
-                let e = fr.kinds.entry(k.clone()).or_insert((0, 0));
-                e.0 += d.kept as usize;
-                e.1 += 1;
-            }
-        }
-        let finish = job.finishes.iter().find(|f| f.name == e.finish);
-        if let Some(f) = finish.filter(|f| f.kind == FinishKind::Milled)
-            && let Ok(p) =
-                toml::Value::Table(f.params.clone()).try_into::<crate::texture::MilledParams>()
-            && let Some((face, deg)) = super::job::parse_view(&e.viewpoint)
-        {
-            // The footprint of a pixel at the working distance: from the image's recorded
-            // camera (the job's `[camera]`), else the default camera at this width.
-            // (Records written before the working distance was recorded read 0: the
-            // default camera's distance then.)
-            let footprint = e.camera.as_ref().map_or_else(
-                || pixel_mm(e.width),
-                |c| {
-                    let wd = if c.working_distance_mm > 0.0 {
-                        c.working_distance_mm
-                    } else {
-                        CameraConfig::default().working_distance_mm
-                    };
-                    wd as f64 / c.fx.max(1e-9)
-                },
-            );
-            let rho_px = p.rho_mm() / footprint;
-            if let Some(t) =
-                texture_visibility(w, h, &img, &faces, face, rho_px, deg.to_radians().cos())
-            {
-                fr.texture.push((e.index, t));
-            }
-        }
-        if fr.examples.len() < examples_per_finish {
-            let name = format!("{}-{}.png", sanitize(&e.finish), e.id);
-            let mut rgb = image::RgbImage::new(w as u32, h as u32);
-            for (k, px) in rgb.pixels_mut().enumerate() {
-                let g = img[k] as f32;
-                *px = match mask[k] {
-                    1 => image::Rgb([(0.5 * g + 127.0) as u8, (0.5 * g) as u8, (0.5 * g) as u8]),
-                    2 => image::Rgb([
-                        (0.5 * g) as u8,
-                        (0.5 * g + 60.0) as u8,
-                        (0.5 * g + 127.0) as u8,
-                    ]),
-                    _ => image::Rgb([img[k]; 3]),
-                };
-            }
-            let path = out_dir.join(&name);
-            rgb.save(&path)
-                .map_err(|err| DatasetError::io(&path, std::io::Error::other(err)))?;
-            fr.examples.push(name);
-        }
-    }
-    for fr in by_finish.values_mut() {
-        fr.p01_p99 = percentiles(&fr.histogram);
-    }
-    let reports: Vec<FinishReport> = job
+    let mut reports: Vec<FinishReport> = job
         .finishes
         .iter()
-        .filter_map(|f| by_finish.remove(&f.name))
+        .map(|f| FinishReport {
+            name: f.name.clone(),
+            kind: Some(f.kind),
+            histogram: vec![0; 256],
+            ..Default::default()
+        })
         .collect();
+    let mut done = 0;
+    for batch in items.chunks(runner::VERIFY_CHUNK) {
+        let entries = fetch(batch)?;
+        let stats: Vec<Result<ImageStats>> = batch
+            .par_iter()
+            .zip(&entries)
+            .map(|(item, e)| image_stats(dir, job, e, item.example.then_some(out_dir)))
+            .collect();
+        // In the report's order, so the first error is the first image's that fails.
+        for ((item, e), st) in batch.iter().zip(&entries).zip(stats) {
+            let st = st?;
+            let fr = &mut reports[item.finish];
+            fr.images += 1;
+            for (h, n) in fr.histogram.iter_mut().zip(&st.histogram) {
+                *h += n;
+            }
+            for d in &e.defects {
+                fr.defects.push((d.class, d.visibility, d.kept));
+                if let Some(k) = &d.kind {
+                    let c = fr.kinds.entry(k.clone()).or_insert((0, 0));
+                    c.0 += d.kept as usize;
+                    c.1 += 1;
+                }
+            }
+            if let Some(t) = st.texture {
+                fr.texture.push((e.index, t));
+            }
+            fr.examples.extend(st.example);
+        }
+        done += batch.len();
+        if let Some(p) = progress.as_deref_mut() {
+            p(done, items.len());
+        }
+    }
+    for fr in &mut reports {
+        fr.p01_p99 = percentiles(&fr.histogram);
+    }
     let html = render_html(job, &reports, threshold);
     let path = out_dir.join("report.html");
     crate::util::write_atomic(&path, html.as_bytes()).map_err(|e| DatasetError::io(&path, e))?;
     Ok(reports)
+}
+
+/// One image's share of its finish's report: the object's grey levels, the milling marks'
+/// visibility (milled finishes), and with `example_dir` its example PNG (the image with
+/// its defects' masks tinted: dents red, scratches blue) written there.
+fn image_stats(
+    dir: &Path,
+    job: &Job,
+    e: &ManifestEntry,
+    example_dir: Option<&Path>,
+) -> Result<ImageStats> {
+    let base = Path::new(&e.image).parent().unwrap_or(Path::new("."));
+    let (w, h, img) = read_image8(dir, &e.image, e.bit_depth)?;
+    let (_, _, object) = read_gray(dir, &base.join("object.png").to_string_lossy())?;
+    let (_, _, faces) = read_gray(dir, &e.faces)?;
+    let mut histogram = vec![0u64; 256];
+    for (v, o) in img.iter().zip(&object) {
+        if *o > 0 {
+            histogram[*v as usize] += 1;
+        }
+    }
+    let mut texture = None;
+    let finish = job.finishes.iter().find(|f| f.name == e.finish);
+    if let Some(f) = finish.filter(|f| f.kind == FinishKind::Milled)
+        && let Ok(p) =
+            toml::Value::Table(f.params.clone()).try_into::<crate::texture::MilledParams>()
+        && let Some((face, deg)) = super::job::parse_view(&e.viewpoint)
+    {
+        // The footprint of a pixel at the working distance: from the image's recorded
+        // camera (the job's `[camera]`), else the default camera at this width.
+        // (Records written before the working distance was recorded read 0: the
+        // default camera's distance then.)
+        let footprint = e.camera.as_ref().map_or_else(
+            || pixel_mm(e.width),
+            |c| {
+                let wd = if c.working_distance_mm > 0.0 {
+                    c.working_distance_mm
+                } else {
+                    CameraConfig::default().working_distance_mm
+                };
+                wd as f64 / c.fx.max(1e-9)
+            },
+        );
+        let rho_px = p.rho_mm() / footprint;
+        texture = texture_visibility(w, h, &img, &faces, face, rho_px, deg.to_radians().cos());
+    }
+    let mut example = None;
+    if let Some(out_dir) = example_dir {
+        let (_, _, mask) = read_gray(dir, &base.join("mask.png").to_string_lossy())?;
+        let name = format!("{}-{}.png", sanitize(&e.finish), e.id);
+        let mut rgb = Vec::with_capacity(3 * img.len());
+        for (&g8, &m) in img.iter().zip(&mask) {
+            let g = g8 as f32;
+            rgb.extend(match m {
+                1 => [(0.5 * g + 127.0) as u8, (0.5 * g) as u8, (0.5 * g) as u8],
+                2 => [
+                    (0.5 * g) as u8,
+                    (0.5 * g + 60.0) as u8,
+                    (0.5 * g + 127.0) as u8,
+                ],
+                _ => [g8; 3],
+            });
+        }
+        let path = out_dir.join(&name);
+        crate::image_io::write_png_rgb8(&path, w as u32, h as u32, &rgb)
+            .map_err(|err| DatasetError::io(&path, err))?;
+        example = Some(name);
+    }
+    Ok(ImageStats {
+        histogram,
+        texture,
+        example,
+    })
 }
 
 fn sanitize(s: &str) -> String {
@@ -539,31 +667,53 @@ fn median_db(t: &[(usize, TextureVisibility)]) -> Option<f64> {
 }
 
 /// The images of a dataset folder: `manifest.jsonl`, else the shard manifests, else
-/// `preview.jsonl` (written by `dataset preview`).
+/// `preview.jsonl` (written by `dataset preview`). A half last line of a shard manifest
+/// (a run still appending to it) is left out.
 pub fn folder_entries(dir: &Path) -> Result<Vec<ManifestEntry>> {
-    let manifest = dir.join("manifest.jsonl");
-    if manifest.is_file() {
-        return super::runner::read_manifest(&manifest, false);
-    }
     let mut out = Vec::new();
-    let mdir = dir.join("manifests");
-    if mdir.is_dir() {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&mdir)
-            .map_err(|e| DatasetError::io(&mdir, e))?
-            .flatten()
-            .map(|e| e.path())
-            .filter(|p| p.extension().is_some_and(|x| x == "jsonl"))
-            .collect();
-        files.sort();
-        for f in files {
-            out.extend(super::runner::read_manifest(&f, false)?);
-        }
-    }
-    let preview = dir.join("preview.jsonl");
-    if out.is_empty() && preview.is_file() {
-        out = super::runner::read_manifest(&preview, false)?;
-    }
+    folder_lines(dir, |_, e| {
+        out.push(e);
+        Ok(())
+    })?;
     Ok(out)
+}
+
+/// Calls `each` with every image line of a dataset folder (as [`folder_entries`] lists
+/// them) and where it is: the manifest's position in the returned list and its bytes.
+fn folder_lines(
+    dir: &Path,
+    mut each: impl FnMut(LineAt, ManifestEntry) -> Result<()>,
+) -> Result<Vec<PathBuf>> {
+    let finished = dir.join("manifest.jsonl");
+    let mut read = |manifests: Vec<PathBuf>, mode: ReadMode| -> Result<(Vec<PathBuf>, usize)> {
+        let mut n_lines = 0;
+        for (mi, m) in manifests.iter().enumerate() {
+            runner::manifest_lines(m, mode, |n, offset, line| {
+                n_lines += 1;
+                let at = LineAt {
+                    manifest: mi,
+                    offset,
+                    len: line.len(),
+                };
+                each(at, runner::parse_entry(m, n, line)?)
+            })?;
+        }
+        Ok((manifests, n_lines))
+    };
+    if finished.is_file() {
+        return Ok(read(vec![finished], ReadMode::Strict)?.0);
+    }
+    let shards = if dir.join("manifests").is_dir() {
+        runner::shard_manifests(dir)?
+    } else {
+        Vec::new()
+    };
+    let (shards, n) = read(shards, ReadMode::DropPartial)?;
+    let preview = dir.join("preview.jsonl");
+    if n == 0 && preview.is_file() {
+        return Ok(read(vec![preview], ReadMode::DropPartial)?.0);
+    }
+    Ok(shards)
 }
 
 /// Items for a preview: per finish, up to `n` images, defective instances first, the

@@ -1029,7 +1029,7 @@ pub fn verify_entry(dir: &Path, e: &ManifestEntry) -> std::result::Result<(), St
 }
 
 /// Manifest entries verified between two calls of a verification's progress callback.
-const VERIFY_CHUNK: usize = 64;
+pub(super) const VERIFY_CHUNK: usize = 64;
 /// Manifest entries read and verified at once where no progress is watched: what a
 /// verification holds of the entries besides their [`Listed`] records.
 const VERIFY_BATCH: usize = 1024;
@@ -1037,10 +1037,10 @@ const VERIFY_BATCH: usize = 1024;
 /// Where a manifest line is: its file (an index into [`Verified::manifests`]) and bytes
 /// (the newline not included).
 #[derive(Clone, Copy, Debug)]
-struct LineAt {
-    manifest: usize,
-    offset: u64,
-    len: usize,
+pub(super) struct LineAt {
+    pub(super) manifest: usize,
+    pub(super) offset: u64,
+    pub(super) len: usize,
 }
 
 /// A manifest line whose image's files verified: where the line is, and what the finish's
@@ -1064,39 +1064,38 @@ struct Verified {
     by_index: BTreeMap<usize, Listed>,
 }
 
-impl Verified {
-    /// Reads the manifest entries of `lines` from their files.
-    fn read(manifests: &[PathBuf], lines: &[LineAt]) -> Result<Vec<ManifestEntry>> {
-        let mut open: Option<(usize, std::fs::File)> = None;
-        let mut buf = Vec::new();
-        lines
-            .iter()
-            .map(|at| {
-                use std::io::{Read, Seek, SeekFrom};
-                let path = &manifests[at.manifest];
-                if open.as_ref().is_none_or(|(mi, _)| *mi != at.manifest) {
-                    let f = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
-                    open = Some((at.manifest, f));
-                }
-                let (_, f) = open.as_mut().expect("opened above");
-                buf.resize(at.len, 0);
-                f.seek(SeekFrom::Start(at.offset))
-                    .and_then(|_| f.read_exact(&mut buf))
-                    .map_err(|e| DatasetError::io(path, e))?;
-                serde_json::from_slice(&buf).map_err(|e| DatasetError::Manifest {
-                    path: path.clone(),
-                    line: 0,
-                    message: format!("changed while it was read: {e}"),
-                })
+/// Reads the manifest entries of `lines` (each in `manifests[at.manifest]`) from their
+/// files, in their order.
+pub(super) fn read_lines(manifests: &[PathBuf], lines: &[LineAt]) -> Result<Vec<ManifestEntry>> {
+    let mut open: Option<(usize, std::fs::File)> = None;
+    let mut buf = Vec::new();
+    lines
+        .iter()
+        .map(|at| {
+            use std::io::{Read, Seek, SeekFrom};
+            let path = &manifests[at.manifest];
+            if open.as_ref().is_none_or(|(mi, _)| *mi != at.manifest) {
+                let f = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
+                open = Some((at.manifest, f));
+            }
+            let (_, f) = open.as_mut().expect("opened above");
+            buf.resize(at.len, 0);
+            f.seek(SeekFrom::Start(at.offset))
+                .and_then(|_| f.read_exact(&mut buf))
+                .map_err(|e| DatasetError::io(path, e))?;
+            serde_json::from_slice(&buf).map_err(|e| DatasetError::Manifest {
+                path: path.clone(),
+                line: 0,
+                message: format!("changed while it was read: {e}"),
             })
-            .collect()
-    }
+        })
+        .collect()
 }
 
 /// Calls `each(line number, offset, line)` for every complete, non-blank line of the
 /// manifest at `path` (none when it does not exist), reading it line by line; a half last
 /// line is handled by `mode`.
-fn manifest_lines(
+pub(super) fn manifest_lines(
     path: &Path,
     mode: ReadMode,
     mut each: impl FnMut(usize, u64, &str) -> Result<()>,
@@ -1149,7 +1148,7 @@ fn manifest_lines(
 }
 
 /// Parses manifest line `n` of `path`.
-fn parse_entry(path: &Path, n: usize, line: &str) -> Result<ManifestEntry> {
+pub(super) fn parse_entry(path: &Path, n: usize, line: &str) -> Result<ManifestEntry> {
     serde_json::from_str(line).map_err(|e| DatasetError::Manifest {
         path: path.into(),
         line: n,
@@ -1218,7 +1217,7 @@ fn verified_entries(
     let own_index = own.and_then(|o| manifests.iter().position(|m| m == o));
     let mut done = 0;
     for chunk in candidates.chunks(chunk_len) {
-        let entries = Verified::read(&manifests, chunk)?;
+        let entries = read_lines(&manifests, chunk)?;
         let ok: Vec<bool> = entries
             .par_iter()
             .map(|e| verify_entry(dir, e).is_ok())
@@ -2208,7 +2207,7 @@ pub fn read_manifest(path: &Path, repair: bool) -> Result<Vec<ManifestEntry>> {
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
-enum ReadMode {
+pub(super) enum ReadMode {
     /// A half last line is an error.
     Strict,
     /// A half last line is dropped and the file rewritten (this process owns the file).
@@ -2273,7 +2272,7 @@ fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<Vec<(u64, us
     Ok(lines)
 }
 
-fn shard_manifests(dir: &Path) -> Result<Vec<PathBuf>> {
+pub(super) fn shard_manifests(dir: &Path) -> Result<Vec<PathBuf>> {
     let mdir = dir.join("manifests");
     let rd = std::fs::read_dir(&mdir).map_err(|e| DatasetError::io(&mdir, e))?;
     let mut v: Vec<PathBuf> = rd
@@ -2342,7 +2341,7 @@ fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> 
     crate::util::write_atomic_with(&path, |f| {
         let mut w = std::io::BufWriter::new(f);
         for batch in lines.chunks(VERIFY_BATCH) {
-            let entries = match Verified::read(&verified.manifests, batch) {
+            let entries = match read_lines(&verified.manifests, batch) {
                 Ok(e) => e,
                 Err(e) => {
                     failed = Some(e);
