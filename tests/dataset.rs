@@ -1102,28 +1102,61 @@ fn output_is_readable_by_compare_and_standard_label_formats() {
     assert_eq!(images, samples.len());
 }
 
-/// `dataset merge`'s progress: (entries verified, entries to verify), rising to the whole
-/// job; the same files as a merge without it.
+/// `dataset merge`'s progress: (step, entries verified, entries to verify): each merged
+/// folder's images (rising to its own), then the finish's (rising to the whole job); the
+/// same files as a merge without it.
 #[test]
 fn merge_reports_its_verification_progress() {
+    use dataset::Verifying;
     let f = fixture(2, 1);
+    let n = f.prep.plan.items.len();
+    let rising = |calls: &[(Verifying, usize, usize)], step: Verifying, want: usize| {
+        let of: Vec<(usize, usize)> = calls
+            .iter()
+            .filter(|c| c.0 == step)
+            .map(|c| (c.1, c.2))
+            .collect();
+        assert_eq!(of.last(), Some(&(want, want)), "{step:?}: {calls:?}");
+        assert!(
+            of.windows(2).all(|w| w[0].0 < w[1].0 && w[0].1 == w[1].1),
+            "{step:?}: {calls:?}"
+        );
+    };
+    // One folder: the finish alone.
     let out = f.root.join("out");
     run_all(&f, &out, Shard::ALL, None).unwrap();
-    let n = f.prep.plan.items.len();
     let before = tree(&out);
-    let mut calls: Vec<(usize, usize)> = Vec::new();
-    let mut progress = |done: usize, total: usize| calls.push((done, total));
+    let mut calls = Vec::new();
+    let mut progress = |v: Verifying, done: usize, total: usize| calls.push((v, done, total));
     let merged =
         dataset::merge_with_progress(std::slice::from_ref(&out), Some(&mut progress)).unwrap();
     assert_eq!(merged, n);
-    assert_eq!(calls.last(), Some(&(n, n)), "{calls:?}");
-    assert!(
-        calls
-            .windows(2)
-            .all(|w| w[0].0 < w[1].0 && w[0].1 == w[1].1),
-        "{calls:?}"
-    );
+    assert!(calls.iter().all(|c| c.0 == Verifying::Finish), "{calls:?}");
+    rising(&calls, Verifying::Finish, n);
     assert_eq!(tree(&out), before);
+    // Two shards' folders: the second's images verified, then the finish.
+    let dirs: Vec<PathBuf> = (0..2).map(|i| f.root.join(format!("s{i}"))).collect();
+    for (i, d) in dirs.iter().enumerate() {
+        run_all(&f, d, Shard { index: i, count: 2 }, None).unwrap();
+    }
+    let second = dataset::read_manifest(&dirs[1].join("manifests/shard-1-of-2.jsonl"), false)
+        .unwrap()
+        .len();
+    let mut calls = Vec::new();
+    let mut progress = |v: Verifying, done: usize, total: usize| calls.push((v, done, total));
+    assert_eq!(
+        dataset::merge_with_progress(&dirs, Some(&mut progress)).unwrap(),
+        n
+    );
+    let first_finish = calls.iter().position(|c| c.0 == Verifying::Finish).unwrap();
+    assert!(
+        calls[..first_finish]
+            .iter()
+            .all(|c| c.0 == Verifying::Merge)
+    );
+    rising(&calls, Verifying::Merge, second);
+    rising(&calls, Verifying::Finish, n);
+    assert_same_dataset(&out, &dirs[0]);
 }
 
 /// `dataset run`'s checks of the files already written report their progress (every

@@ -6,7 +6,8 @@ folder's image (i mod n) in index order: its folder hard links to that image's f
 its manifest line is that image's, renumbered (index, id, and the paths under
 images/<id>/); its instance, split and labels stay the copied image's. The shard
 manifests are replaced by one, shard-0-of-1.jsonl; manifest.jsonl and coco/ are removed
-(they no longer match).
+(they no longer match). Files are replaced, never written in place, so DATA may be a
+hard-linked copy (cp -rl) of the folder.
 
 With --job the folder must be finished (every image of its job listed once: indices
 0 .. n-1) and its job.toml's defective / defect_free counts are multiplied, so that the
@@ -39,7 +40,9 @@ if job_counts:
                      lambda m: "%s%s%d" % (m[1], m[2], int(m[3]) * f), job, flags=re.M)
     if k == 0:
         sys.exit("widen-dataset: the job has no defective / defect_free counts to widen")
-    open(job_path, "w").write(job)
+    # A new file, not the old one rewritten: the folder may be a hard-linked copy.
+    open(job_path + ".tmp", "w").write(job)
+    os.replace(job_path + ".tmp", job_path)
 for stale in ["manifest.jsonl"]:
     if os.path.exists(os.path.join(data, stale)):
         os.remove(os.path.join(data, stale))

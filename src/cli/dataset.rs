@@ -268,8 +268,9 @@ fn bar_style(template: &str) -> indicatif::ProgressStyle {
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
 }
 
-/// `dataset run`'s bar through a run's steps: checking the images earlier runs wrote,
-/// rendering, verifying every image at the finish; each step after the first starts the
+/// `dataset run`'s bar through a run's steps (and `dataset merge`'s through its
+/// verifications): checking the images earlier runs wrote, rendering, verifying every
+/// image at the finish; each step after the first starts the
 /// bar (and its elapsed time and ETA) afresh with its own words (the first keeps the time
 /// since the run started: the renderer's start-up and the first image).
 struct RunBar {
@@ -359,14 +360,12 @@ pub fn run(a: DatasetArgs) -> Result<()> {
     match a.cmd {
         Cmd::Run(r) => run_job(r),
         Cmd::Merge { dirs } => {
-            // Verifying every file of every image is what takes the time.
-            let bar = styled_bar(
-                "verifying {bar:40} {pos}/{len} images' files, {elapsed} elapsed, ETA {eta}",
-                false,
-            );
-            let mut progress = bar_progress(&bar);
+            // Verifying every file of every image is what takes the time: each merged
+            // folder's, then the finish's of the whole dataset.
+            let bar = RunBar::new(false);
+            let mut progress = |v, done, total| bar.show(RunStep::Verifying(v), done, total);
             let n = dataset::merge_with_progress(&dirs, Some(&mut progress));
-            bar.finish_and_clear();
+            bar.bar.finish_and_clear();
             let n = n.context("merge")?;
             println!(
                 "{}: {n} images, manifest.jsonl and coco/*.json written",

@@ -432,6 +432,9 @@ pub enum Verifying {
     /// After the last image of a whole-job run: every image's files, before
     /// `manifest.jsonl` and `coco/` are written.
     Finish,
+    /// `dataset merge`: the images of a folder merged into the target, before they are
+    /// moved (then [`Verifying::Finish`] on the target).
+    Merge,
 }
 
 impl Verifying {
@@ -440,6 +443,7 @@ impl Verifying {
         match self {
             Verifying::Resume => "checking earlier images",
             Verifying::Finish => "verifying all images",
+            Verifying::Merge => "verifying a folder's images",
         }
     }
 }
@@ -2336,25 +2340,7 @@ fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> 
     }
     // The entries read again from their lines, a batch at a time, as they are written.
     let lines: Vec<LineAt> = by_index.values().map(|l| l.at).collect();
-    let path = dir.join("manifest.jsonl");
-    let mut failed = None;
-    crate::util::write_atomic_with(&path, |f| {
-        let mut w = std::io::BufWriter::new(f);
-        for batch in lines.chunks(VERIFY_BATCH) {
-            let entries = match read_lines(&verified.manifests, batch) {
-                Ok(e) => e,
-                Err(e) => {
-                    failed = Some(e);
-                    return Err(std::io::Error::other("a manifest line could not be read"));
-                }
-            };
-            for e in &entries {
-                write_manifest_line(&mut w, e)?;
-            }
-        }
-        w.flush()
-    })
-    .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(&path, e)))?;
+    write_manifest_from(&dir.join("manifest.jsonl"), &verified.manifests, &lines)?;
     Ok(lines.len())
 }
 
@@ -2420,16 +2406,17 @@ pub fn merge(dirs: &[PathBuf]) -> Result<usize> {
     merge_with_progress(dirs, None)
 }
 
-/// [`merge`], calling `progress` with (entries verified, entries to verify) while the
-/// finish step verifies the merged dataset's files.
+/// [`merge`], calling `progress` with (step, entries verified, entries to verify) while
+/// each merged folder's images are verified ([`Verifying::Merge`], once per folder) and
+/// then the finish step verifies the merged dataset's files ([`Verifying::Finish`]).
 pub fn merge_with_progress(
     dirs: &[PathBuf],
-    progress: Option<&mut dyn FnMut(usize, usize)>,
+    mut progress: Option<&mut dyn FnMut(Verifying, usize, usize)>,
 ) -> Result<usize> {
     let Some((target, others)) = dirs.split_first() else {
         return Err(DatasetError::layout(".", "merge needs at least one folder"));
     };
-    let (text, _) = stored_job(target)?;
+    let (text, job) = stored_job(target)?;
     let _lock = lock::lock(target, lock::Access::Exclusive)?;
     let mut locks = Vec::new();
     for src in others {
@@ -2442,38 +2429,128 @@ pub fn merge_with_progress(
         }
         locks.push(lock::lock(src, lock::Access::Exclusive)?);
     }
+    let plan = plan::expand(&job);
+    let all: BTreeSet<usize> = (0..plan.items.len()).collect();
     for src in others {
-        for m in shard_manifests(src)? {
-            let entries = read_manifest(&m, false)?;
-            let mut moved = Vec::new();
-            for e in entries {
-                if verify_entry(src, &e).is_err() {
-                    continue; // missing or changed in the source: not merged
-                }
-                let from = src.join("images").join(&e.id);
-                let to = target.join("images").join(&e.id);
-                if to.exists() && verify_entry(target, &e).is_err() {
-                    std::fs::remove_dir_all(&to).map_err(|err| DatasetError::io(&to, err))?;
-                }
-                if !to.exists() {
-                    move_dir(&from, &to)?;
-                }
-                moved.push(e);
+        let verified = {
+            let mut step = progress
+                .as_deref_mut()
+                .map(|p| move |done: usize, total: usize| p(Verifying::Merge, done, total));
+            verified_entries(
+                src,
+                &plan,
+                &all,
+                None,
+                step.as_mut().map(|p| p as &mut dyn FnMut(usize, usize)),
+            )?
+        };
+        // Each verified line goes to the target's manifest of the same name.
+        let mut by_manifest: BTreeMap<usize, Vec<(usize, LineAt)>> = BTreeMap::new();
+        for (&index, listed) in &verified.by_index {
+            by_manifest
+                .entry(listed.at.manifest)
+                .or_default()
+                .push((index, listed.at));
+        }
+        std::fs::create_dir_all(target.join("manifests"))
+            .map_err(|e| DatasetError::io(target, e))?;
+        for (mi, lines) in by_manifest {
+            for batch in lines.chunks(VERIFY_BATCH) {
+                let ats: Vec<LineAt> = batch.iter().map(|(_, at)| *at).collect();
+                move_images(src, target, &read_lines(&verified.manifests, &ats)?)?;
             }
+            let from = &verified.manifests[mi];
             let dest = target
                 .join("manifests")
-                .join(m.file_name().unwrap_or_default());
-            std::fs::create_dir_all(target.join("manifests"))
-                .map_err(|e| DatasetError::io(target, e))?;
-            let mut lines = read_manifest(&dest, false)?;
-            let have: BTreeSet<usize> = lines.iter().map(|e| e.index).collect();
-            lines.extend(moved.into_iter().filter(|e| !have.contains(&e.index)));
-            lines.sort_by_key(|e| e.index);
-            write_manifest(&dest, &lines)?;
+                .join(from.file_name().unwrap_or_default());
+            add_manifest_lines(&dest, from, &lines)?;
         }
     }
     drop(locks);
-    finish_locked(target, progress)
+    let mut finish_progress =
+        progress.map(|p| move |done, total| p(Verifying::Finish, done, total));
+    finish_locked(
+        target,
+        finish_progress
+            .as_mut()
+            .map(|p| p as &mut dyn FnMut(usize, usize)),
+    )
+}
+
+/// Moves the folders of `entries` (verified in `src`) into `target`, where the target has
+/// no copy of an image or one whose files differ from the entry (checked on all cores).
+fn move_images(src: &Path, target: &Path, entries: &[ManifestEntry]) -> Result<()> {
+    use rayon::prelude::*;
+    let stale: Vec<bool> = entries
+        .par_iter()
+        .map(|e| target.join("images").join(&e.id).exists() && verify_entry(target, e).is_err())
+        .collect();
+    for (e, stale) in entries.iter().zip(stale) {
+        let from = src.join("images").join(&e.id);
+        let to = target.join("images").join(&e.id);
+        if stale {
+            std::fs::remove_dir_all(&to).map_err(|err| DatasetError::io(&to, err))?;
+        }
+        if !to.exists() {
+            move_dir(&from, &to)?;
+        }
+    }
+    Ok(())
+}
+
+/// Adds the manifest lines `moved` of `from` ((image index, line), in image order) to the
+/// target's manifest `dest`: its own lines kept, the moved ones for images it does not
+/// list, all in image order (each image's lines in their order, its own first), written
+/// whole or not at all, the entries read from their lines a batch at a time.
+fn add_manifest_lines(dest: &Path, from: &Path, moved: &[(usize, LineAt)]) -> Result<()> {
+    let manifests = [dest.to_path_buf(), from.to_path_buf()];
+    let mut lines: Vec<(usize, LineAt)> = Vec::new();
+    let mut have = BTreeSet::new();
+    manifest_lines(dest, ReadMode::Strict, |n, offset, line| {
+        let index = parse_entry(dest, n, line)?.index;
+        have.insert(index);
+        lines.push((
+            index,
+            LineAt {
+                manifest: 0,
+                offset,
+                len: line.len(),
+            },
+        ));
+        Ok(())
+    })?;
+    lines.extend(
+        moved
+            .iter()
+            .filter(|(index, _)| !have.contains(index))
+            .map(|&(index, at)| (index, LineAt { manifest: 1, ..at })),
+    );
+    lines.sort_by_key(|(index, _)| *index);
+    let ats: Vec<LineAt> = lines.into_iter().map(|(_, at)| at).collect();
+    write_manifest_from(dest, &manifests, &ats)
+}
+
+/// Writes the manifest at `path` (whole or not at all) with the entries of `lines` (in
+/// `manifests`), in their order, read from their lines a batch at a time.
+fn write_manifest_from(path: &Path, manifests: &[PathBuf], lines: &[LineAt]) -> Result<()> {
+    let mut failed = None;
+    crate::util::write_atomic_with(path, |f| {
+        let mut w = std::io::BufWriter::new(f);
+        for batch in lines.chunks(VERIFY_BATCH) {
+            let entries = match read_lines(manifests, batch) {
+                Ok(e) => e,
+                Err(e) => {
+                    failed = Some(e);
+                    return Err(std::io::Error::other("a manifest line could not be read"));
+                }
+            };
+            for e in &entries {
+                write_manifest_line(&mut w, e)?;
+            }
+        }
+        w.flush()
+    })
+    .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(path, e)))
 }
 
 fn move_dir(from: &Path, to: &Path) -> Result<()> {
