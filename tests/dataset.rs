@@ -1213,14 +1213,35 @@ fn a_resumed_run_reports_its_verification_progress() {
     );
 }
 
+/// `dataset postprocess` re-runs the steps from the raw files: the same steps give the
+/// same files, its progress rising to every image and then the finish's verification.
 #[test]
 fn postprocess_reruns_from_raw_files() {
+    use dataset::Verifying;
     let f = fixture(1, 1);
     let out = f.root.join("out");
     run_all(&f, &out, Shard::ALL, None).unwrap();
     let before = tree(&out);
-    let n = dataset::postprocess_dir(&out, None).unwrap();
-    assert_eq!(n, f.prep.plan.items.len());
+    let total = f.prep.plan.items.len();
+    let mut done = Vec::new();
+    let mut verified = Vec::new();
+    let mut progress = |d: usize, t: usize| done.push((d, t));
+    let mut verifying = |v: Verifying, d: usize, t: usize| verified.push((v, d, t));
+    let n = dataset::postprocess_dir_with_progress(
+        &out,
+        None,
+        Some(&mut progress),
+        Some(&mut verifying),
+    )
+    .unwrap();
+    assert_eq!(n, total);
+    assert_eq!(done.last(), Some(&(total, total)), "{done:?}");
+    assert!(done.windows(2).all(|w| w[0].0 < w[1].0), "{done:?}");
+    assert_eq!(
+        verified.last(),
+        Some(&(Verifying::Finish, total, total)),
+        "{verified:?}"
+    );
     assert_eq!(
         before,
         tree(&out),

@@ -268,8 +268,8 @@ fn bar_style(template: &str) -> indicatif::ProgressStyle {
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
 }
 
-/// `dataset run`'s bar through a run's steps (and `dataset merge`'s through its
-/// verifications): checking the images earlier runs wrote, rendering, verifying every
+/// `dataset run`'s bar through a run's steps (and `dataset merge`'s and `postprocess`'s
+/// through theirs): checking the images earlier runs wrote, rendering, verifying every
 /// image at the finish; each step after the first starts the
 /// bar (and its elapsed time and ETA) afresh with its own words (the first keeps the time
 /// since the run started: the renderer's start-up and the first image).
@@ -282,6 +282,8 @@ struct RunBar {
 enum RunStep {
     Verifying(dataset::Verifying),
     Rendering,
+    /// `dataset postprocess`'s images.
+    Postprocessing,
 }
 
 const RENDERING_BAR: &str = "{bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta} ({per_sec})";
@@ -302,6 +304,9 @@ impl RunBar {
         if before != Some(step) {
             let style = match step {
                 RunStep::Rendering => bar_style(RENDERING_BAR),
+                RunStep::Postprocessing => bar_style(
+                    "post-processing {bar:40} {pos}/{len} images, {elapsed} elapsed, ETA {eta}",
+                ),
                 RunStep::Verifying(v) => bar_style(&format!(
                     "{}: {{bar:24}} {{pos}}/{{len}}, {{elapsed}} elapsed, ETA {{eta}}",
                     v.describe()
@@ -374,7 +379,19 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             Ok(())
         }
         Cmd::Postprocess { dir, job } => {
-            let n = dataset::postprocess_dir(&dir, job.as_deref()).context("postprocess")?;
+            // Each image's raw files read and its post-processed ones written, then (in a
+            // finished folder) every image's files verified.
+            let bar = RunBar::new(false);
+            let mut progress = |done, total| bar.show(RunStep::Postprocessing, done, total);
+            let mut verifying = |v, done, total| bar.show(RunStep::Verifying(v), done, total);
+            let n = dataset::postprocess_dir_with_progress(
+                &dir,
+                job.as_deref(),
+                Some(&mut progress),
+                Some(&mut verifying),
+            );
+            bar.bar.finish_and_clear();
+            let n = n.context("postprocess")?;
             println!("{}: {n} images post-processed", dir.display());
             Ok(())
         }

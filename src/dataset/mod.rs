@@ -30,6 +30,7 @@ pub use renderer::{FaceTexture, ImageRenderer, ImageRequest, RenderedImage, Text
 pub use runner::{
     DEFAULT_IN_FLIGHT, DEVICE_ALLOCATIONS_COUNTER, DEVICE_MEMORY_COUNTER, ManifestEntry, Prepared,
     RunOptions, RunReport, Shard, Verifying, finish, merge, merge_with_progress, postprocess_dir,
-    prepare, prepare_text, read_manifest, render_one, render_one_seeded, run,
+    postprocess_dir_with_progress, prepare, prepare_text, read_manifest, render_one,
+    render_one_seeded, run,
 };
 pub use textures::{TextureCache, TextureSource, TextureWant};

@@ -2579,6 +2579,19 @@ fn move_dir(from: &Path, to: &Path) -> Result<()> {
 /// finish's `exposure`) replace the stored ones (everything else in it must equal the
 /// stored job). Returns the number of images processed.
 pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
+    postprocess_dir_with_progress(dir, new_job, None, None)
+}
+
+/// [`postprocess_dir`], calling `progress` with (images processed, images to process) as
+/// the images are processed (on all cores, a batch of entries at a time, each shard
+/// manifest rewritten as a stream), and `verifying` as the finish step then verifies a
+/// finished folder's images ([`Verifying::Finish`]).
+pub fn postprocess_dir_with_progress(
+    dir: &Path,
+    new_job: Option<&Path>,
+    mut progress: Option<&mut dyn FnMut(usize, usize)>,
+    verifying: Option<&mut dyn FnMut(Verifying, usize, usize)>,
+) -> Result<usize> {
     use rayon::prelude::*;
     let (_, mut job) = stored_job(dir)?;
     let _lock = lock::lock(dir, lock::Access::Exclusive)?;
@@ -2598,55 +2611,103 @@ pub fn postprocess_dir(dir: &Path, new_job: Option<&Path>) -> Result<usize> {
             .map_err(|e| DatasetError::io(dir, e))?;
         job = other;
     }
-    let mut n = 0;
     // Folders written before the manifest recorded the camera: the job's camera (the
     // calibration of a stored job is not read, so only an uncalibrated one).
     let job_camera = match &job.camera_config.calibration {
         None => Some(image_camera_record(&job)?),
         Some(_) => None,
     };
-    for m in shard_manifests(dir)? {
-        let entries = read_manifest(&m, false)?;
-        let updated: Vec<ManifestEntry> = entries
-            .into_par_iter()
-            .map(|mut e| -> Result<ManifestEntry> {
-                let idir = dir.join("images").join(&e.id);
-                let camera = e.camera.clone().or_else(|| job_camera.clone()).ok_or_else(|| {
-                    DatasetError::layout(
-                        &idir,
-                        "the manifest line records no camera and the job's calibration is not read from a dataset folder: render the image again",
-                    )
-                })?;
-                let (frame, exposed) = read_raw_frame(&job, &e, &camera, &idir)?;
-                let (hashes, defects, noise) =
-                    write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
-                e.files.extend(hashes);
-                e.sizes = file_sizes(&idir, &e.files)?;
-                // The raw labels are unchanged, so each instance keeps its spec entry.
-                let kinds: BTreeMap<u16, Option<String>> = e
-                    .defects
-                    .iter()
-                    .map(|d| (d.instance, d.kind.clone()))
-                    .collect();
-                e.defects = defects
-                    .into_iter()
-                    .map(|mut d| {
-                        d.kind = kinds.get(&d.instance).cloned().flatten();
-                        d
-                    })
-                    .collect();
-                e.noise_sigma = noise;
-                e.exposure_ev = exposed.exposure_ev;
-                e.exposure_ms = exposed.exposure_ms;
-                e.bit_depth = job.sensor.model.deep_bit_depth();
-                Ok(e)
+    let process = |mut e: ManifestEntry| -> Result<ManifestEntry> {
+        let idir = dir.join("images").join(&e.id);
+        let camera = e.camera.clone().or_else(|| job_camera.clone()).ok_or_else(|| {
+            DatasetError::layout(
+                &idir,
+                "the manifest line records no camera and the job's calibration is not read from a dataset folder: render the image again",
+            )
+        })?;
+        let (frame, exposed) = read_raw_frame(&job, &e, &camera, &idir)?;
+        let (hashes, defects, noise) = write_post(&idir, &job, &e.texture_type, e.seed, frame)?;
+        e.files.extend(hashes);
+        e.sizes = file_sizes(&idir, &e.files)?;
+        // The raw labels are unchanged, so each instance keeps its spec entry.
+        let kinds: BTreeMap<u16, Option<String>> = e
+            .defects
+            .iter()
+            .map(|d| (d.instance, d.kind.clone()))
+            .collect();
+        e.defects = defects
+            .into_iter()
+            .map(|mut d| {
+                d.kind = kinds.get(&d.instance).cloned().flatten();
+                d
             })
-            .collect::<Result<_>>()?;
-        n += updated.len();
-        write_manifest(&m, &updated)?;
+            .collect();
+        e.noise_sigma = noise;
+        e.exposure_ev = exposed.exposure_ev;
+        e.exposure_ms = exposed.exposure_ms;
+        e.bit_depth = job.sensor.model.deep_bit_depth();
+        Ok(e)
+    };
+    let manifests = shard_manifests(dir)?;
+    let mut lines: Vec<Vec<LineAt>> = Vec::new();
+    for (mi, m) in manifests.iter().enumerate() {
+        let mut of = Vec::new();
+        // Every line parsed first: a malformed one is an error naming it before any
+        // image is processed.
+        manifest_lines(m, ReadMode::Strict, |n, offset, line| {
+            parse_entry(m, n, line)?;
+            of.push(LineAt {
+                manifest: mi,
+                offset,
+                len: line.len(),
+            });
+            Ok(())
+        })?;
+        lines.push(of);
+    }
+    let total: usize = lines.iter().map(Vec::len).sum();
+    let mut n = 0;
+    for (m, of) in manifests.iter().zip(&lines) {
+        // The manifest rewritten as its images are processed, a batch at a time; an error
+        // leaves it as it was.
+        let mut failed = None;
+        crate::util::write_atomic_with(m, |f| {
+            let mut w = std::io::BufWriter::new(f);
+            for batch in of.chunks(VERIFY_CHUNK) {
+                let updated = read_lines(&manifests, batch).and_then(|entries| {
+                    entries
+                        .into_par_iter()
+                        .map(process)
+                        .collect::<Result<Vec<_>>>()
+                });
+                let updated = match updated {
+                    Ok(u) => u,
+                    Err(e) => {
+                        failed = Some(e);
+                        return Err(std::io::Error::other("an image could not be processed"));
+                    }
+                };
+                for e in &updated {
+                    write_manifest_line(&mut w, e)?;
+                }
+                n += updated.len();
+                if let Some(p) = progress.as_deref_mut() {
+                    p(n, total);
+                }
+            }
+            w.flush()
+        })
+        .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(m, e)))?;
     }
     if dir.join("manifest.jsonl").exists() {
-        finish_locked(dir, None)?;
+        let mut finish_progress =
+            verifying.map(|v| move |done, total| v(Verifying::Finish, done, total));
+        finish_locked(
+            dir,
+            finish_progress
+                .as_mut()
+                .map(|p| p as &mut dyn FnMut(usize, usize)),
+        )?;
     }
     Ok(n)
 }
