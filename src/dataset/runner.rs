@@ -1249,22 +1249,27 @@ fn verified_entries(
         && let Some(o) = own
     {
         // The entries that failed are dropped (entries outside `wanted` are kept as they
-        // are), the rest sorted by image. Only this shard's manifest is held, and only
-        // here, where a run found files missing or changed.
-        let mut all = Vec::new();
+        // are), the rest sorted by image, read again from their lines as they are written.
+        let oi = own_index.expect("own is among the manifests");
+        let mut kept: Vec<(usize, LineAt)> = Vec::new();
         manifest_lines(o, ReadMode::Strict, |n, offset, line| {
             if !own_failed.contains(&offset) {
-                all.push(parse_entry(o, n, line)?);
+                let at = LineAt {
+                    manifest: oi,
+                    offset,
+                    len: line.len(),
+                };
+                kept.push((parse_entry(o, n, line)?.index, at));
             }
             Ok(())
         })?;
-        all.sort_by_key(|e| e.index);
-        let written = write_manifest(o, &all)?;
+        kept.sort_by_key(|(index, _)| *index);
+        let ats: Vec<LineAt> = kept.iter().map(|(_, at)| *at).collect();
+        let written = write_manifest_from(o, &manifests, &ats)?;
         // The lines moved: each image's first line in the rewritten file.
         let mut at_index: BTreeMap<usize, LineAt> = BTreeMap::new();
-        let oi = own_index.expect("own is among the manifests");
-        for (e, &(offset, len)) in all.iter().zip(&written) {
-            at_index.entry(e.index).or_insert(LineAt {
+        for (&(index, _), &(offset, len)) in kept.iter().zip(&written) {
+            at_index.entry(index).or_insert(LineAt {
                 manifest: oi,
                 offset,
                 len,
@@ -2262,20 +2267,6 @@ fn read_manifest_mode(path: &Path, mode: ReadMode) -> Result<Vec<ManifestEntry>>
     Ok(out)
 }
 
-/// Writes `entries` as the manifest at `path`, a line each; returns where each entry's
-/// line is in it (offset, length without the newline).
-fn write_manifest(path: &Path, entries: &[ManifestEntry]) -> Result<Vec<(u64, usize)>> {
-    let mut text = Vec::new();
-    let mut lines = Vec::with_capacity(entries.len());
-    for e in entries {
-        let at = text.len() as u64;
-        let len = write_manifest_line(&mut text, e).map_err(|e| DatasetError::io(path, e))?;
-        lines.push((at, len));
-    }
-    crate::util::write_atomic(path, &text).map_err(|e| DatasetError::io(path, e))?;
-    Ok(lines)
-}
-
 pub(super) fn shard_manifests(dir: &Path) -> Result<Vec<PathBuf>> {
     let mdir = dir.join("manifests");
     let rd = std::fs::read_dir(&mdir).map_err(|e| DatasetError::io(&mdir, e))?;
@@ -2527,15 +2518,22 @@ fn add_manifest_lines(dest: &Path, from: &Path, moved: &[(usize, LineAt)]) -> Re
     );
     lines.sort_by_key(|(index, _)| *index);
     let ats: Vec<LineAt> = lines.into_iter().map(|(_, at)| at).collect();
-    write_manifest_from(dest, &manifests, &ats)
+    write_manifest_from(dest, &manifests, &ats).map(|_| ())
 }
 
 /// Writes the manifest at `path` (whole or not at all) with the entries of `lines` (in
-/// `manifests`), in their order, read from their lines a batch at a time.
-fn write_manifest_from(path: &Path, manifests: &[PathBuf], lines: &[LineAt]) -> Result<()> {
+/// `manifests`), in their order, read from their lines a batch at a time; returns where
+/// each written line is (offset, length without the newline).
+fn write_manifest_from(
+    path: &Path,
+    manifests: &[PathBuf],
+    lines: &[LineAt],
+) -> Result<Vec<(u64, usize)>> {
     let mut failed = None;
+    let mut written = Vec::with_capacity(lines.len());
     crate::util::write_atomic_with(path, |f| {
         let mut w = std::io::BufWriter::new(f);
+        let mut offset = 0u64;
         for batch in lines.chunks(VERIFY_BATCH) {
             let entries = match read_lines(manifests, batch) {
                 Ok(e) => e,
@@ -2545,12 +2543,15 @@ fn write_manifest_from(path: &Path, manifests: &[PathBuf], lines: &[LineAt]) -> 
                 }
             };
             for e in &entries {
-                write_manifest_line(&mut w, e)?;
+                let len = write_manifest_line(&mut w, e)?;
+                written.push((offset, len));
+                offset += len as u64 + 1;
             }
         }
         w.flush()
     })
-    .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(path, e)))
+    .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(path, e)))?;
+    Ok(written)
 }
 
 fn move_dir(from: &Path, to: &Path) -> Result<()> {
