@@ -437,6 +437,10 @@ pub enum Verifying {
     Merge,
 }
 
+/// A verification's progress callback: (the check, entries verified, entries to verify).
+/// Its own lifetime, so that a caller's callback can be lent to one check after another.
+type VerifyProgress<'a> = dyn FnMut(Verifying, usize, usize) + 'a;
+
 impl Verifying {
     /// A few words for a progress bar.
     pub fn describe(self) -> &'static str {
@@ -600,21 +604,15 @@ fn run_locked(
         .collect();
     let wanted: BTreeSet<usize> = mine.iter().map(|i| i.index).collect();
     let mut verifying = opts.verifying.take();
-    let done = {
-        let mut resume_progress = verifying
-            .as_deref_mut()
-            .map(|v| move |done: usize, total: usize| v(Verifying::Resume, done, total));
-        verified_entries(
-            out,
-            &prep.plan,
-            &wanted,
-            Some(&manifest_path),
-            resume_progress
-                .as_mut()
-                .map(|p| p as &mut dyn FnMut(usize, usize)),
-        )?
-        .by_index
-    };
+    let done = verified_entries(
+        out,
+        &prep.plan,
+        &wanted,
+        Some(&manifest_path),
+        Verifying::Resume,
+        verifying.as_deref_mut(),
+    )?
+    .by_index;
     let mut stray = 0;
     if exclusive {
         stray += sweep_temps(out, None)?;
@@ -671,14 +669,7 @@ fn run_locked(
     }
     let finished = exclusive && left == 0;
     if finished {
-        let mut finish_progress =
-            verifying.map(|v| move |done: usize, total: usize| v(Verifying::Finish, done, total));
-        finish_locked(
-            out,
-            finish_progress
-                .as_mut()
-                .map(|p| p as &mut dyn FnMut(usize, usize)),
-        )?;
+        finish_locked(out, verifying)?;
     }
     Ok(RunReport {
         shard_items: mine.len(),
@@ -1164,13 +1155,14 @@ pub(super) fn parse_entry(path: &Path, n: usize, line: &str) -> Result<ManifestE
 /// `wanted` (the first that verifies, in file name order). `own`, this run's manifest, is
 /// repaired (half last line) and rewritten without the entries that fail. Every line is
 /// parsed (a malformed one is an error) and its image's files read and hashed, a batch of
-/// entries at a time.
+/// entries at a time. `progress` is told (`step`, entries verified, entries to verify).
 fn verified_entries(
     dir: &Path,
     plan: &Plan,
     wanted: &BTreeSet<usize>,
     own: Option<&Path>,
-    mut progress: Option<&mut dyn FnMut(usize, usize)>,
+    step: Verifying,
+    mut progress: Option<&mut VerifyProgress<'_>>,
 ) -> Result<Verified> {
     use rayon::prelude::*;
     let mut candidates: Vec<LineAt> = Vec::new();
@@ -1242,7 +1234,7 @@ fn verified_entries(
         }
         done += chunk.len();
         if let Some(p) = progress.as_deref_mut() {
-            p(done, candidates.len());
+            p(step, done, candidates.len());
         }
     }
     if !own_failed.is_empty()
@@ -2298,13 +2290,14 @@ pub fn finish(dir: &Path) -> Result<usize> {
     finish_locked(dir, None)
 }
 
-/// `progress`: (manifest entries verified, entries to verify) as the images' files are
-/// read and hashed, the step that takes the time (every file of every image).
-fn finish_locked(dir: &Path, progress: Option<&mut dyn FnMut(usize, usize)>) -> Result<usize> {
+/// `progress`: ([`Verifying::Finish`], manifest entries verified, entries to verify) as
+/// the images' files are read and hashed, the step that takes the time (every file of
+/// every image).
+fn finish_locked(dir: &Path, progress: Option<&mut VerifyProgress<'_>>) -> Result<usize> {
     let (_, job) = stored_job(dir)?;
     let plan = plan::expand(&job);
     let all: BTreeSet<usize> = (0..plan.items.len()).collect();
-    let verified = verified_entries(dir, &plan, &all, None, progress)?;
+    let verified = verified_entries(dir, &plan, &all, None, Verifying::Finish, progress)?;
     let by_index = &verified.by_index;
     let missing: Vec<usize> = (0..plan.items.len())
         .filter(|i| !by_index.contains_key(i))
@@ -2423,18 +2416,14 @@ pub fn merge_with_progress(
     let plan = plan::expand(&job);
     let all: BTreeSet<usize> = (0..plan.items.len()).collect();
     for src in others {
-        let verified = {
-            let mut step = progress
-                .as_deref_mut()
-                .map(|p| move |done: usize, total: usize| p(Verifying::Merge, done, total));
-            verified_entries(
-                src,
-                &plan,
-                &all,
-                None,
-                step.as_mut().map(|p| p as &mut dyn FnMut(usize, usize)),
-            )?
-        };
+        let verified = verified_entries(
+            src,
+            &plan,
+            &all,
+            None,
+            Verifying::Merge,
+            progress.as_deref_mut(),
+        )?;
         // Each verified line goes to the target's manifest of the same name.
         let mut by_manifest: BTreeMap<usize, Vec<(usize, LineAt)>> = BTreeMap::new();
         for (&index, listed) in &verified.by_index {
@@ -2458,14 +2447,7 @@ pub fn merge_with_progress(
         }
     }
     drop(locks);
-    let mut finish_progress =
-        progress.map(|p| move |done, total| p(Verifying::Finish, done, total));
-    finish_locked(
-        target,
-        finish_progress
-            .as_mut()
-            .map(|p| p as &mut dyn FnMut(usize, usize)),
-    )
+    finish_locked(target, progress)
 }
 
 /// Moves the folders of `entries` (verified in `src`) into `target`, where the target has
@@ -2701,14 +2683,7 @@ pub fn postprocess_dir_with_progress(
         .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(m, e)))?;
     }
     if dir.join("manifest.jsonl").exists() {
-        let mut finish_progress =
-            verifying.map(|v| move |done, total| v(Verifying::Finish, done, total));
-        finish_locked(
-            dir,
-            finish_progress
-                .as_mut()
-                .map(|p| p as &mut dyn FnMut(usize, usize)),
-        )?;
+        finish_locked(dir, verifying)?;
     }
     Ok(n)
 }
