@@ -13,7 +13,7 @@ use rustfft::FftPlanner;
 use rustfft::num_complex::Complex32;
 
 use super::error::{DatasetError, Result};
-use super::job::{FinishKind, Job};
+use super::job::{Finish, FinishKind, Job};
 use super::post::PostStep;
 use super::runner::{self, LineAt, ManifestEntry, ReadMode};
 use crate::scene::config::CameraConfig;
@@ -356,7 +356,10 @@ fn report_items<S: Sync>(
         let stats: Vec<Result<ImageStats>> = batch
             .par_iter()
             .zip(&entries)
-            .map(|(item, e)| image_stats(dir, job, e, item.example.then_some(out_dir)))
+            .map(|(item, e)| {
+                let finish = &job.finishes[item.finish];
+                image_stats(dir, finish, e, item.example.then_some(out_dir))
+            })
             .collect();
         // In the report's order, so the first error is the first image's that fails.
         for ((item, e), st) in batch.iter().zip(&entries).zip(stats) {
@@ -398,7 +401,7 @@ fn report_items<S: Sync>(
 /// its defects' masks tinted: dents red, scratches blue) written there.
 fn image_stats(
     dir: &Path,
-    job: &Job,
+    finish: &Finish,
     e: &ManifestEntry,
     example_dir: Option<&Path>,
 ) -> Result<ImageStats> {
@@ -413,10 +416,9 @@ fn image_stats(
         }
     }
     let mut texture = None;
-    let finish = job.finishes.iter().find(|f| f.name == e.finish);
-    if let Some(f) = finish.filter(|f| f.kind == FinishKind::Milled)
+    if finish.kind == FinishKind::Milled
         && let Ok(p) =
-            toml::Value::Table(f.params.clone()).try_into::<crate::texture::MilledParams>()
+            toml::Value::Table(finish.params.clone()).try_into::<crate::texture::MilledParams>()
         && let Some((face, deg)) = super::job::parse_view(&e.viewpoint)
     {
         // The footprint of a pixel at the working distance: from the image's recorded
