@@ -734,7 +734,7 @@ fn post_steps_match_hand_computed_cases() {
     // [0, 0, 10] with reflect-101 borders: x=2 sees itself three times (up, down,
     // centre) and x=1 twice -> 6; x=1 sees x=2 once -> 2.
     let k = post::defocus_kernel(1.0, 0.0);
-    assert_eq!(k.size, 3);
+    assert_eq!(k.side(), 3);
     assert_eq!(k.weights, vec![0.0, 0.2, 0.0, 0.2, 0.2, 0.2, 0.0, 0.2, 0.0]);
     let r = post::convolve(&[0.0, 0.0, 10.0], 3, 1, &k);
     assert!(
@@ -744,7 +744,7 @@ fn post_steps_match_hand_computed_cases() {
     // With the 3x3 Gaussian (sigma 0.5: weights 0.106507, 0.786986, 0.106507), the
     // centre weight is 0.2 * (0.786986^2 + 4 * 0.786986 * 0.106507) = 0.190926.
     let k = post::defocus_kernel(1.0, 0.5);
-    assert_eq!(k.size, 5);
+    assert_eq!(k.side(), 5);
     assert!((k.weights[12] - 0.190926).abs() < 1e-5, "{}", k.weights[12]);
     assert!((k.weights.iter().sum::<f32>() - 1.0).abs() < 1e-5);
     // background noise: object untouched, background std = sigma

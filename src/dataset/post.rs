@@ -15,6 +15,8 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use crate::render::optics::Border;
+pub use crate::render::optics::Kernel;
 /// Full scale of the image values (the pixel pipeline's 8-bit units).
 pub use crate::render::pixels::FULL_SCALE;
 /// Rounds to 8 bit with clamping (NaN gives 0): the pixel pipeline's last step.
@@ -311,13 +313,6 @@ pub fn linear(image: &[f32], factor: f32, bias: f32) -> Vec<f32> {
     image.iter().map(|&v| factor * v + bias).collect()
 }
 
-/// A square, odd-sized, normalised convolution kernel.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Kernel {
-    pub size: usize,
-    pub weights: Vec<f32>,
-}
-
 /// Hendrycks' defocus kernel: the pixels with x^2 + y^2 <= r^2 (normalised), smoothed
 /// by a 3x3 Gaussian of sigma `alias_sigma` (OpenCV's 3x3 `GaussianBlur`).
 pub fn defocus_kernel(radius: f64, alias_sigma: f64) -> Kernel {
@@ -361,46 +356,15 @@ pub fn defocus_kernel(radius: f64, alias_sigma: f64) -> Kernel {
         disk = out;
     }
     Kernel {
-        size,
+        radius: half as usize,
         weights: disk.into_iter().map(|v| v as f32).collect(),
     }
 }
 
-/// OpenCV's default border (BORDER_REFLECT_101): -1 -> 1, n -> n - 2.
-fn reflect101(i: i64, n: usize) -> usize {
-    let n = n as i64;
-    if n == 1 {
-        return 0;
-    }
-    let period = 2 * (n - 1);
-    let mut i = i.rem_euclid(period);
-    if i >= n {
-        i = period - i;
-    }
-    i as usize
-}
-
-/// 2-D correlation with `k` (centred), reflect-101 borders.
+/// 2-D correlation with `k` (centred), reflect-101 borders (OpenCV's default), as
+/// [`render::optics::convolve`](crate::render::optics::convolve) computes it.
 pub fn convolve(image: &[f32], width: usize, height: usize, k: &Kernel) -> Vec<f32> {
-    let h = (k.size / 2) as i64;
-    let mut out = vec![0.0f32; image.len()];
-    for y in 0..height {
-        for x in 0..width {
-            let mut acc = 0.0f32;
-            for ky in 0..k.size {
-                let sy = reflect101(y as i64 + ky as i64 - h, height);
-                for kx in 0..k.size {
-                    let w = k.weights[ky * k.size + kx];
-                    if w != 0.0 {
-                        let sx = reflect101(x as i64 + kx as i64 - h, width);
-                        acc += w * image[sy * width + sx];
-                    }
-                }
-            }
-            out[y * width + x] = acc;
-        }
-    }
-    out
+    crate::render::optics::convolve(image, width, height, k, Border::Reflect101)
 }
 
 /// Adds N(0, sigma^2) noise where `object` is 0; the object is left alone.
@@ -448,7 +412,7 @@ pub fn blooming(
     let add: Vec<f32> = (0..width as i64)
         .map(|x| {
             let s: f32 = (0..box_width as i64)
-                .map(|k| masked[reflect101(x - half + k, width)])
+                .map(|k| masked[Border::Reflect101.source(x - half + k, width)])
                 .sum();
             factor * s / box_width as f32
         })

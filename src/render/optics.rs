@@ -82,22 +82,59 @@ pub fn airy_kernel(pixel_um: f64, f_number: f64, wavelength_nm: f64) -> Kernel {
     }
 }
 
-/// `image` (row-major, `width` x `height`) convolved with `kernel`, the border pixels
-/// repeated outwards (a uniform image stays uniform). On all cores.
-pub fn convolve(image: &[f32], width: usize, height: usize, kernel: &Kernel) -> Vec<f32> {
+/// How [`convolve`] reads the image outside its edges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Border {
+    /// The border pixels repeated outwards (a uniform image stays uniform).
+    Replicate,
+    /// Mirrored about the border pixel, which is not repeated: -1 -> 1, n -> n - 2
+    /// (OpenCV's default border, BORDER_REFLECT_101).
+    Reflect101,
+}
+
+impl Border {
+    /// The pixel (0 .. n) that position `i` reads.
+    pub fn source(self, i: i64, n: usize) -> usize {
+        let n = n as i64;
+        match self {
+            Border::Replicate => i.clamp(0, n - 1) as usize,
+            Border::Reflect101 if n == 1 => 0,
+            Border::Reflect101 => {
+                let period = 2 * (n - 1);
+                let i = i.rem_euclid(period);
+                (if i >= n { period - i } else { i }) as usize
+            }
+        }
+    }
+}
+
+/// `image` (row-major, `width` x `height`) correlated with `kernel` (centred; for the
+/// symmetric kernels here, a convolution), reading outside the image by `border`. Each
+/// output pixel sums its taps in the kernel's row-major order, taps of weight 0 left out.
+/// On all cores.
+pub fn convolve(
+    image: &[f32],
+    width: usize,
+    height: usize,
+    kernel: &Kernel,
+    border: Border,
+) -> Vec<f32> {
     assert_eq!(image.len(), width * height, "image size");
     if image.is_empty() {
         return Vec::new();
     }
     let r = kernel.radius;
     let side = kernel.side();
-    // The image with its border repeated r pixels outwards: every tap then reads inside.
+    // The image with r pixels of border around it: every tap then reads inside.
     let pw = width + 2 * r;
+    let columns: Vec<usize> = (0..pw)
+        .map(|px| border.source(px as i64 - r as i64, width))
+        .collect();
     let padded: Vec<f32> = (0..height + 2 * r)
         .flat_map(|py| {
-            let y = py.saturating_sub(r).min(height - 1);
+            let y = border.source(py as i64 - r as i64, height);
             let row = &image[y * width..(y + 1) * width];
-            (0..pw).map(move |px| row[px.saturating_sub(r).min(width - 1)])
+            columns.iter().map(move |&x| row[x])
         })
         .collect();
     let mut out = vec![0.0f32; image.len()];
@@ -106,6 +143,9 @@ pub fn convolve(image: &[f32], width: usize, height: usize, kernel: &Kernel) -> 
             let src = &padded[(y + ky) * pw..(y + ky + 1) * pw];
             let k = &kernel.weights[ky * side..(ky + 1) * side];
             for (kx, &kw) in k.iter().enumerate() {
+                if kw == 0.0 {
+                    continue;
+                }
                 for (o, &v) in row.iter_mut().zip(&src[kx..kx + width]) {
                     *o += kw * v;
                 }
@@ -135,6 +175,7 @@ pub fn diffract(
         width,
         height,
         &airy_kernel(pixel_um, f_number, wavelength_nm),
+        Border::Replicate,
     )
 }
 
