@@ -1213,6 +1213,45 @@ fn a_resumed_run_reports_its_verification_progress() {
     );
 }
 
+/// A `postprocess` that fails on one image (its radiance.exr gone) returns that image's
+/// error, and the manifest it leaves still describes every other image's files: the
+/// processed images' new lines, the failed one's old line (nothing half-written).
+#[test]
+fn a_failed_postprocess_leaves_a_manifest_that_matches_the_files() {
+    let f = fixture(1, 1);
+    let out = f.root.join("out");
+    run_all(&f, &out, Shard::ALL, None).unwrap();
+    let manifest = out.join("manifests/shard-0-of-1.jsonl");
+    let before = dataset::read_manifest(&manifest, false).unwrap();
+    // Steps that change every image: none (the plain sensor image).
+    let plain = job_text(1, 1)
+        .split("[[postprocess]]")
+        .next()
+        .unwrap()
+        .to_string();
+    let pj = f.root.join("plain.toml");
+    std::fs::write(&pj, &plain).unwrap();
+    std::fs::remove_file(out.join("images/000003/radiance.exr")).unwrap();
+    let err = dataset::postprocess_dir(&out, Some(&pj))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("000003"), "{err}");
+    let after = dataset::read_manifest(&manifest, false).unwrap();
+    assert_eq!(after.len(), before.len());
+    let mut changed = 0;
+    for (a, b) in after.iter().zip(&before) {
+        assert_eq!(a.index, b.index);
+        if a.index == 3 {
+            assert_eq!(a.files, b.files, "the failed image keeps its line");
+            continue;
+        }
+        synosis::dataset::runner::verify_entry(&out, a)
+            .unwrap_or_else(|e| panic!("image {}: {e}", a.index));
+        changed += (a.files != b.files) as usize;
+    }
+    assert!(changed > 0, "no image was processed");
+}
+
 /// `dataset postprocess` re-runs the steps from the raw files: the same steps give the
 /// same files, its progress rising to every image and then the finish's verification.
 #[test]

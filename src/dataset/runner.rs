@@ -2600,7 +2600,8 @@ pub fn postprocess_dir_with_progress(
         None => Some(image_camera_record(&job)?),
         Some(_) => None,
     };
-    let process = |mut e: ManifestEntry| -> Result<ManifestEntry> {
+    let process = |e: &ManifestEntry| -> Result<ManifestEntry> {
+        let mut e = e.clone();
         let idir = dir.join("images").join(&e.id);
         let camera = e.camera.clone().or_else(|| job_camera.clone()).ok_or_else(|| {
             DatasetError::layout(
@@ -2650,37 +2651,56 @@ pub fn postprocess_dir_with_progress(
     }
     let total: usize = lines.iter().map(Vec::len).sum();
     let mut n = 0;
+    // The first image that could not be processed: no image is processed after its batch.
+    let mut image_failed: Option<DatasetError> = None;
     for (m, of) in manifests.iter().zip(&lines) {
-        // The manifest rewritten as its images are processed, a batch at a time; an error
-        // leaves it as it was.
-        let mut failed = None;
+        if image_failed.is_some() {
+            break;
+        }
+        // The manifest rewritten as its images are processed, a batch at a time. After an
+        // image fails, the images not processed keep their lines (the failed one too), so
+        // the manifest written still describes every image's files: a later run redoes
+        // only what no longer matches. An unreadable line leaves the manifest as it was.
+        let mut read_failed = None;
         crate::util::write_atomic_with(m, |f| {
             let mut w = std::io::BufWriter::new(f);
             for batch in of.chunks(VERIFY_CHUNK) {
-                let updated = read_lines(&manifests, batch).and_then(|entries| {
-                    entries
-                        .into_par_iter()
-                        .map(process)
-                        .collect::<Result<Vec<_>>>()
-                });
-                let updated = match updated {
-                    Ok(u) => u,
+                let entries = match read_lines(&manifests, batch) {
+                    Ok(e) => e,
                     Err(e) => {
-                        failed = Some(e);
-                        return Err(std::io::Error::other("an image could not be processed"));
+                        read_failed = Some(e);
+                        return Err(std::io::Error::other("a manifest line could not be read"));
                     }
                 };
-                for e in &updated {
-                    write_manifest_line(&mut w, e)?;
+                if image_failed.is_some() {
+                    for e in &entries {
+                        write_manifest_line(&mut w, e)?;
+                    }
+                    continue;
                 }
-                n += updated.len();
+                let results: Vec<Result<ManifestEntry>> = entries.par_iter().map(process).collect();
+                for (old, result) in entries.iter().zip(results) {
+                    match result {
+                        Ok(e) => {
+                            write_manifest_line(&mut w, &e)?;
+                            n += 1;
+                        }
+                        Err(err) => {
+                            image_failed.get_or_insert(err);
+                            write_manifest_line(&mut w, old)?;
+                        }
+                    }
+                }
                 if let Some(p) = progress.as_deref_mut() {
                     p(n, total);
                 }
             }
             w.flush()
         })
-        .map_err(|e| failed.take().unwrap_or_else(|| DatasetError::io(m, e)))?;
+        .map_err(|e| read_failed.take().unwrap_or_else(|| DatasetError::io(m, e)))?;
+    }
+    if let Some(e) = image_failed {
+        return Err(e);
     }
     if dir.join("manifest.jsonl").exists() {
         finish_locked(dir, verifying)?;
