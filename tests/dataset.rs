@@ -219,6 +219,15 @@ defect_free = {free}
     )
 }
 
+/// [`job_text`] without its `[[postprocess]]` steps: image.png is the sensor's image.
+fn job_text_without_postprocess(defective: i64, free: i64) -> String {
+    job_text(defective, free)
+        .split("[[postprocess]]")
+        .next()
+        .unwrap()
+        .to_string()
+}
+
 struct Fixture {
     _tmp: tempfile::TempDir,
     root: PathBuf,
@@ -1224,11 +1233,7 @@ fn a_failed_postprocess_leaves_a_manifest_that_matches_the_files() {
     let manifest = out.join("manifests/shard-0-of-1.jsonl");
     let before = dataset::read_manifest(&manifest, false).unwrap();
     // Steps that change every image: none (the plain sensor image).
-    let plain = job_text(1, 1)
-        .split("[[postprocess]]")
-        .next()
-        .unwrap()
-        .to_string();
+    let plain = job_text_without_postprocess(1, 1);
     let pj = f.root.join("plain.toml");
     std::fs::write(&pj, &plain).unwrap();
     std::fs::remove_file(out.join("images/000003/radiance.exr")).unwrap();
@@ -1288,11 +1293,7 @@ fn postprocess_reruns_from_raw_files() {
     );
 
     // Without post-processing steps, image.png is the plain sensor image.
-    let plain = job_text(1, 1)
-        .split("[[postprocess]]")
-        .next()
-        .unwrap()
-        .to_string();
+    let plain = job_text_without_postprocess(1, 1);
     let pj = f.root.join("plain.toml");
     std::fs::write(&pj, &plain).unwrap();
     dataset::postprocess_dir(&out, Some(&pj)).unwrap();
@@ -2239,10 +2240,7 @@ fn emva_sensor_and_random_exposure_rerun_from_raw_files() {
         );
     }
     // The linear model with the jitter: 255 * 2^ev * L per pixel.
-    let linear = job_text(1, 1)
-        .split("[[postprocess]]")
-        .next()
-        .unwrap()
+    let linear = job_text_without_postprocess(1, 1)
         .replace(
             "[texture]",
             "[camera]\nf_number = 8.0\n[sensor]\nexposure = 1.0\nexposure_jitter_ev = [-0.5, 1.5]\n[texture]",
@@ -2268,11 +2266,8 @@ fn emva_sensor_and_random_exposure_rerun_from_raw_files() {
 /// `[sensor]`) on the CPU test doubles, into `root`/out.
 fn run_sensor_job(root: &Path, sensor: &str) -> (dataset::Prepared, PathBuf) {
     std::fs::write(root.join("defects.toml"), DEFECT_SPEC).unwrap();
-    let text = job_text(1, 1)
-        .split("[[postprocess]]")
-        .next()
-        .unwrap()
-        .replace("[texture]", &format!("{sensor}\n[texture]"));
+    let text =
+        job_text_without_postprocess(1, 1).replace("[texture]", &format!("{sensor}\n[texture]"));
     std::fs::write(root.join("job.toml"), &text).unwrap();
     let prep = dataset::prepare(&root.join("job.toml")).unwrap();
     let out = root.join("out");
