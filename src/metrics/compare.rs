@@ -10,13 +10,15 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use rayon::prelude::*;
 use serde::Serialize;
 
 use super::dataset::{Sample, load_dir, texture_of};
 use super::{
-    Alignment, GrayImage, Histogram, Mask, MetricsError, Moments, Ssim, SsimPrep, paper_defaults,
+    Alignment, GrayImage, Histogram, Lpips, LpipsFeatures, Mask, MetricsError, Moments, Ssim,
+    SsimPrep, paper_defaults,
 };
 
 /// Which synthetic images are candidates for a real one (always the same viewpoint).
@@ -111,6 +113,9 @@ pub struct CompareConfig {
     pub faces: FaceSelect,
     pub match_by: MatchBy,
     pub align: AlignMode,
+    /// LPIPS too (the paper's fourth row), with these weights; `None`: the three
+    /// handcrafted metrics only.
+    pub lpips: Option<Arc<Lpips>>,
 }
 
 impl CompareConfig {
@@ -122,6 +127,7 @@ impl CompareConfig {
             faces: FaceSelect::Observed,
             match_by: MatchBy::Texture,
             align: AlignMode::Table(paper_defaults()),
+            lpips: None,
         }
     }
 }
@@ -143,6 +149,13 @@ pub struct RealResult {
     pub hist_wd_similarity: f64,
     pub mae_similarity: f64,
     pub ssim_similarity: f64,
+    /// With `CompareConfig::lpips` only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_match: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_similarity: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -150,7 +163,7 @@ pub struct SimilarityTable {
     /// Texture types, then "All".
     pub columns: Vec<String>,
     pub images: Vec<usize>,
-    /// ("1-HistWD" | "1-MAE" | "SSIM", one mean per column).
+    /// ("1-HistWD" | "1-MAE" | "SSIM" | "1-LPIPS", one mean per column).
     pub rows: Vec<(String, Vec<f64>)>,
 }
 
@@ -406,9 +419,12 @@ struct Prepared {
     img: GrayImage,
     prep: SsimPrep,
     hist: Histogram,
+    /// The (aligned) image's LPIPS features, with `CompareConfig::lpips`.
+    lpips: Option<LpipsFeatures>,
 }
 
 fn prepare(
+    cfg: &CompareConfig,
     ssim: &Ssim,
     vd: &ViewpointData,
     s: &Sample,
@@ -423,10 +439,16 @@ fn prepare(
         raw.aligned(align)
     };
     let rect = vd.mask.bbox().expect("meta-mask checked non-empty");
+    let lpips = cfg
+        .lpips
+        .as_ref()
+        .map(|net| net.features(&img))
+        .transpose()?;
     Ok(Prepared {
         prep: ssim.prepare(&img, rect),
         img,
         hist,
+        lpips,
     })
 }
 
@@ -436,6 +458,7 @@ struct Best {
     wd: (f64, usize),
     mae: (f64, usize),
     ssim: (f64, usize),
+    lpips: (f64, usize),
     n: usize,
 }
 
@@ -444,6 +467,7 @@ impl Best {
         wd: (f64::INFINITY, usize::MAX),
         mae: (f64::INFINITY, usize::MAX),
         ssim: (f64::NEG_INFINITY, usize::MAX),
+        lpips: (f64::INFINITY, usize::MAX),
         n: 0,
     };
 
@@ -461,6 +485,7 @@ impl Best {
             wd: lo(self.wd, o.wd),
             mae: lo(self.mae, o.mae),
             ssim: hi(self.ssim, o.ssim),
+            lpips: lo(self.lpips, o.lpips),
             n: self.n + o.n,
         }
     }
@@ -488,7 +513,7 @@ fn match_viewpoint(
 ) -> Result<Vec<RealResult>, MetricsError> {
     let real_prep: Vec<Prepared> = reals
         .par_iter()
-        .map(|s| prepare(ssim, vd, s, Alignment::IDENTITY))
+        .map(|s| prepare(cfg, ssim, vd, s, Alignment::IDENTITY))
         .collect::<Result<_, _>>()?;
     let bests = synths
         .par_iter()
@@ -502,7 +527,7 @@ fn match_viewpoint(
                 tally.tick();
                 return Ok(out);
             }
-            let sp = prepare(ssim, vd, s, alignments[&s.texture()])?;
+            let sp = prepare(cfg, ssim, vd, s, alignments[&s.texture()])?;
             for ri in wanted {
                 let rp = &real_prep[ri];
                 let wd = rp.hist.wasserstein(&sp.hist);
@@ -514,10 +539,15 @@ fn match_viewpoint(
                     &sp.prep,
                     Some(&vd.mask),
                 );
+                let lpips = match (&cfg.lpips, &rp.lpips, &sp.lpips) {
+                    (Some(net), Some(a), Some(b)) => net.distance(a, b, Some(&vd.mask))?,
+                    _ => f64::INFINITY,
+                };
                 out[ri] = Best {
                     wd: (wd, si),
                     mae: (m, si),
                     ssim: (ss, si),
+                    lpips: (lpips, si),
                     n: 1,
                 };
             }
@@ -542,6 +572,7 @@ fn match_viewpoint(
                 ));
             }
             let name = |i: usize| synths[i].id.clone();
+            let lpips = cfg.lpips.as_ref().map(|_| b.lpips.0);
             Ok(RealResult {
                 id: r.id.clone(),
                 viewpoint: r.viewpoint.clone(),
@@ -557,6 +588,9 @@ fn match_viewpoint(
                 hist_wd_similarity: super::distance_similarity(b.wd.0),
                 mae_similarity: super::distance_similarity(b.mae.0),
                 ssim_similarity: super::ssim_similarity(b.ssim.0),
+                lpips,
+                lpips_match: lpips.map(|_| name(b.lpips.1)),
+                lpips_similarity: lpips.map(super::lpips_similarity),
             })
         })
         .collect()
@@ -586,22 +620,24 @@ impl SimilarityTable {
         let mean = |g: &[&RealResult], f: fn(&RealResult) -> f64| {
             g.iter().map(|r| f(r)).sum::<f64>() / g.len().max(1) as f64
         };
-        let rows: Vec<(String, Vec<f64>)> = [
-            (
-                "1-HistWD",
-                (|r: &RealResult| r.hist_wd_similarity) as fn(&RealResult) -> f64,
-            ),
+        type Row = (&'static str, fn(&RealResult) -> f64);
+        let mut metrics: Vec<Row> = vec![
+            ("1-HistWD", |r| r.hist_wd_similarity),
             ("1-MAE", |r| r.mae_similarity),
             ("SSIM", |r| r.ssim_similarity),
-        ]
-        .into_iter()
-        .map(|(name, f)| {
-            (
-                name.to_string(),
-                groups.iter().map(|g| mean(g, f)).collect(),
-            )
-        })
-        .collect();
+        ];
+        if results.iter().all(|r| r.lpips_similarity.is_some()) && !results.is_empty() {
+            metrics.push(("1-LPIPS", |r| r.lpips_similarity.unwrap_or(f64::NAN)));
+        }
+        let rows: Vec<(String, Vec<f64>)> = metrics
+            .into_iter()
+            .map(|(name, f)| {
+                (
+                    name.to_string(),
+                    groups.iter().map(|g| mean(g, f)).collect(),
+                )
+            })
+            .collect();
         let mut columns = types;
         columns.push("All".into());
         Self {
@@ -659,11 +695,13 @@ impl SimilarityTable {
 impl CompareReport {
     /// One row per real image: the best value per metric and which synthetic gave it.
     pub fn matches_csv(&self) -> String {
+        let lpips = !self.results.is_empty() && self.results.iter().all(|r| r.lpips.is_some());
         let mut s = String::from(
-            "real,viewpoint,finish,texture,candidates,hist_wd,hist_wd_match,mae,mae_match,ssim,ssim_match\n",
+            "real,viewpoint,finish,texture,candidates,hist_wd,hist_wd_match,mae,mae_match,ssim,ssim_match",
         );
+        s.push_str(if lpips { ",lpips,lpips_match\n" } else { "\n" });
         for r in &self.results {
-            let _ = writeln!(
+            let _ = write!(
                 s,
                 "{},{},{},{},{},{:.6},{},{:.6},{},{:.6},{}",
                 r.id,
@@ -678,6 +716,10 @@ impl CompareReport {
                 r.ssim,
                 r.ssim_match
             );
+            if let (true, Some(d), Some(m)) = (lpips, r.lpips, &r.lpips_match) {
+                let _ = write!(s, ",{d:.6},{m}");
+            }
+            s.push('\n');
         }
         s
     }

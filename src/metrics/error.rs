@@ -27,9 +27,10 @@ pub enum MetricsError {
         b: String,
         b_size: (usize, usize),
     },
-    #[error("{what}: image is {size:?} (width, height), SSIM needs at least {min} x {min}")]
+    #[error("{what}: image is {size:?} (width, height), {metric} needs at least {min} x {min}")]
     TooSmall {
         what: String,
+        metric: &'static str,
         size: (usize, usize),
         min: usize,
     },

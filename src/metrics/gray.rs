@@ -5,6 +5,7 @@ use std::path::Path;
 use image::DynamicImage;
 
 use super::MetricsError;
+use super::masks::Mask;
 
 /// Full-scale value of every image after loading: intensities live in 8-bit units
 /// (0..=255) whatever the file's bit depth, 16-bit codes being divided by 257
@@ -244,6 +245,19 @@ pub(crate) fn check_same_size(
             a_size: a.size(),
             b: b_name.to_string(),
             b_size: b.size(),
+        });
+    }
+    Ok(())
+}
+
+/// `mask` is the size of the images it selects from.
+pub(crate) fn check_mask_size(mask: &Mask, size: (usize, usize)) -> Result<(), MetricsError> {
+    if mask.size() != size {
+        return Err(MetricsError::SizeMismatch {
+            a: "images".into(),
+            a_size: size,
+            b: "mask".into(),
+            b_size: mask.size(),
         });
     }
     Ok(())

@@ -12,6 +12,7 @@ mod error;
 mod gray;
 mod histogram;
 pub mod labelme;
+mod lpips;
 mod mae;
 mod masks;
 mod ssim;
@@ -20,13 +21,15 @@ pub use align::{Alignment, Moments, paper_defaults};
 pub use error::MetricsError;
 pub use gray::{DATA_RANGE, GREY_CHANNEL_TOLERANCE, GrayImage};
 pub use histogram::Histogram;
+pub use lpips::{Lpips, LpipsFeatures, default_weights_path};
 pub use mae::mae;
 pub use masks::{Mask, Rect, face_mask};
 pub use ssim::{Ssim, SsimParams, SsimPrep};
 
 use serde::Serialize;
 
-/// The three distances for one pair, and their similarities.
+/// The distances for one pair, and their similarities (LPIPS only when asked for:
+/// it needs the learned weights and a network's run per image).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PairMetrics {
     /// W1 between the masked intensity distributions, 8-bit units.
@@ -40,6 +43,11 @@ pub struct PairMetrics {
     pub ssim_similarity: f64,
     /// Pixels the histogram and MAE were taken over.
     pub pixels: usize,
+    /// LPIPS (AlexNet, v0.1) over the mask's positions (`lpips` module).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_similarity: Option<f64>,
 }
 
 impl PairMetrics {
@@ -52,6 +60,17 @@ impl PairMetrics {
             mae_similarity: distance_similarity(mae),
             ssim_similarity: ssim_similarity(ssim),
             pixels,
+            lpips: None,
+            lpips_similarity: None,
+        }
+    }
+
+    /// With the pair's LPIPS distance added.
+    pub fn with_lpips(self, d: f64) -> Self {
+        Self {
+            lpips: Some(d),
+            lpips_similarity: Some(lpips_similarity(d)),
+            ..self
         }
     }
 }
@@ -66,6 +85,13 @@ pub fn distance_similarity(d: f64) -> f64 {
 /// (anti-correlated) structure counts as no similarity.
 pub fn ssim_similarity(s: f64) -> f64 {
     s.clamp(0.0, 1.0)
+}
+
+/// `1 - LPIPS`, clamped: the paper's "1-LPIPS" row. AlexNet's LPIPS is 0 for equal
+/// images and rarely above 1 (each layer's normalised features differ by at most 2 in
+/// length, weighted by the learned channel weights).
+pub fn lpips_similarity(d: f64) -> f64 {
+    (1.0 - d).clamp(0.0, 1.0)
 }
 
 /// All three metrics for one pair, over the mask if given. Without a mask, WD and MAE
@@ -84,14 +110,7 @@ pub fn pair_metrics(
             Ok(PairMetrics::new(wd, mae(a, b, None), s, a.data.len()))
         }
         Some(m) => {
-            if m.size() != a.size() {
-                return Err(MetricsError::SizeMismatch {
-                    a: "images".into(),
-                    a_size: a.size(),
-                    b: "mask".into(),
-                    b_size: m.size(),
-                });
-            }
+            gray::check_mask_size(m, a.size())?;
             let ix = m.indices();
             if ix.is_empty() {
                 return Err(MetricsError::EmptyMask {

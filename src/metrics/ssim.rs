@@ -100,6 +100,7 @@ impl Ssim {
         if a.width < self.win_size() || a.height < self.win_size() {
             return Err(MetricsError::TooSmall {
                 what: "image pair".into(),
+                metric: "SSIM",
                 size: a.size(),
                 min: self.win_size(),
             });
