@@ -4,7 +4,9 @@
 //!
 //! cargo run --release --example bench_metrics
 //! Env: BENCH_REAL (real images per viewpoint, default 30), BENCH_SYNTH (synthetic per
-//! viewpoint, default 120; the paper has 600).
+//! viewpoint, default 120; the paper has 600). With LPIPS's weights where synosis finds
+//! them (tools/lpips-weights), also LPIPS: one image's features, one masked pair's
+//! distance, and what `compare --lpips` adds at the paper's scale.
 
 use std::time::Instant;
 
@@ -154,5 +156,51 @@ fn main() {
         rayon::current_num_threads(),
         162_000.0 * cpu_pair / rayon::current_num_threads() as f64 / 60.0,
         1_458_000.0 * cpu_pair / rayon::current_num_threads() as f64 / 60.0
+    );
+
+    lpips(&mask);
+}
+
+/// LPIPS's two parts as `compare --lpips` uses them: features once per image, a masked
+/// distance per pair.
+fn lpips(mask: &Mask) {
+    let net = match metrics::Lpips::load(None) {
+        Ok(net) => net,
+        Err(e) => {
+            println!("LPIPS not timed: {e}");
+            return;
+        }
+    };
+    let a = random_image(1);
+    let b = random_image(2);
+    let cpu0 = cpu_seconds();
+    let mut t = Vec::new();
+    let mut feats = Vec::new();
+    for img in [&a, &b, &a, &b, &a] {
+        let s = Instant::now();
+        feats.push(net.features(img).unwrap());
+        t.push(s.elapsed().as_secs_f64());
+    }
+    let t_feat = median(t);
+    println!(
+        "LPIPS features, one image: median {:.3} s wall (5 runs), {:.3} s CPU per run",
+        t_feat,
+        (cpu_seconds() - cpu0) / 5.0
+    );
+    let mut t = Vec::new();
+    for _ in 0..15 {
+        let s = Instant::now();
+        std::hint::black_box(net.distance(&feats[0], &feats[1], Some(mask)).unwrap());
+        t.push(s.elapsed().as_secs_f64());
+    }
+    let t_dist = median(t);
+    println!(
+        "LPIPS distance, one masked pair: median {:.2} ms wall (15 runs)",
+        t_dist * 1e3
+    );
+    println!(
+        "extrapolated: compare --lpips adds, at the paper's scale (5400 synthetic + 270 real images' features, 162000 pairs): {:.1} + {:.1} min",
+        5670.0 * t_feat / 60.0,
+        162_000.0 * t_dist / 60.0
     );
 }

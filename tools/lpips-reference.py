@@ -160,7 +160,7 @@ def check(synosis, args):
             cmd += ["--mask", g[2]]
         got = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)["lpips"]
         worst = max(worst, abs(got - ref))
-        name = f"{os.path.relpath(g[0])} / {os.path.basename(g[1])}"
+        name = " / ".join(os.path.relpath(p) for p in g[:2])
         print(f"| {name} | {os.path.basename(g[2]) if mask is not None else '-'} | {ref:.7f} | {got:.7f} | {got - ref:+.2e} |")
     print(f"\nlargest difference: {worst:.2e}")
 

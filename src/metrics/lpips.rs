@@ -248,12 +248,7 @@ impl Lpips {
                             }
                         }
                         let i = (y * fa.w + x) * fa.c;
-                        let d: f32 = (0..fa.c)
-                            .map(|c| {
-                                let e = fa.data[i + c] - fb.data[i + c];
-                                w[c] * e * e
-                            })
-                            .sum();
+                        let d = weighted_squares(w, &fa.data[i..i + fa.c], &fb.data[i..i + fa.c]);
                         sum += d as f64;
                         n += 1;
                     }
@@ -288,6 +283,27 @@ impl Lpips {
         let (fa, fb) = rayon::join(|| self.features(a), || self.features(b));
         self.distance(&fa?, &fb?, mask)
     }
+}
+
+/// Sum over channels of `w * (a - b)^2`, in 8 interleaved partial sums (vector lanes:
+/// one chain of dependent additions made a masked pair at 1224 x 1025 cost 3.4 ms);
+/// every layer's channel count is a multiple of 8.
+fn weighted_squares(w: &[f32], a: &[f32], b: &[f32]) -> f32 {
+    const LANES: usize = 8;
+    let mut acc = [0.0f32; LANES];
+    for ((w, a), b) in w
+        .chunks_exact(LANES)
+        .zip(a.chunks_exact(LANES))
+        .zip(b.chunks_exact(LANES))
+    {
+        for l in 0..LANES {
+            let e = a[l] - b[l];
+            acc[l] += w[l] * e * e;
+        }
+    }
+    let tail = w.len() / LANES * LANES;
+    let rest: f32 = (tail..w.len()).map(|c| w[c] * (a[c] - b[c]).powi(2)).sum();
+    acc.iter().sum::<f32>() + rest
 }
 
 /// Where a position of layer `l` is centred in the image: pixel `step * i + offset`

@@ -88,8 +88,8 @@ pub fn ssim_similarity(s: f64) -> f64 {
 }
 
 /// `1 - LPIPS`, clamped: the paper's "1-LPIPS" row. AlexNet's LPIPS is 0 for equal
-/// images and rarely above 1 (each layer's normalised features differ by at most 2 in
-/// length, weighted by the learned channel weights).
+/// images and can exceed 1 for unlike textures (1.075 between a sandblasted and a
+/// parallel-milled paper image of one view, docs/benchmarks/metrics.md): no similarity.
 pub fn lpips_similarity(d: f64) -> f64 {
     (1.0 - d).clamp(0.0, 1.0)
 }
