@@ -1030,6 +1030,17 @@ fn lpips_is_a_distance_over_the_masks_positions() {
     }
     let dl = net.pair(&a, &b, Some(&left)).unwrap();
     assert!(dl > 0.0 && dl != d, "{dl} {d}");
+    // Only the positions centred in the mask are kept: conv1's at pixel 4i + 3 (64 x 48:
+    // 15 x 11 positions, 8 columns of them left of x = 32), the next layer's at 8i + 7
+    // (7 x 5, 4 columns), the last three's at 16i + 15 (3 x 2, 2 columns).
+    let fa = net.features(&a, Some(&left)).unwrap();
+    assert_eq!(fa.positions(), [8 * 11, 4 * 5, 2 * 2, 2 * 2, 2 * 2]);
+    let all = net.features(&b, None).unwrap();
+    assert_eq!(all.positions(), [15 * 11, 7 * 5, 3 * 2, 3 * 2, 3 * 2]);
+    let e = net.distance(&fa, &all).unwrap_err();
+    assert!(e.to_string().contains("different masks"), "{e}");
+    let fb = net.features(&b, Some(&left)).unwrap();
+    assert_eq!(net.distance(&fa, &fb).unwrap(), dl);
 
     // Errors name what is wrong.
     let small = textured(30, 40, 1, 0.0, 255.0);

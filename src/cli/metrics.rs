@@ -83,8 +83,9 @@ pub struct CompareArgs {
     #[arg(long = "match", value_enum, default_value = "texture")]
     pub match_by: MatchArg,
     /// Also LPIPS (AlexNet, v0.1; the paper's "1-LPIPS" row): a network's run per
-    /// image, about 0.4 s for a 1224 x 1025 image on 2 cores, and 52 MB of features
-    /// per real image of a viewpoint. Needs the weights that tools/lpips-weights writes.
+    /// image, about 0.3 s for a 1224 x 1025 image on 2 cores, and the meta-mask's share
+    /// of 52 MB of features per real image of a viewpoint. Needs the weights that
+    /// tools/lpips-weights writes.
     #[arg(long)]
     pub lpips: bool,
     /// The LPIPS weights file (default: $SYNOSIS_LPIPS_WEIGHTS, else

@@ -442,7 +442,7 @@ fn prepare(
     let lpips = cfg
         .lpips
         .as_ref()
-        .map(|net| net.features(&img))
+        .map(|net| net.features(&img, Some(&vd.mask)))
         .transpose()?;
     Ok(Prepared {
         prep: ssim.prepare(&img, rect),
@@ -540,7 +540,7 @@ fn match_viewpoint(
                     Some(&vd.mask),
                 );
                 let lpips = match (&cfg.lpips, &rp.lpips, &sp.lpips) {
-                    (Some(net), Some(a), Some(b)) => net.distance(a, b, Some(&vd.mask))?,
+                    (Some(net), Some(a), Some(b)) => net.distance(a, b)?,
                     _ => f64::INFINITY,
                 };
                 out[ri] = Best {

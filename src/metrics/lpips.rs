@@ -68,17 +68,27 @@ struct Map {
     data: Vec<f32>,
 }
 
-/// One image's five feature maps, each normalised over its channels.
+/// One image's five feature maps, each position normalised over its channels: only the
+/// positions a mask selects (every position without one), packed in row order, so a
+/// face mask's features take the face's share of the memory and of a pair's time.
 #[derive(Clone)]
 pub struct LpipsFeatures {
-    layers: Vec<Map>,
+    /// Per layer: (channels, the selected positions' channels one after the other).
+    layers: Vec<(usize, Vec<f32>)>,
     size: (usize, usize),
+    /// A digest of the mask that selected the positions; `None`: every position.
+    selection: Option<u64>,
 }
 
 impl LpipsFeatures {
     /// (width, height) of the image they were made from.
     pub fn size(&self) -> (usize, usize) {
         self.size
+    }
+
+    /// Positions kept per layer.
+    pub fn positions(&self) -> Vec<usize> {
+        self.layers.iter().map(|(c, d)| d.len() / c).collect()
     }
 }
 
@@ -174,8 +184,17 @@ impl Lpips {
         &self.path
     }
 
-    /// The five normalised feature maps of `image` (at least `MIN_SIDE` on each side).
-    pub fn features(&self, image: &GrayImage) -> Result<LpipsFeatures, MetricsError> {
+    /// The five normalised feature maps of `image` (at least `MIN_SIDE` on each side),
+    /// at the positions whose receptive field is centred on a pixel of `mask` (the image's
+    /// size) if given.
+    pub fn features(
+        &self,
+        image: &GrayImage,
+        mask: Option<&Mask>,
+    ) -> Result<LpipsFeatures, MetricsError> {
+        if let Some(m) = mask {
+            gray::check_mask_size(m, image.size())?;
+        }
         if image.width < MIN_SIDE || image.height < MIN_SIDE {
             return Err(MetricsError::TooSmall {
                 what: "LPIPS input".into(),
@@ -202,24 +221,18 @@ impl Lpips {
                 x = max_pool(&x);
             }
             x = conv.apply(&x);
-            let mut f = x.clone();
-            normalise(&mut f);
-            layers.push(f);
+            let kept = select(&x, i, mask)?;
+            layers.push((x.c, kept));
         }
         Ok(LpipsFeatures {
             layers,
             size: image.size(),
+            selection: mask.map(digest),
         })
     }
 
-    /// LPIPS between two images' features; over the mask's positions if given (the
-    /// mask the size of both images).
-    pub fn distance(
-        &self,
-        a: &LpipsFeatures,
-        b: &LpipsFeatures,
-        mask: Option<&Mask>,
-    ) -> Result<f64, MetricsError> {
+    /// LPIPS between two images' features, made with the same mask (or both without).
+    pub fn distance(&self, a: &LpipsFeatures, b: &LpipsFeatures) -> Result<f64, MetricsError> {
         if a.size != b.size {
             return Err(MetricsError::SizeMismatch {
                 a: "first image".into(),
@@ -228,46 +241,27 @@ impl Lpips {
                 b_size: b.size,
             });
         }
-        if let Some(m) = mask {
-            gray::check_mask_size(m, a.size)?;
+        if a.selection != b.selection {
+            return Err(MetricsError::param(
+                "LPIPS features",
+                "made with different masks: a pair's features need the same mask",
+            ));
         }
         let mut total = 0.0f64;
-        for (l, (fa, fb)) in a.layers.iter().zip(&b.layers).enumerate() {
+        for (l, ((c, fa), (_, fb))) in a.layers.iter().zip(&b.layers).enumerate() {
             let w = &self.lins[l];
-            let (step, offset) = centre(l);
-            let rows: Vec<(f64, usize)> = (0..fa.h)
-                .into_par_iter()
-                .map(|y| {
-                    let mut sum = 0.0f64;
-                    let mut n = 0usize;
-                    for x in 0..fa.w {
-                        if let Some(m) = mask {
-                            let (px, py) = (x * step + offset, y * step + offset);
-                            if !m.data[py * m.width + px] {
-                                continue;
-                            }
-                        }
-                        let i = (y * fa.w + x) * fa.c;
-                        let d = weighted_squares(w, &fa.data[i..i + fa.c], &fb.data[i..i + fa.c]);
-                        sum += d as f64;
-                        n += 1;
-                    }
-                    (sum, n)
+            // Fixed chunks summed in order: the same value on any number of threads.
+            let sums: Vec<f64> = fa
+                .par_chunks(c * DISTANCE_CHUNK)
+                .zip(fb.par_chunks(c * DISTANCE_CHUNK))
+                .map(|(pa, pb)| {
+                    pa.chunks_exact(*c)
+                        .zip(pb.chunks_exact(*c))
+                        .map(|(u, v)| weighted_squares(w, u, v) as f64)
+                        .sum::<f64>()
                 })
                 .collect();
-            let (sum, n) = rows
-                .iter()
-                .fold((0.0, 0), |(s, n), &(rs, rn)| (s + rs, n + rn));
-            if n == 0 {
-                return Err(MetricsError::EmptyMask {
-                    what: format!(
-                        "the LPIPS mask at AlexNet's layer {} (no position there is centred \
-                         on a mask pixel; every {step}th pixel from {offset} is one)",
-                        l + 1
-                    ),
-                });
-            }
-            total += sum / n as f64;
+            total += sums.iter().sum::<f64>() / (fa.len() / c) as f64;
         }
         Ok(total)
     }
@@ -280,9 +274,55 @@ impl Lpips {
         mask: Option<&Mask>,
     ) -> Result<f64, MetricsError> {
         gray::check_same_size(a, "first image", b, "second image")?;
-        let (fa, fb) = rayon::join(|| self.features(a), || self.features(b));
-        self.distance(&fa?, &fb?, mask)
+        let (fa, fb) = rayon::join(|| self.features(a, mask), || self.features(b, mask));
+        self.distance(&fa?, &fb?)
     }
+}
+
+/// Positions a task of `distance` sums.
+const DISTANCE_CHUNK: usize = 1024;
+
+/// Layer `l`'s positions centred on a pixel of `mask` (all without one), each normalised
+/// over its channels, packed in row order; none is an error naming the layer.
+fn select(x: &Map, l: usize, mask: Option<&Mask>) -> Result<Vec<f32>, MetricsError> {
+    let (step, offset) = centre(l);
+    let rows: Vec<Vec<f32>> = (0..x.h)
+        .into_par_iter()
+        .map(|y| {
+            let mut kept = Vec::new();
+            for px in 0..x.w {
+                if let Some(m) = mask
+                    && !m.data[(y * step + offset) * m.width + px * step + offset]
+                {
+                    continue;
+                }
+                let v = &x.data[(y * x.w + px) * x.c..][..x.c];
+                let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+                let inv = 1.0 / (n + EPS);
+                kept.extend(v.iter().map(|x| x * inv));
+            }
+            kept
+        })
+        .collect();
+    let kept = rows.concat();
+    if kept.is_empty() {
+        return Err(MetricsError::EmptyMask {
+            what: format!(
+                "the LPIPS mask at AlexNet's layer {} (no position there is centred on a \
+                 mask pixel; every {step}th pixel from {offset} is one)",
+                l + 1
+            ),
+        });
+    }
+    Ok(kept)
+}
+
+/// What tells two masks apart in `LpipsFeatures` (a hash of size and pixels).
+fn digest(m: &Mask) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    (m.width, m.height, &m.data).hash(&mut h);
+    h.finish()
 }
 
 /// Sum over channels of `w * (a - b)^2`, in 8 interleaved partial sums (vector lanes:
@@ -437,19 +477,6 @@ fn max_pool(x: &Map) -> Map {
         c: x.c,
         data,
     }
-}
-
-/// Each position's channels divided by their length plus `EPS` (lpips
-/// `normalize_tensor`).
-fn normalise(f: &mut Map) {
-    let c = f.c;
-    f.data.par_chunks_mut(c).for_each(|v| {
-        let n = v.iter().map(|x| x * x).sum::<f32>().sqrt();
-        let inv = 1.0 / (n + EPS);
-        for x in v {
-            *x *= inv;
-        }
-    });
 }
 
 #[cfg(test)]
