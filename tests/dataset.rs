@@ -1449,6 +1449,41 @@ fn resume_and_merge_verify_files_and_redo_what_differs() {
     assert_same_dataset(&full, &dirs[0]);
 }
 
+/// A merge verifies each moved image as it moves, and its finish then reads again only
+/// the images it did not move by a rename (docs/dataset.md, "Commands", merge): the target's own
+/// images are still read, so a file of the target's own shard changed before the merge
+/// is found, and the error names that shard.
+#[test]
+fn merge_still_verifies_the_targets_own_images() {
+    let f = fixture(2, 1);
+    let dirs: Vec<PathBuf> = (0..3).map(|i| f.root.join(format!("t{i}"))).collect();
+    for (i, d) in dirs.iter().enumerate() {
+        run_all(&f, d, Shard { index: i, count: 3 }, None).unwrap();
+    }
+    let own = f
+        .prep
+        .plan
+        .items
+        .iter()
+        .find(|it| it.instance % 3 == 0)
+        .unwrap()
+        .id();
+    let p = dirs[0].join("images").join(&own).join("mask.png");
+    let mut b = std::fs::read(&p).unwrap();
+    let last = b.len() - 20;
+    b[last] ^= 0x55;
+    std::fs::write(&p, &b).unwrap();
+    let err = dataset::merge(&dirs).unwrap_err().to_string();
+    assert!(err.contains("1 of") && err.contains("--shard 0/3"), "{err}");
+    // The other shards' images moved in; shard 0 run again into the target finishes it.
+    let r = run_all(&f, &dirs[0], Shard { index: 0, count: 3 }, None).unwrap();
+    assert_eq!(r.rendered, 1);
+    dataset::merge(&dirs[..1]).unwrap();
+    let full = f.root.join("full");
+    run_all(&f, &full, Shard::ALL, None).unwrap();
+    assert_same_dataset(&full, &dirs[0]);
+}
+
 /// The finish reads the shard manifests line by line (docs/dataset.md, "Memory at
 /// scale"): a line naming an image outside the job, or one that is not an entry, is an
 /// error naming its manifest and line, and leaves the finished files as they were.

@@ -609,6 +609,7 @@ fn run_locked(
         &prep.plan,
         &wanted,
         Some(&manifest_path),
+        None,
         Verifying::Resume,
         verifying.as_deref_mut(),
     )?
@@ -669,7 +670,7 @@ fn run_locked(
     }
     let finished = exclusive && left == 0;
     if finished {
-        finish_locked(out, verifying)?;
+        finish_locked(out, verifying, None)?;
     }
     Ok(RunReport {
         shard_items: mine.len(),
@@ -1023,6 +1024,19 @@ pub fn verify_entry(dir: &Path, e: &ManifestEntry) -> std::result::Result<(), St
     Ok(())
 }
 
+/// Images whose files this process has just verified in a folder, each with the
+/// [`entry_digest`] of the entry they were verified against.
+type Trusted = BTreeMap<usize, u64>;
+
+/// What [`verify_entry`] checks an entry's files against (id, file names, hashes and
+/// sizes), as one number: an entry with the same digest verifies the same files alike.
+fn entry_digest(e: &ManifestEntry) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    (e.index, &e.id, &e.files, &e.sizes).hash(&mut h);
+    h.finish()
+}
+
 /// Manifest entries verified between two calls of a verification's progress callback.
 pub(super) const VERIFY_CHUNK: usize = 64;
 /// Manifest entries read and verified at once where no progress is watched: what a
@@ -1155,12 +1169,15 @@ pub(super) fn parse_entry(path: &Path, n: usize, line: &str) -> Result<ManifestE
 /// `wanted` (the first that verifies, in file name order). `own`, this run's manifest, is
 /// repaired (half last line) and rewritten without the entries that fail. Every line is
 /// parsed (a malformed one is an error) and its image's files read and hashed, a batch of
-/// entries at a time. `progress` is told (`step`, entries verified, entries to verify).
+/// entries at a time, except where `trusted` holds the entry's [`entry_digest`] for its
+/// image (files this process verified in `dir` and has not rewritten since: a merge's
+/// moved images). `progress` is told (`step`, entries verified, entries to verify).
 fn verified_entries(
     dir: &Path,
     plan: &Plan,
     wanted: &BTreeSet<usize>,
     own: Option<&Path>,
+    trusted: Option<&Trusted>,
     step: Verifying,
     mut progress: Option<&mut VerifyProgress<'_>>,
 ) -> Result<Verified> {
@@ -1216,7 +1233,10 @@ fn verified_entries(
         let entries = read_lines(&manifests, chunk)?;
         let ok: Vec<bool> = entries
             .par_iter()
-            .map(|e| verify_entry(dir, e).is_ok())
+            .map(|e| {
+                trusted.is_some_and(|t| t.get(&e.index) == Some(&entry_digest(e)))
+                    || verify_entry(dir, e).is_ok()
+            })
             .collect();
         for ((at, e), ok) in chunk.iter().zip(entries).zip(ok) {
             if ok {
@@ -2287,17 +2307,21 @@ fn stored_job(dir: &Path) -> Result<(String, Job)> {
 /// naming the missing shards if any image of the job is missing.
 pub fn finish(dir: &Path) -> Result<usize> {
     let _lock = lock::lock(dir, lock::Access::Exclusive)?;
-    finish_locked(dir, None)
+    finish_locked(dir, None, None)
 }
 
 /// `progress`: ([`Verifying::Finish`], manifest entries verified, entries to verify) as
 /// the images' files are read and hashed, the step that takes the time (every file of
-/// every image).
-fn finish_locked(dir: &Path, progress: Option<&mut VerifyProgress<'_>>) -> Result<usize> {
+/// every image but those `trusted`: a merge's, verified as they moved).
+fn finish_locked(
+    dir: &Path,
+    progress: Option<&mut VerifyProgress<'_>>,
+    trusted: Option<&Trusted>,
+) -> Result<usize> {
     let (_, job) = stored_job(dir)?;
     let plan = plan::expand(&job);
     let all: BTreeSet<usize> = (0..plan.items.len()).collect();
-    let verified = verified_entries(dir, &plan, &all, None, Verifying::Finish, progress)?;
+    let verified = verified_entries(dir, &plan, &all, None, trusted, Verifying::Finish, progress)?;
     let by_index = &verified.by_index;
     let missing: Vec<usize> = (0..plan.items.len())
         .filter(|i| !by_index.contains_key(i))
@@ -2415,11 +2439,16 @@ pub fn merge_with_progress(
     }
     let plan = plan::expand(&job);
     let all: BTreeSet<usize> = (0..plan.items.len()).collect();
+    // The images just verified and renamed into the target (or found there equal): the
+    // finish below need not read their files again (a copy across file systems is
+    // read again).
+    let mut trusted = Trusted::new();
     for src in others {
         let verified = verified_entries(
             src,
             &plan,
             &all,
+            None,
             None,
             Verifying::Merge,
             progress.as_deref_mut(),
@@ -2437,7 +2466,13 @@ pub fn merge_with_progress(
         for (mi, lines) in by_manifest {
             for batch in lines.chunks(VERIFY_BATCH) {
                 let ats: Vec<LineAt> = batch.iter().map(|(_, at)| *at).collect();
-                move_images(src, target, &read_lines(&verified.manifests, &ats)?)?;
+                let entries = read_lines(&verified.manifests, &ats)?;
+                let renamed = move_images(src, target, &entries)?;
+                for (e, renamed) in entries.iter().zip(renamed) {
+                    if renamed {
+                        trusted.insert(e.index, entry_digest(e));
+                    }
+                }
             }
             let from = &verified.manifests[mi];
             let dest = target
@@ -2447,28 +2482,33 @@ pub fn merge_with_progress(
         }
     }
     drop(locks);
-    finish_locked(target, progress)
+    finish_locked(target, progress, Some(&trusted))
 }
 
 /// Moves the folders of `entries` (verified in `src`) into `target`, where the target has
 /// no copy of an image or one whose files differ from the entry (checked on all cores).
-fn move_images(src: &Path, target: &Path, entries: &[ManifestEntry]) -> Result<()> {
+/// Per entry: whether the target's files are now the verified ones without a copy (moved
+/// by a rename, or the target's own copy checked equal).
+fn move_images(src: &Path, target: &Path, entries: &[ManifestEntry]) -> Result<Vec<bool>> {
     use rayon::prelude::*;
     let stale: Vec<bool> = entries
         .par_iter()
         .map(|e| target.join("images").join(&e.id).exists() && verify_entry(target, e).is_err())
         .collect();
+    let mut same = Vec::with_capacity(entries.len());
     for (e, stale) in entries.iter().zip(stale) {
         let from = src.join("images").join(&e.id);
         let to = target.join("images").join(&e.id);
         if stale {
             std::fs::remove_dir_all(&to).map_err(|err| DatasetError::io(&to, err))?;
         }
-        if !to.exists() {
-            move_dir(&from, &to)?;
-        }
+        same.push(if to.exists() {
+            true
+        } else {
+            move_dir(&from, &to)?
+        });
     }
-    Ok(())
+    Ok(same)
 }
 
 /// Adds the manifest lines `moved` of `from` ((image index, line), in image order) to the
@@ -2536,12 +2576,14 @@ fn write_manifest_from(
     Ok(written)
 }
 
-fn move_dir(from: &Path, to: &Path) -> Result<()> {
+/// Moves the folder `from` to `to`: a rename (true), or across file systems a copy into
+/// a temporary folder renamed into place, then `from` removed (false).
+fn move_dir(from: &Path, to: &Path) -> Result<bool> {
     if let Some(p) = to.parent() {
         std::fs::create_dir_all(p).map_err(|e| DatasetError::io(p, e))?;
     }
     if std::fs::rename(from, to).is_ok() {
-        return Ok(());
+        return Ok(true);
     }
     // Another file system: copy to a temporary folder, then rename it into place.
     let tmp = crate::util::temp_sibling(to);
@@ -2554,7 +2596,8 @@ fn move_dir(from: &Path, to: &Path) -> Result<()> {
             .map_err(|err| DatasetError::io(e.path(), err))?;
     }
     std::fs::rename(&tmp, to).map_err(|e| DatasetError::io(to, e))?;
-    std::fs::remove_dir_all(from).map_err(|e| DatasetError::io(from, e))
+    std::fs::remove_dir_all(from).map_err(|e| DatasetError::io(from, e))?;
+    Ok(false)
 }
 
 /// Re-runs the post-processing of every finished image from its raw files. With
@@ -2703,7 +2746,7 @@ pub fn postprocess_dir_with_progress(
         return Err(e);
     }
     if dir.join("manifest.jsonl").exists() {
-        finish_locked(dir, verifying)?;
+        finish_locked(dir, verifying, None)?;
     }
     Ok(n)
 }
