@@ -32,14 +32,6 @@ pub const MIN_SIDE: usize = 31;
 /// Where synosis looks for the weights when no path is given (after the variable).
 pub const WEIGHTS_ENV: &str = "SYNOSIS_LPIPS_WEIGHTS";
 
-impl std::fmt::Debug for Lpips {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Lpips")
-            .field("weights", &self.path)
-            .finish()
-    }
-}
-
 /// One convolution: kernel `k` x `k`, `stride`, zero `pad` on every side.
 struct Conv {
     k: usize,
@@ -59,8 +51,15 @@ pub struct Lpips {
     path: PathBuf,
 }
 
+impl std::fmt::Debug for Lpips {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Lpips")
+            .field("weights", &self.path)
+            .finish()
+    }
+}
+
 /// A feature map, channels last: `data[(y * w + x) * c + ch]`.
-#[derive(Clone)]
 struct Map {
     h: usize,
     w: usize,
