@@ -1157,15 +1157,19 @@ fn cli_metrics_and_compare_take_lpips() {
     };
     let a = fixture("tex_a.png");
     let b = fixture("tex_b.png");
-    let out = run(&[
-        "metrics".as_ref(),
-        "--json".as_ref(),
-        "--lpips".as_ref(),
-        "--lpips-weights".as_ref(),
-        weights.as_os_str(),
-        a.as_os_str(),
-        b.as_os_str(),
-    ]);
+    // `metrics --lpips --lpips-weights W EXTRA.. A B`.
+    let with_lpips = |extra: &[&std::ffi::OsStr]| {
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "metrics".as_ref(),
+            "--lpips".as_ref(),
+            "--lpips-weights".as_ref(),
+            weights.as_os_str(),
+        ];
+        args.extend_from_slice(extra);
+        args.extend([a.as_os_str(), b.as_os_str()]);
+        run(&args)
+    };
+    let out = with_lpips(&["--json".as_ref()]);
     assert!(
         out.status.success(),
         "{}",
@@ -1180,16 +1184,7 @@ fn cli_metrics_and_compare_take_lpips() {
     );
     // The map: an EXR of the images' size; asked for without --lpips, an error.
     let map = dir.path().join("map.exr");
-    let out = run(&[
-        "metrics".as_ref(),
-        "--lpips".as_ref(),
-        "--lpips-weights".as_ref(),
-        weights.as_os_str(),
-        "--lpips-map".as_ref(),
-        map.as_os_str(),
-        a.as_os_str(),
-        b.as_os_str(),
-    ]);
+    let out = with_lpips(&["--lpips-map".as_ref(), map.as_os_str()]);
     assert!(
         out.status.success(),
         "{}",
