@@ -1046,6 +1046,9 @@ fn lpips_is_a_distance_over_the_masks_positions() {
     let map = net.map(&a, &b).unwrap();
     // (Random linear weights may be negative: only the real ones make it a distance.)
     assert!(map.data.iter().any(|&v| v != 0.0));
+    // Both at once (each image's features made once without a mask): the same values.
+    let (d_both, map_both) = net.pair_and_map(&a, &b, None).unwrap();
+    assert_eq!((d_both, &map_both.data), (d, &map.data));
     assert_eq!(net.pair(&b, &a, None).unwrap(), d);
     // Every position selected: the unmasked value, to the bit.
     let full = Mask::filled(64, 48, true);
@@ -1060,6 +1063,8 @@ fn lpips_is_a_distance_over_the_masks_positions() {
     }
     let dl = net.pair(&a, &b, Some(&left)).unwrap();
     assert!(dl > 0.0 && dl != d, "{dl} {d}");
+    let (dl_both, map_left) = net.pair_and_map(&a, &b, Some(&left)).unwrap();
+    assert_eq!((dl_both, &map_left.data), (dl, &map.data));
     // Only the positions centred in the mask are kept: conv1's at pixel 4i + 3 (64 x 48:
     // 15 x 11 positions, 8 columns of them left of x = 32), the next layer's at 8i + 7
     // (7 x 5, 4 columns), the last three's at 16i + 15 (3 x 2, 2 columns).

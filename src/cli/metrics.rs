@@ -106,12 +106,15 @@ pub fn run_metrics(a: MetricsArgs) -> anyhow::Result<()> {
     let mut m = metrics::pair_metrics(&ia, &ib, mask.as_ref()).with_context(context)?;
     if a.lpips {
         let net = metrics::Lpips::load(a.lpips_weights.as_deref())?;
-        let d = net.pair(&ia, &ib, mask.as_ref()).with_context(context)?;
-        m = m.with_lpips(d);
         if let Some(path) = &a.lpips_map {
-            let map = net.map(&ia, &ib).with_context(context)?;
+            let (d, map) = net
+                .pair_and_map(&ia, &ib, mask.as_ref())
+                .with_context(context)?;
+            m = m.with_lpips(d);
             synosis::image_io::write_exr_f32(path, map.width, map.height, "Y", &map.data)
                 .with_context(|| format!("writing {}", path.display()))?;
+        } else {
+            m = m.with_lpips(net.pair(&ia, &ib, mask.as_ref()).with_context(context)?);
         }
     }
     if a.json {

@@ -276,10 +276,31 @@ impl Lpips {
     /// align_corners=False)`), the five summed. Its mean is close to, not equal to, the
     /// scalar LPIPS (the upsampling weighs edge positions otherwise).
     pub fn map(&self, a: &GrayImage, b: &GrayImage) -> Result<GrayImage, MetricsError> {
-        gray::check_same_size(a, "first image", b, "second image")?;
-        let (fa, fb) = rayon::join(|| self.features(a, None), || self.features(b, None));
-        let (fa, fb) = (fa?, fb?);
-        let (width, height) = a.size();
+        let (fa, fb) = self.both(a, b, None)?;
+        self.map_of(&fa, &fb)
+    }
+
+    /// LPIPS over the mask (as [`Lpips::pair`]) and its map ([`Lpips::map`]); without a
+    /// mask each image's features are made once for both.
+    pub fn pair_and_map(
+        &self,
+        a: &GrayImage,
+        b: &GrayImage,
+        mask: Option<&Mask>,
+    ) -> Result<(f64, GrayImage), MetricsError> {
+        match mask {
+            None => {
+                let (fa, fb) = self.both(a, b, None)?;
+                Ok((self.distance(&fa, &fb)?, self.map_of(&fa, &fb)?))
+            }
+            Some(_) => Ok((self.pair(a, b, mask)?, self.map(a, b)?)),
+        }
+    }
+
+    /// The map of two images' features made without a mask.
+    fn map_of(&self, fa: &LpipsFeatures, fb: &LpipsFeatures) -> Result<GrayImage, MetricsError> {
+        debug_assert!(fa.selection.is_none() && fb.selection.is_none());
+        let (width, height) = fa.size;
         let mut out = vec![0.0f64; width * height];
         for (l, (((c, da), (_, db)), &(h, w))) in
             fa.layers.iter().zip(&fb.layers).zip(&fa.grids).enumerate()
@@ -309,9 +330,20 @@ impl Lpips {
         b: &GrayImage,
         mask: Option<&Mask>,
     ) -> Result<f64, MetricsError> {
+        let (fa, fb) = self.both(a, b, mask)?;
+        self.distance(&fa, &fb)
+    }
+
+    /// Both images' features, made side by side.
+    fn both(
+        &self,
+        a: &GrayImage,
+        b: &GrayImage,
+        mask: Option<&Mask>,
+    ) -> Result<(LpipsFeatures, LpipsFeatures), MetricsError> {
         gray::check_same_size(a, "first image", b, "second image")?;
         let (fa, fb) = rayon::join(|| self.features(a, mask), || self.features(b, mask));
-        self.distance(&fa?, &fb?)
+        Ok((fa?, fb?))
     }
 }
 
