@@ -82,11 +82,6 @@ pub struct LpipsFeatures {
 }
 
 impl LpipsFeatures {
-    /// (width, height) of the image they were made from.
-    pub fn size(&self) -> (usize, usize) {
-        self.size
-    }
-
     /// Positions kept per layer.
     pub fn positions(&self) -> Vec<usize> {
         self.layers.iter().map(|(c, d)| d.len() / c).collect()
@@ -178,11 +173,6 @@ impl Lpips {
             lins.push(tensor(&format!("lin{i}.kernel"), &[1, 1, cout, 1])?);
         }
         Ok(Self { convs, lins, path })
-    }
-
-    /// The file the weights were read from.
-    pub fn path(&self) -> &Path {
-        &self.path
     }
 
     /// The five normalised feature maps of `image` (at least `MIN_SIDE` on each side),
