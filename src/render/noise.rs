@@ -323,9 +323,10 @@ pub struct CheckedImage {
     exposure_s: f64,
 }
 
-/// The camera's temporal noise variance in codes (DN^2) at a mean signal of
-/// `mean_electrons`: K^2 (mu_e + sigma_d^2) + 1/12 (shot noise, dark noise, uniform
-/// quantisation of a unit step).
+/// The camera's temporal noise variance in codes (DN^2) at a mean charge of
+/// `mean_electrons` (photo-electrons and the dark current's, I_d t): K^2 (mu_e +
+/// sigma_d^2) + 1/12 (shot noise of both, dark noise, uniform quantisation of a unit
+/// step).
 pub fn camera_variance_dn(sensor: &SensorConfig, mean_electrons: f64) -> f64 {
     let k = sensor.gain_dn_per_electron;
     let sd = sensor.dark_noise_electrons;
@@ -522,7 +523,11 @@ impl CameraNoise {
     /// ends").
     fn pixel_weight(&self, i: usize, image: &CheckedImage, full: f64) -> Option<(f64, f64)> {
         let e_per_l = self.resp.electrons_per_s[i] * image.exposure_s;
-        let mu = (image.mean[i] as f64).max(0.0) * e_per_l;
+        // The dark current's electrons join the photo-electrons (as in
+        // `sensor::capture`): their shot noise is the camera's, and their charge fills
+        // the well with the signal's.
+        let dark = self.sensor.dark_current_electrons_per_s * image.exposure_s;
+        let mu = (image.mean[i] as f64).max(0.0) * e_per_l + dark;
         (mu < full).then(|| ((self.sensor.gain_dn_per_electron * e_per_l).powi(2), mu))
     }
 
@@ -1015,6 +1020,7 @@ impl NoiseStop {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::sensor::capture;
     use crate::scene::config::Blooming;
 
     /// The mean of `v` (an image `width` values a row) over the (2 r + 1)^2 window around
@@ -1103,6 +1109,52 @@ mod tests {
         assert_eq!(g.next_check(4, 8.0), 16);
         // The prediction checks out: at 16 spp the ratio is 8 sqrt(4 / 16) = 4, met.
         assert!(8.0 * (4.0f64 / 16.0).sqrt() <= g.target_at(16.0) + 1e-12);
+    }
+
+    #[test]
+    fn the_camera_noise_checked_against_is_the_captures_with_dark_current() {
+        // A flat image on 128 x 128 pixels: the capture's spread over the pixels (no
+        // fixed patterns) is its temporal noise, which the check's camera noise must
+        // be: with a dark current twice the signal's charge, its shot noise is most of it.
+        let (w, h) = (128u32, 128u32);
+        let px = (w * h) as usize;
+        let radiance = vec![1.0f32; px];
+        let resp = Responsivity::uniform(w, h, 100_000.0); // 200 e- at 2 ms
+        for dark_current in [0.0, 200_000.0] {
+            let sensor = SensorConfig {
+                saturation_electrons: 20_000.0,
+                dark_current_electrons_per_s: dark_current, // 0 or 400 e- at 2 ms
+                ..sensor()
+            };
+            let cam = CameraNoise {
+                resp: resp.clone(),
+                sensor: sensor.clone(),
+                exposure_factor: 1.0,
+            };
+            let (sum, sq) = (vec![2.0f32; px], vec![2.0f32; px]);
+            let all = vec![true; px];
+            let (est, _) = cam
+                .estimate(NoiseEstimator::Samples, &sum, &sq, 2, &all, &all)
+                .unwrap();
+            assert_eq!(est.pixels, px);
+            let shot = if dark_current > 0.0 { 600.0 } else { 200.0 };
+            let want = 0.25 * (shot + 9.0) + 1.0 / 12.0;
+            assert!(
+                (est.camera_rms_dn.powi(2) - want).abs() < 1e-9 * want,
+                "{est:?}"
+            );
+            let c = capture(&resp, &radiance, est.exposure_s, &sensor, 7).unwrap();
+            let codes: Vec<f64> = c.codes.iter().map(|&c| c as f64).collect();
+            let mean = codes.iter().sum::<f64>() / px as f64;
+            let var = codes.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / (px - 1) as f64;
+            // The variance of a variance from n normal draws: 2 sigma^4 / (n - 1), so
+            // sqrt(2 / 16383) = 1.1 % relative: 5 % is over four of its deviations.
+            let rel = var / want - 1.0;
+            assert!(
+                rel.abs() < 0.05,
+                "dark current {dark_current}: capture {var} DN^2, check {want} ({rel:+.3})"
+            );
+        }
     }
 
     #[test]
