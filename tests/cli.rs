@@ -327,6 +327,44 @@ fn render_with_calibration_lens_and_sensor() {
             && err.contains("stopped at 6 spp"),
         "{err}"
     );
+    assert!(
+        !dp.join("out3/spp.png").exists(),
+        "without adaptive_radius every pixel takes the image's spp: no spp.png"
+    );
+    // With `adaptive_radius` each pixel stops at its own samples: spp.png (16-bit) holds
+    // them, its most the image's spp, its mean the last check's.
+    std::fs::write(
+        dp.join("a.toml"),
+        "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0\n[light]\nradiance = 50.0\n[render]\nspp = 64\nbatch_spp = 4\nnoise_target = 1.0\nmin_spp = 4\nadaptive_radius = 1\n[sensor]\n",
+    )
+    .unwrap();
+    let o = synosis(&["render", "a.toml", "--out", "out4"], dp);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let last = err
+        .lines()
+        .filter_map(|l| l.strip_prefix("noise check: "))
+        .next_back()
+        .unwrap_or_else(|| panic!("no noise check: {err}"));
+    // "N spp (mean M), ..."
+    let (spp, mean) = last.split_once(" spp (mean ").unwrap();
+    let spp: u32 = spp.parse().unwrap();
+    let mean: f64 = mean.split_once(')').unwrap().0.parse().unwrap();
+    let img = image::open(dp.join("out4/spp.png")).unwrap();
+    assert_eq!(img.color(), image::ColorType::L16);
+    let img = img.into_luma16();
+    assert_eq!(img.dimensions(), (40, 30));
+    let counts: Vec<u32> = img.pixels().map(|p| p.0[0] as u32).collect();
+    let png_mean = counts.iter().sum::<u32>() as f64 / counts.len() as f64;
+    assert_eq!(counts.iter().max(), Some(&spp), "{err}");
+    assert!(
+        counts.iter().any(|&c| c < spp),
+        "no pixel stopped early: {err}"
+    );
+    assert!(
+        (png_mean - mean).abs() <= 0.05,
+        "{png_mean} against {mean}: {err}"
+    );
 }
 
 #[test]

@@ -22,8 +22,9 @@ use synosis::vk::{Context, ContextOptions, Profiler};
 pub struct RenderArgs {
     /// Scene file (TOML, docs/scene-format.md).
     scene: PathBuf,
-    /// Output directory (created if missing): radiance.exr, image.png and the
-    /// annotation masks mask.png, instances.png, faces.png, coverage.png.
+    /// Output directory (created if missing): radiance.exr, image.png, the annotation
+    /// masks mask.png, instances.png, faces.png, coverage.png and, with `[render]
+    /// adaptive_radius`, each pixel's samples spp.png (16-bit).
     #[arg(long)]
     out: PathBuf,
     /// Samples per pixel (overrides render.spp).
@@ -249,6 +250,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         if let Some(ann) = &frame.annotation {
             ann.write_pngs(&a.out)
                 .context("writing the annotation masks")?;
+        }
+        if let Some(counts) = &frame.pixel_spp {
+            // `[render] adaptive_radius`: each pixel's samples (at most 65535 shown), as
+            // a dataset image's spp.png.
+            let spp: Vec<u16> = counts.iter().map(|&c| c.min(65535) as u16).collect();
+            let path = a.out.join("spp.png");
+            synosis::image_io::write_png_gray16(&path, w, h, &spp)
+                .with_context(|| format!("writing {}", path.display()))?;
         }
         Ok(())
     })?;
