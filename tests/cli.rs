@@ -22,6 +22,16 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
+/// Writes scene file `name` (`toml`) into `dir`, renders it into `out` there, asserts
+/// that the render succeeded and returns its stderr.
+fn render_scene(dir: &Path, name: &str, toml: &str, out: &str) -> String {
+    std::fs::write(dir.join(name), toml).unwrap();
+    let o = synosis(&["render", name, "--out", out], dir);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    err
+}
+
 /// Exit code 1, nothing on stdout, one `error:` line on stderr that contains each of `want`.
 fn assert_fails(o: &Output, want: &[&str]) -> String {
     let (out, err) = (text(&o.stdout), text(&o.stderr));
@@ -279,14 +289,12 @@ fn render_with_calibration_lens_and_sensor() {
         "%YAML:1.0\n---\nimage_width: 40\nimage_height: 30\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 120., 0., 20.5, 0., 121., 14.2, 0., 0., 1. ]\ndistortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n   data: [ -0.2, 0.05, 1.0e-3, 0., 0. ]\n",
     )
     .unwrap();
-    std::fs::write(
-        dp.join("s.toml"),
+    let err = render_scene(
+        dp,
+        "s.toml",
         "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0\n[light]\nradiance = 50.0\n[render]\nspp = 2\nbatch_spp = 2\n[sensor]\nbit_depth = 12\ngain_dn_per_electron = 0.4\nblooming = \"vertical\"\n",
-    )
-    .unwrap();
-    let o = synosis(&["render", "s.toml", "--out", "out"], dp);
-    let err = text(&o.stderr);
-    assert!(o.status.success(), "{err}");
+        "out",
+    );
     assert!(
         err.contains("sensor: exposure") && err.contains("12 bit"),
         "{err}"
@@ -312,14 +320,12 @@ fn render_with_calibration_lens_and_sensor() {
     );
     // A scene file's noise target with `analytic_rays_max`: the render chooses its rays at
     // the first check (a target it cannot meet, so that it samples on to `spp`).
-    std::fs::write(
-        dp.join("t.toml"),
+    let err = render_scene(
+        dp,
+        "t.toml",
         "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0\n[light]\nradiance = 50.0\n[render]\nspp = 6\nbatch_spp = 2\nnoise_target = 0.01\nmin_spp = 2\nanalytic_rays = 2\nanalytic_rays_max = 8\n[sensor]\n",
-    )
-    .unwrap();
-    let o = synosis(&["render", "t.toml", "--out", "out3"], dp);
-    let err = text(&o.stderr);
-    assert!(o.status.success(), "{err}");
+        "out3",
+    );
     assert!(
         err.contains("noise check: 2 spp")
             && err.contains("analytic rays: ")
@@ -333,14 +339,12 @@ fn render_with_calibration_lens_and_sensor() {
     );
     // With `adaptive_radius` each pixel stops at its own samples: spp.png (16-bit) holds
     // them, its most the image's spp, its mean the last check's.
-    std::fs::write(
-        dp.join("a.toml"),
+    let err = render_scene(
+        dp,
+        "a.toml",
         "[camera]\ncalibration = \"cam.yaml\"\nf_number = 4.0\n[light]\nradiance = 50.0\n[render]\nspp = 64\nbatch_spp = 4\nnoise_target = 1.0\nmin_spp = 4\nadaptive_radius = 1\n[sensor]\n",
-    )
-    .unwrap();
-    let o = synosis(&["render", "a.toml", "--out", "out4"], dp);
-    let err = text(&o.stderr);
-    assert!(o.status.success(), "{err}");
+        "out4",
+    );
     let last = err
         .lines()
         .filter_map(|l| l.strip_prefix("noise check: "))
