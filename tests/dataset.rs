@@ -267,6 +267,28 @@ fn run_all(
     )
 }
 
+/// Each of `count` shards run into a folder of its own, `root/<prefix><i>`; the folders.
+fn run_shard_folders(f: &Fixture, prefix: &str, count: usize) -> Vec<PathBuf> {
+    let dirs: Vec<PathBuf> = (0..count)
+        .map(|i| f.root.join(format!("{prefix}{i}")))
+        .collect();
+    for (index, d) in dirs.iter().enumerate() {
+        run_all(f, d, Shard { index, count }, None).unwrap();
+    }
+    dirs
+}
+
+/// The id of the job's first image whose instance falls to `shard` of 3 shards.
+fn image_of_shard(f: &Fixture, shard: usize) -> String {
+    f.prep
+        .plan
+        .items
+        .iter()
+        .find(|it| it.instance % 3 == shard)
+        .unwrap()
+        .id()
+}
+
 /// Manifest lines without the timing fields.
 fn manifest_without_times(dir: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(dir.join("manifest.jsonl"))
@@ -1144,10 +1166,7 @@ fn merge_reports_its_verification_progress() {
     rising(&calls, Verifying::Finish, n);
     assert_eq!(tree(&out), before);
     // Two shards' folders: the second's images verified, then the finish.
-    let dirs: Vec<PathBuf> = (0..2).map(|i| f.root.join(format!("s{i}"))).collect();
-    for (i, d) in dirs.iter().enumerate() {
-        run_all(&f, d, Shard { index: i, count: 2 }, None).unwrap();
-    }
+    let dirs = run_shard_folders(&f, "s", 2);
     let second = dataset::read_manifest(&dirs[1].join("manifests/shard-1-of-2.jsonl"), false)
         .unwrap()
         .len();
@@ -1428,18 +1447,8 @@ fn resume_and_merge_verify_files_and_redo_what_differs() {
 
     // merge: a shard folder with a deleted file does not pass it on, and the error names
     // the shard that must run again; running that shard into the target finishes it.
-    let dirs: Vec<PathBuf> = (0..3).map(|i| f.root.join(format!("s{i}"))).collect();
-    for (i, d) in dirs.iter().enumerate() {
-        run_all(&f, d, Shard { index: i, count: 3 }, None).unwrap();
-    }
-    let victim = f
-        .prep
-        .plan
-        .items
-        .iter()
-        .find(|it| it.instance % 3 == 1)
-        .unwrap()
-        .id();
+    let dirs = run_shard_folders(&f, "s", 3);
+    let victim = image_of_shard(&f, 1);
     std::fs::remove_file(dirs[1].join("images").join(&victim).join("coco.json")).unwrap();
     let err = dataset::merge(&dirs).unwrap_err().to_string();
     assert!(err.contains("1 of") && err.contains("--shard 1/3"), "{err}");
@@ -1456,18 +1465,8 @@ fn resume_and_merge_verify_files_and_redo_what_differs() {
 #[test]
 fn merge_still_verifies_the_targets_own_images() {
     let f = fixture(2, 1);
-    let dirs: Vec<PathBuf> = (0..3).map(|i| f.root.join(format!("t{i}"))).collect();
-    for (i, d) in dirs.iter().enumerate() {
-        run_all(&f, d, Shard { index: i, count: 3 }, None).unwrap();
-    }
-    let own = f
-        .prep
-        .plan
-        .items
-        .iter()
-        .find(|it| it.instance % 3 == 0)
-        .unwrap()
-        .id();
+    let dirs = run_shard_folders(&f, "t", 3);
+    let own = image_of_shard(&f, 0);
     let p = dirs[0].join("images").join(&own).join("mask.png");
     let mut b = std::fs::read(&p).unwrap();
     let last = b.len() - 20;
