@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use synosis::render::annotate::DEFAULT_COVERAGE_GRID;
 use synosis::render::energy::EnergyTables;
 use synosis::render::noise::{CameraNoise, NoiseStop, RayChoice};
-use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene_on};
+use synosis::render::path_trace::{FrameOptions, RenderScene, render_scene_on, spp_map};
 use synosis::render::pixels::Exposure;
 use synosis::render::sensor::{Responsivity, capture, exposure_time_s};
 use synosis::render::{PathTracer, RenderSettings};
@@ -252,11 +252,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 .context("writing the annotation masks")?;
         }
         if let Some(counts) = &frame.pixel_spp {
-            // `[render] adaptive_radius`: each pixel's samples (at most 65535 shown), as
-            // a dataset image's spp.png.
-            let spp: Vec<u16> = counts.iter().map(|&c| c.min(65535) as u16).collect();
+            // `[render] adaptive_radius`: each pixel's samples, as a dataset image's.
             let path = a.out.join("spp.png");
-            synosis::image_io::write_png_gray16(&path, w, h, &spp)
+            synosis::image_io::write_png_gray16(&path, w, h, &spp_map(counts))
                 .with_context(|| format!("writing {}", path.display()))?;
         }
         Ok(())

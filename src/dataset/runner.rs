@@ -27,6 +27,7 @@ use super::seed::{derive, name, tag};
 use super::textures::{TextureCache, TextureSource, TextureWant, texture_error};
 use crate::defect::{DefectSet, DefectSpec, imprint, imprint_traced, sample_defects};
 use crate::render::PreparedScene;
+use crate::render::path_trace::spp_map;
 use crate::render::pixels::{quantise_units_deep, quantise_units8};
 use crate::scene::assemble::Placement;
 use crate::scene::materials::GltfMaterials;
@@ -2015,11 +2016,10 @@ fn write_raw(dir: &Path, img: &RenderedImage) -> Result<BTreeMap<String, String>
         files::write_gray16(&dir.join("coverage.png"), w, h, &cov)?,
     );
     if let Some(counts) = &img.pixel_spp {
-        // `[render] adaptive_radius`: each pixel's samples (at most 65535 shown).
-        let spp: Vec<u16> = counts.iter().map(|&c| c.min(65535) as u16).collect();
+        // `[render] adaptive_radius`: each pixel's samples.
         m.insert(
             "spp.png".into(),
-            files::write_gray16(&dir.join("spp.png"), w, h, &spp)?,
+            files::write_gray16(&dir.join("spp.png"), w, h, &spp_map(counts))?,
         );
     }
     Ok(m)

@@ -90,6 +90,12 @@ impl Frame {
     }
 }
 
+/// Each pixel's samples (`Frame::pixel_spp`) as the 16-bit values of an spp.png, the
+/// samples map `synosis render` and a dataset image write (at most 65535 shown).
+pub fn spp_map(counts: &[u32]) -> Vec<u16> {
+    counts.iter().map(|&c| c.min(65535) as u16).collect()
+}
+
 /// Renders one view of `scene`; `progress(done_spp)` after each batch (one graph each).
 ///
 /// With `opts.noise`, after the batch that reaches each check (the first at `min_spp`,
